@@ -1,0 +1,1 @@
+"""scenarios: scripted headless scenarios, the `vnav-demo` command line and Rerun recording."""
