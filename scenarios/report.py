@@ -1,0 +1,73 @@
+"""The JSON report of a run: error statistics per method, checks, timing.
+
+Statistics follow evo (``vnav.metrics.error_stats``): rmse, mean, median, std, min, max, count,
+all in metres. Statistics of an empty series are ``null``. Only ``timing_s`` depends on the
+machine; everything else is fixed by the scenario and the seed.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+from typing import Any
+
+from scenarios.checks import CheckResult
+from scenarios.runner import RunResult
+from scenarios.spec import METHODS
+from vnav import metrics
+
+REPORT_VERSION = 1
+
+
+def _finite_or_none(value: float) -> float | int | None:
+    if isinstance(value, int):
+        return value
+    return None if not math.isfinite(value) else round(float(value), 9)
+
+
+def build(run: RunResult, checks: list[CheckResult]) -> dict[str, Any]:
+    """The report as a JSON-ready dict."""
+    spec = run.spec
+    methods = {}
+    for method in METHODS:
+        stats = metrics.error_stats(run.errors(method))
+        methods[method] = {"position_error_m": {k: _finite_or_none(v) for k, v in stats.items()}}
+    n_detections = sum(len(f.detections) for f in run.frames)
+    n_matched = sum(d.cone_index is not None for f in run.frames for d in f.detections)
+    return {
+        "report_version": REPORT_VERSION,
+        "scenario": spec.name,
+        "description": spec.description,
+        "seed": run.seed,
+        "passed": all(c.passed for c in checks),
+        "frames": len(run.frames),
+        "detections": n_detections,
+        "matched_detections": n_matched,
+        "simulated_s": round(run.frames[-1].t_s, 9) if run.frames else 0.0,
+        "camera_rate_hz": spec.camera_rate_hz,
+        "flight_mode": spec.flight.mode,
+        "cones_w": [list(c) for c in spec.scene.cones_w],
+        "methods": methods,
+        "checks": [
+            {**c.as_dict(), "value": None if c.value is None else _finite_or_none(c.value)}
+            for c in checks
+        ],
+        "timing_s": {k: round(v, 4) for k, v in run.timing_s.items()},
+    }
+
+
+def write_atomic(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` whole or not at all (temporary file, then rename)."""
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.partial")
+    try:
+        tmp.write_text(text, encoding="utf-8")
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def write(path: Path, report: dict[str, Any]) -> None:
+    """Write the report as indented JSON, atomically."""
+    write_atomic(path, json.dumps(report, indent=2, allow_nan=False) + "\n")
