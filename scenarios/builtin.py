@@ -37,49 +37,62 @@ def frame_problem() -> Scenario:
     return {
         "name": "frame-problem",
         "description": "Chapter 0: a cone 2 m ahead, 1 m left of a drone at 10 m; the drone "
-                       "yaws 90 deg clockwise. Correct chain vs the naive mistake.",
+        "yaws 90 deg clockwise. Correct chain vs the naive mistake.",
         "lesson": "'2 m in front and 1 m to the left' of *what*? The camera reports the cone "
-                  "in its own frame (x right, y down, z forward). Adding those numbers to the "
-                  "drone's position (the naive estimate, red) is wrong by metres; "
-                  "p_w = T_w_b T_b_c p_c (blue, green, magenta) stays on the cone while the "
-                  "drone yaws.",
+        "in its own frame (x right, y down, z forward). Adding those numbers to the "
+        "drone's position (the naive estimate, red) is wrong by metres; "
+        "p_w = T_w_b T_b_c p_c (blue, green, magenta) stays on the cone while the "
+        "drone yaws.",
         "camera_rate_hz": 10.0,
         "camera": {"pitch_down_deg": 80.0},
         "cones": [{"position_w": [2.0, 1.0, 0.0]}],
-        "flight": {"mode": "kinematic", "keyframes": [
-            {"t": 0.0, "position_w": [0.0, 0.0, 10.0], "rpy_deg": [0.0, 0.0, 0.0]},
-            {"t": 1.0, "position_w": [0.0, 0.0, 10.0], "rpy_deg": [0.0, 0.0, 0.0]},
-            {"t": 4.0, "position_w": [0.0, 0.0, 10.0], "rpy_deg": [0.0, 0.0, -90.0]},
-            {"t": 5.0, "position_w": [0.0, 0.0, 10.0], "rpy_deg": [0.0, 0.0, -90.0]},
-        ]},
-        "checks": [*ACCURACY_CHECKS,
-                   _check("detection_rate", 0.95, name="cone detected in every frame it is in view"),
-                   _check("naive_worse", 10.0, name="naive median error >= 10x depth_image"),
-                   _check("world_estimate_spread", 0.1,
-                          name="depth_image world estimate constant while yawing (m)")],
+        "flight": {
+            "mode": "kinematic",
+            "keyframes": [
+                {"t": 0.0, "position_w": [0.0, 0.0, 10.0], "rpy_deg": [0.0, 0.0, 0.0]},
+                {"t": 1.0, "position_w": [0.0, 0.0, 10.0], "rpy_deg": [0.0, 0.0, 0.0]},
+                {"t": 4.0, "position_w": [0.0, 0.0, 10.0], "rpy_deg": [0.0, 0.0, -90.0]},
+                {"t": 5.0, "position_w": [0.0, 0.0, 10.0], "rpy_deg": [0.0, 0.0, -90.0]},
+            ],
+        },
+        # Seen from almost straight above, the cone's height is foreshortened to a few pixels:
+        # the known-height triangle is degenerate there and that method (rightly) gives no
+        # estimate, so only the depth image and the ground plane are held to their bounds.
+        "checks": [
+            *ACCURACY_CHECKS[:2],
+            _check("detection_rate", 0.95, name="cone detected in every frame it is in view"),
+            _check("naive_worse", 10.0, name="naive median error >= 10x depth_image"),
+            _check(
+                "world_estimate_spread",
+                0.1,
+                name="depth_image world estimate constant while yawing (m)",
+            ),
+        ],
     }
 
 
 def yaw_sweep() -> Scenario:
     # Chapters 0 and 3: p_c changes as R_w_b turns, p_w = R_w_b p_b + t does not.
-    keyframes = [{"t": 2.0 * i, "position_w": [0.0, 0.0, 6.0], "rpy_deg": [0.0, 0.0, 90.0 * i]}
-                 for i in range(5)]
+    keyframes = [
+        {"t": 2.0 * i, "position_w": [0.0, 0.0, 6.0], "rpy_deg": [0.0, 0.0, 90.0 * i]}
+        for i in range(5)
+    ]
     return {
         "name": "yaw-sweep",
         "description": "Chapters 0 and 3: the drone yaws through 360 deg in place; the cone's "
-                       "camera coordinates change, its world estimate does not.",
+        "camera coordinates change, its world estimate does not.",
         "lesson": "A rotation changes coordinates, not the point: p_b = R_b_w (p_w - t_w_b) "
-                  "moves with every degree of yaw, p_w stays put.",
+        "moves with every degree of yaw, p_w stays put.",
         "camera_rate_hz": 10.0,
         "camera": {"pitch_down_deg": 45.0},
         "cones": [{"position_w": [6.0, 0.0, 0.0]}],
         "flight": {"mode": "kinematic", "keyframes": keyframes},
-        "checks": [*ACCURACY_CHECKS,
-                   _check("detection_rate", 0.95, name="cone detected whenever fully in view"),
-                   _check("camera_coords_span", 2.0,
-                          name="cone's camera coordinates move (m)"),
-                   _check("world_estimate_spread", 0.15,
-                          name="depth_image world estimate constant (m)")],
+        "checks": [
+            *ACCURACY_CHECKS,
+            _check("detection_rate", 0.95, name="cone detected whenever fully in view"),
+            _check("camera_coords_span", 2.0, name="cone's camera coordinates move (m)"),
+            _check("world_estimate_spread", 0.15, name="depth_image world estimate constant (m)"),
+        ],
     }
 
 
@@ -96,18 +109,18 @@ def transform_composer() -> Scenario:
     return {
         "name": "transform-composer",
         "description": "Chapter 8: body translation and yaw swept; the cone in world, body "
-                       "and camera frames side by side.",
-        "lesson": "T_w_c = T_w_b T_b_c: the composer of chapter 8, running on a simulated "
-                  "drone.",
+        "and camera frames side by side.",
+        "lesson": "T_w_c = T_w_b T_b_c: the composer of chapter 8, running on a simulated drone.",
         "camera_rate_hz": 10.0,
         "camera": {"pitch_down_deg": 45.0, "position_b": [0.2, 0.0, -0.05]},
         "cones": [{"position_w": [7.0, -1.0, 0.0]}],
         "flight": {"mode": "kinematic", "keyframes": keyframes},
-        "checks": [*ACCURACY_CHECKS,
-                   _check("detection_rate", 0.95, name="cone detected whenever fully in view"),
-                   _check("camera_coords_span", 1.0, name="cone's camera coordinates move (m)"),
-                   _check("world_estimate_spread", 0.15,
-                          name="depth_image world estimate constant (m)")],
+        "checks": [
+            *ACCURACY_CHECKS,
+            _check("detection_rate", 0.95, name="cone detected whenever fully in view"),
+            _check("camera_coords_span", 1.0, name="cone's camera coordinates move (m)"),
+            _check("world_estimate_spread", 0.15, name="depth_image world estimate constant (m)"),
+        ],
     }
 
 
@@ -120,19 +133,28 @@ def gimbal_lock() -> Scenario:
     return {
         "name": "gimbal-lock",
         "description": "Chapter 4: a kinematic pitch-up through 90 deg; roll/pitch/yaw "
-                       "degenerate, the quaternion and the estimates do not.",
+        "degenerate, the quaternion and the estimates do not.",
         "lesson": "At pitch = -90 deg only yaw + roll is defined (gimbal lock): the extracted "
-                  "angles jump by 180 deg past it while the quaternion moves smoothly and the "
-                  "cone estimates do not notice.",
+        "angles jump by 180 deg past it while the quaternion moves smoothly and the "
+        "cone estimates do not notice.",
         "camera_rate_hz": 10.0,
         "camera": {"pitch_down_deg": 80.0},
         "cones": [{"position_w": [10.0, 0.0, 0.0]}],
-        "flight": {"mode": "kinematic", "keyframes": [
-            kf(0.0, -55.0), kf(2.0, -90.0), kf(3.0, -90.0), kf(4.0, -100.0), kf(6.0, -55.0),
-        ]},
-        "checks": [*ACCURACY_CHECKS,
-                   _check("detection_rate", 0.95, name="cone detected whenever fully in view"),
-                   _check("gimbal_lock_seen", 1.0, name="frames flagged as gimbal lock")],
+        "flight": {
+            "mode": "kinematic",
+            "keyframes": [
+                kf(0.0, -55.0),
+                kf(2.0, -90.0),
+                kf(3.0, -90.0),
+                kf(4.0, -100.0),
+                kf(6.0, -55.0),
+            ],
+        },
+        "checks": [
+            *ACCURACY_CHECKS,
+            _check("detection_rate", 0.95, name="cone detected whenever fully in view"),
+            _check("gimbal_lock_seen", 1.0, name="frames flagged as gimbal lock"),
+        ],
     }
 
 
@@ -142,24 +164,28 @@ def orbit() -> Scenario:
     waypoints = [{"t": 0.0, "position_w": [-radius_m, 0.0, height_m], "yaw_deg": 0.0}]
     for i in range(1, n + 1):
         angle = math.pi + 2.0 * math.pi * i / n
-        waypoints.append({
-            "t": 2.0 + 1.5 * i,
-            "position_w": [radius_m * math.cos(angle), radius_m * math.sin(angle), height_m],
-            "yaw_deg": math.degrees(angle + math.pi),
-        })
+        waypoints.append(
+            {
+                "t": 2.0 + 1.5 * i,
+                "position_w": [radius_m * math.cos(angle), radius_m * math.sin(angle), height_m],
+                "yaw_deg": math.degrees(angle + math.pi),
+            }
+        )
     return {
         "name": "orbit",
         "description": "The geometric controller flies a circle around the cone, camera on it.",
         "lesson": "The controller's attitude error lives on SO(3) (Lee et al. 2010); the "
-                  "estimates only need T_w_b from the simulator's state.",
+        "estimates only need T_w_b from the simulator's state.",
         "camera_rate_hz": 10.0,
         "camera": {"pitch_down_deg": math.degrees(math.atan2(height_m, radius_m))},
         "cones": [{"position_w": [0.0, 0.0, 0.0]}],
         "flight": {"mode": "controlled", "waypoints": waypoints},
         "duration_s": waypoints[-1]["t"] + 1.0,
-        "checks": [*ACCURACY_CHECKS,
-                   _check("detection_rate", 0.95, name="cone detected whenever fully in view"),
-                   _check("tracking_error", 0.5, name="controller tracking error (m)")],
+        "checks": [
+            *ACCURACY_CHECKS,
+            _check("detection_rate", 0.95, name="cone detected whenever fully in view"),
+            _check("tracking_error", 0.5, name="controller tracking error (m)"),
+        ],
     }
 
 
@@ -168,19 +194,24 @@ def approach() -> Scenario:
         "name": "approach",
         "description": "The controller flies from 30 m towards the cone; error against range.",
         "lesson": "Range costs pixels: at 20 m the 0.70 m cone is 14 px tall, so one pixel is "
-                  "7% of its height; the depth image and ground plane degrade far more slowly.",
+        "7% of its height; the depth image and ground plane degrade far more slowly.",
         "camera_rate_hz": 10.0,
         "camera": {"pitch_down_deg": 12.0},
         "cones": [{"position_w": [0.0, 0.0, 0.0]}],
-        "flight": {"mode": "controlled", "waypoints": [
-            {"t": 0.0, "position_w": [-30.0, 0.0, 3.0], "yaw_deg": 0.0},
-            {"t": 1.0, "position_w": [-30.0, 0.0, 3.0], "yaw_deg": 0.0},
-            {"t": 13.0, "position_w": [-8.0, 0.0, 3.0], "yaw_deg": 0.0},
-        ]},
+        "flight": {
+            "mode": "controlled",
+            "waypoints": [
+                {"t": 0.0, "position_w": [-30.0, 0.0, 3.0], "yaw_deg": 0.0},
+                {"t": 1.0, "position_w": [-30.0, 0.0, 3.0], "yaw_deg": 0.0},
+                {"t": 13.0, "position_w": [-8.0, 0.0, 3.0], "yaw_deg": 0.0},
+            ],
+        },
         "duration_s": 14.0,
-        "checks": [*ACCURACY_CHECKS,
-                   _check("detection_rate", 0.95, name="cone detected whenever fully in view"),
-                   _check("tracking_error", 1.0, name="controller tracking error (m)")],
+        "checks": [
+            *ACCURACY_CHECKS,
+            _check("detection_rate", 0.95, name="cone detected whenever fully in view"),
+            _check("tracking_error", 1.0, name="controller tracking error (m)"),
+        ],
     }
 
 
@@ -190,18 +221,23 @@ def multi_cone() -> Scenario:
         "name": "multi-cone",
         "description": "Five cones at once; every estimate matched to its own true cone.",
         "lesson": "With several cones each estimate must be matched to the right truth "
-                  "(nearest one-to-one assignment) before it can be scored.",
+        "(nearest one-to-one assignment) before it can be scored.",
         "camera_rate_hz": 10.0,
         "camera": {"pitch_down_deg": 30.0},
         "cones": [{"position_w": [x, y, 0.0]} for x, y in cones],
-        "flight": {"mode": "kinematic", "keyframes": [
-            {"t": 0.0, "position_w": [0.0, 0.0, 5.0], "rpy_deg": [0.0, 0.0, -15.0]},
-            {"t": 3.0, "position_w": [2.0, 0.0, 5.0], "rpy_deg": [0.0, 0.0, 15.0]},
-            {"t": 5.0, "position_w": [2.0, 0.0, 5.0], "rpy_deg": [0.0, 0.0, 0.0]},
-        ]},
-        "checks": [*ACCURACY_CHECKS,
-                   _check("detection_rate", 0.95, name="cones detected whenever fully in view"),
-                   _check("matched_cones", 5.0, name="distinct cones matched")],
+        "flight": {
+            "mode": "kinematic",
+            "keyframes": [
+                {"t": 0.0, "position_w": [0.0, 0.0, 5.0], "rpy_deg": [0.0, 0.0, -15.0]},
+                {"t": 3.0, "position_w": [2.0, 0.0, 5.0], "rpy_deg": [0.0, 0.0, 15.0]},
+                {"t": 5.0, "position_w": [2.0, 0.0, 5.0], "rpy_deg": [0.0, 0.0, 0.0]},
+            ],
+        },
+        "checks": [
+            *ACCURACY_CHECKS,
+            _check("detection_rate", 0.95, name="cones detected whenever fully in view"),
+            _check("matched_cones", 5.0, name="distinct cones matched"),
+        ],
     }
 
 

@@ -139,8 +139,9 @@ class Recording:
         rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         rec.log(
             "world/ground",
-            rr.LineStrips3D(_ground_grid(ground_half_size_m, 5.0), colors=[(90, 90, 90)],
-                            radii=0.01),
+            rr.LineStrips3D(
+                _ground_grid(ground_half_size_m, 5.0), colors=[(90, 90, 90)], radii=0.01
+            ),
             static=True,
         )
         rec.log("world/body/camera", _pose_transform(T_b_c), static=True)
@@ -156,17 +157,28 @@ class Recording:
         )
         rec.log(
             "world/cones/truth",
-            rr.Points3D(cones_w, colors=[TRUTH_COLOR], radii=0.12,
-                        labels=[f"cone {i}" for i in range(len(cones_w))]),
+            rr.Points3D(
+                cones_w,
+                colors=[TRUTH_COLOR],
+                radii=0.12,
+                labels=[f"cone {i}" for i in range(len(cones_w))],
+            ),
             static=True,
         )
         for method, color in METHOD_COLORS.items():
-            rec.log(f"metrics/error/{method}",
-                    rr.SeriesLines(colors=[color], names=[method]), static=True)
-        rec.log("metrics/range_m", rr.SeriesLines(colors=[(200, 200, 200)], names=["range"]),
-                static=True)
-        rec.log("description", rr.TextDocument(description_md, media_type="text/markdown"),
-                static=True)
+            rec.log(
+                f"metrics/error/{method}",
+                rr.SeriesLines(colors=[color], names=[method]),
+                static=True,
+            )
+        rec.log(
+            "metrics/range_m",
+            rr.SeriesLines(colors=[(200, 200, 200)], names=["range"]),
+            static=True,
+        )
+        rec.log(
+            "description", rr.TextDocument(description_md, media_type="text/markdown"), static=True
+        )
         rec.send_blueprint(blueprint())
 
     # ------------------------------------------------------------------ per camera frame
@@ -202,35 +214,53 @@ class Recording:
         ok, jpeg = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
         if not ok:
             raise RuntimeError("OpenCV could not JPEG-encode the camera image")
-        rec.log("world/body/camera/image",
-                rr.EncodedImage(contents=jpeg.tobytes(), media_type="image/jpeg"))
+        rec.log(
+            "world/body/camera/image",
+            rr.EncodedImage(contents=jpeg.tobytes(), media_type="image/jpeg"),
+        )
         if depth_m is not None:
-            depth_mm = np.clip(np.nan_to_num(depth_m, nan=0.0, posinf=0.0) * 1000.0, 0,
-                               DEPTH_MM_MAX).astype(np.uint16)
+            depth_mm = np.clip(
+                np.nan_to_num(depth_m, nan=0.0, posinf=0.0) * 1000.0, 0, DEPTH_MM_MAX
+            ).astype(np.uint16)
             ok, png = cv2.imencode(".png", depth_mm)
             if not ok:
                 raise RuntimeError("OpenCV could not PNG-encode the depth image")
-            rec.log("world/body/camera/depth",
-                    rr.EncodedDepthImage(png.tobytes(), media_type="image/png", meter=1000.0))
+            rec.log(
+                "world/body/camera/depth",
+                rr.EncodedDepthImage(png.tobytes(), media_type="image/png", meter=1000.0),
+            )
 
         if detections:
             mins = rerun_uv([d.bbox[:2] for d in detections]) - 0.5
             sizes = np.array([d.bbox[2:] for d in detections], dtype=np.float64)
             keypoints = np.concatenate([[d.apex_uv, d.base_uv] for d in detections])
-            rec.log("world/body/camera/detections",
-                    rr.Boxes2D(mins=mins, sizes=sizes, colors=[(255, 220, 0)],
-                               labels=[f"{d.area_px} px" for d in detections]))
-            rec.log("world/body/camera/detections/keypoints",
-                    rr.Points2D(rerun_uv(keypoints), radii=2.5,
-                                colors=[(255, 0, 255), (0, 255, 255)] * len(detections)))
+            rec.log(
+                "world/body/camera/detections",
+                rr.Boxes2D(
+                    mins=mins,
+                    sizes=sizes,
+                    colors=[(255, 220, 0)],
+                    labels=[f"{d.area_px} px" for d in detections],
+                ),
+            )
+            rec.log(
+                "world/body/camera/detections/keypoints",
+                rr.Points2D(
+                    rerun_uv(keypoints),
+                    radii=2.5,
+                    colors=[(255, 0, 255), (0, 255, 255)] * len(detections),
+                ),
+            )
         else:
             rec.log("world/body/camera/detections", rr.Clear(recursive=True))
 
         for method in METHOD_COLORS:
             points = estimates_w.get(method)
             if points is not None and len(points):
-                rec.log(f"world/cones/estimate/{method}",
-                        rr.Points3D(points, colors=[METHOD_COLORS[method]], radii=0.08))
+                rec.log(
+                    f"world/cones/estimate/{method}",
+                    rr.Points3D(points, colors=[METHOD_COLORS[method]], radii=0.08),
+                )
             else:
                 rec.log(f"world/cones/estimate/{method}", rr.Clear(recursive=False))
             if method in errors_m:
@@ -238,14 +268,15 @@ class Recording:
         if range_m is not None:
             rec.log("metrics/range_m", rr.Scalars(range_m))
         if cloud_w is not None:
-            rec.log("world/depth_cloud", rr.Points3D(cloud_w, colors=[(150, 150, 200)],
-                                                     radii=0.03))
+            rec.log("world/depth_cloud", rr.Points3D(cloud_w, colors=[(150, 150, 200)], radii=0.03))
 
     def log_trajectory(self, positions_w: np.ndarray) -> None:
         """The whole flown path of the body origin, shape (N, 3), static."""
-        self.rec.log("world/trajectory",
-                     rr.LineStrips3D([positions_w], colors=[(255, 200, 0)], radii=0.03),
-                     static=True)
+        self.rec.log(
+            "world/trajectory",
+            rr.LineStrips3D([positions_w], colors=[(255, 200, 0)], radii=0.03),
+            static=True,
+        )
 
     # ------------------------------------------------------------------ ending
     def commit(self) -> Path:

@@ -5,7 +5,7 @@ One camera frame of :func:`run_scenario`::
     truth    T_w_b, cones_w            <- the simulator (sim.world.World)
     render   rgb, depth                <- sim.render.Renderer, one pass
     detect   detections                <- vnav.detect.detect_cones(rgb)
-    estimate p_w per method            <- vnav.localize.localize(det, camera, T_w_b_est, T_b_c, depth)
+    estimate p_w per method            <- vnav.localize.localize(det, camera, T_w_b, T_b_c, depth)
     compare  error = |p_w - truth|     <- matched to the nearest true cone (vnav.metrics)
     record   .rrd entities             <- scenarios.recording
 
@@ -46,6 +46,9 @@ CLOUD_STRIDE_PX = 16
 MIN_CONE_HEIGHT_PX = 12.0
 """A cone counts as in view (for detection rates) when fully inside and at least this tall."""
 
+CONTRACT_RANGE_M = (2.0, 25.0)
+"""Ranges over which the perception accuracy contract (issue 4) is stated."""
+
 
 @dataclass
 class DetectionRecord:
@@ -58,6 +61,9 @@ class DetectionRecord:
     range_m: float | None
     p_c_true: np.ndarray | None
     """The matched cone's true base centre in the camera frame."""
+    in_contract: bool = False
+    """The matched cone is fully in view, >= 12 px tall and 2-25 m away: the domain of the
+    accuracy contract (``scenarios.checks.ERROR_BOUNDS_M``)."""
 
 
 @dataclass
@@ -85,31 +91,46 @@ class RunResult:
     trajectory_w: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     timing_s: dict[str, float] = field(default_factory=dict)
 
-    def errors(self, method: str) -> np.ndarray:
-        """All errors of ``method`` over matched detections, metres, shape (K,)."""
+    def _scored(self, method: str, contract_only: bool) -> list[DetectionRecord]:
+        return [
+            d
+            for f in self.frames
+            for d in f.detections
+            if method in d.errors_m and (d.in_contract or not contract_only)
+        ]
+
+    def errors(self, method: str, *, contract_only: bool = False) -> np.ndarray:
+        """Errors of ``method`` over matched detections, metres, shape (K,).
+
+        ``contract_only`` keeps only detections in the accuracy contract's domain.
+        """
         return np.array(
-            [d.errors_m[method] for f in self.frames for d in f.detections if method in d.errors_m],
-            dtype=np.float64,
+            [d.errors_m[method] for d in self._scored(method, contract_only)], dtype=np.float64
         )
 
-    def ranges_for(self, method: str) -> np.ndarray:
+    def ranges_for(self, method: str, *, contract_only: bool = False) -> np.ndarray:
         """Ranges of the detections behind :meth:`errors`, same order, metres."""
-        return np.array(
-            [d.range_m for f in self.frames for d in f.detections if method in d.errors_m],
-            dtype=np.float64,
-        )
+        return np.array([d.range_m for d in self._scored(method, contract_only)], dtype=np.float64)
 
 
 def cone_points_w(p_base_w: np.ndarray, cone: ConeModel = TRAFFIC_CONE) -> np.ndarray:
     """The apex and the base plate's eight corners of a cone at ``p_base_w``, shape (9, 3)."""
     h = cone.base_width_m / 2.0
-    corners = np.array([[sx * h, sy * h, z] for sx in (-1, 1) for sy in (-1, 1)
-                        for z in (0.0, cone.base_thickness_m)])
-    return np.vstack([p_base_w + [0.0, 0.0, cone.height_m], p_base_w + corners])
+    corners = np.array(
+        [
+            [sx * h, sy * h, z]
+            for sx in (-1, 1)
+            for sy in (-1, 1)
+            for z in (0.0, cone.base_thickness_m)
+        ]
+    )
+    return np.vstack([[*p_base_w, 0.0, 0.0, cone.height_m], p_base_w + corners])
 
 
 def cones_fully_in_view(
-    cones_w: np.ndarray, camera: PinholeCamera, T_w_c: np.ndarray,
+    cones_w: np.ndarray,
+    camera: PinholeCamera,
+    T_w_c: np.ndarray,
     min_height_px: float = MIN_CONE_HEIGHT_PX,
 ) -> list[int]:
     """Indices of cones whose apex and base corners all project inside the image (truth only)."""
@@ -146,8 +167,9 @@ def _driver(world: World, spec: ScenarioSpec):
     wps = flight.waypoints
     if len(wps) == 1:
         wps = (wps[0], wps[0].__class__(wps[0].t_s + 1.0, wps[0].position_w, wps[0].yaw_rad))
-    trajectory = MinimumJerkTrajectory([w.t_s for w in wps], [w.position_w for w in wps],
-                                       [w.yaw_rad for w in wps])
+    trajectory = MinimumJerkTrajectory(
+        [w.t_s for w in wps], [w.position_w for w in wps], [w.yaw_rad for w in wps]
+    )
     return Autopilot(world, trajectory)
 
 
@@ -183,19 +205,20 @@ def run_scenario(
     cones_w = world.cones_w()
     far_m = spec.scene.zfar_m
     dt = float(world.model.opt.timestep)
-    n_frames = int(math.floor(spec.end_s * spec.camera_rate_hz + 1e-9)) + 1
+    n_frames = math.floor(spec.end_s * spec.camera_rate_hz + 1e-9) + 1
     driver = _driver(world, spec)
     recording = Recording(rrd_path, f"{spec.name}-seed{seed}") if rrd_path else None
     positions_w = []
     try:
         if recording:
-            recording.log_setup(camera=camera, T_b_c=T_b_c, cones_w=cones_w,
-                                description_md=describe(spec, seed))
+            recording.log_setup(
+                camera=camera, T_b_c=T_b_c, cones_w=cones_w, description_md=describe(spec, seed)
+            )
         with Renderer(world) as renderer:
             for k in range(n_frames):
                 t0 = time.perf_counter()
                 target_s = k / spec.camera_rate_hz
-                n_steps = int(round((target_s - world.time_s) / dt))
+                n_steps = round((target_s - world.time_s) / dt)
                 if n_steps > 0:
                     driver.step(n_steps)
                 t1 = time.perf_counter()
@@ -204,21 +227,38 @@ def run_scenario(
                 detections = detect_cones(frame.rgb)
                 t3 = time.perf_counter()
                 record, estimates_w, errors_m, range_m, cloud_w = _evaluate_frame(
-                    k, world, driver, detections, frame.depth, camera, T_b_c, cones_w, far_m,
-                    spec, rng,
+                    k,
+                    world,
+                    driver,
+                    detections,
+                    frame.depth,
+                    camera,
+                    T_b_c,
+                    cones_w,
+                    far_m,
+                    spec,
+                    rng,
                 )
                 result.frames.append(record)
                 positions_w.append(record.T_w_b[:3, 3])
                 t4 = time.perf_counter()
                 if recording:
                     recording.log_frame(
-                        frame=k, t_s=record.t_s, T_w_b=record.T_w_b, rgb=frame.rgb,
-                        depth_m=frame.depth, detections=detections, estimates_w=estimates_w,
-                        errors_m=errors_m, range_m=range_m, cloud_w=cloud_w,
+                        frame=k,
+                        t_s=record.t_s,
+                        T_w_b=record.T_w_b,
+                        rgb=frame.rgb,
+                        depth_m=frame.depth,
+                        detections=detections,
+                        estimates_w=estimates_w,
+                        errors_m=errors_m,
+                        range_m=range_m,
+                        cloud_w=cloud_w,
                     )
                 t5 = time.perf_counter()
-                for key, seconds in zip(timing, (t1 - t0, t2 - t1, t3 - t2, t4 - t3, t5 - t4),
-                                        strict=True):
+                for key, seconds in zip(
+                    timing, (t1 - t0, t2 - t1, t3 - t2, t4 - t3, t5 - t4), strict=True
+                ):
                     timing[key] += seconds
                 if progress:
                     progress(k + 1, n_frames)
@@ -233,8 +273,9 @@ def run_scenario(
     return result
 
 
-def _evaluate_frame(k, world, driver, detections, depth_m, camera, T_b_c, cones_w, far_m, spec,
-                    rng):
+def _evaluate_frame(
+    k, world, driver, detections, depth_m, camera, T_b_c, cones_w, far_m, spec, rng
+):
     """Localise every detection, match to the truth, and build the frame's record."""
     T_w_b = world.T_w_b()
     T_w_b_est = _noisy_pose(T_w_b, spec, rng)
@@ -244,13 +285,20 @@ def _evaluate_frame(k, world, driver, detections, depth_m, camera, T_b_c, cones_
     rpy = so3.to_rpy(R_w_b, warn=False)
     in_view = cones_fully_in_view(cones_w, camera, T_w_c)
 
-    per_det = [localize(d, camera, T_w_b_est, T_b_c, depth=depth_m, far_m=far_m).as_dict()
-               for d in detections]
+    per_det = [
+        localize(d, camera, T_w_b_est, T_b_c, depth=depth_m, far_m=far_m).as_dict()
+        for d in detections
+    ]
     # Match on the ground plane with the first available non-naive estimate of each detection.
     anchors = [next((e[m] for m in METHODS[:3] if e[m] is not None), None) for e in per_det]
     usable = [i for i, a in enumerate(anchors) if a is not None]
-    pairs = metrics.match_nearest(cones_w[:, :2], np.array([anchors[i][:2] for i in usable]),
-                                  max_distance=MATCH_GATE_M) if usable else []
+    pairs = (
+        metrics.match_nearest(
+            cones_w[:, :2], np.array([anchors[i][:2] for i in usable]), max_distance=MATCH_GATE_M
+        )
+        if usable
+        else []
+    )
     cone_of = {usable[j]: i for i, j in pairs}
 
     T_c_w = se3.invert(T_w_c)
@@ -273,22 +321,43 @@ def _evaluate_frame(k, world, driver, detections, depth_m, camera, T_b_c, cones_
         for method, p_w in est.items():
             if p_w is not None:
                 estimates_w[method].append(p_w)
-        det_records.append(DetectionRecord(cone_index, {m: p for m, p in est.items()
-                                                        if p is not None},
-                                           errors, range_m, p_c_true))
+        in_contract = (
+            cone_index in in_view
+            and range_m is not None
+            and CONTRACT_RANGE_M[0] <= range_m <= CONTRACT_RANGE_M[1]
+        )
+        det_records.append(
+            DetectionRecord(
+                cone_index,
+                {m: p for m, p in est.items() if p is not None},
+                errors,
+                range_m,
+                p_c_true,
+                in_contract,
+            )
+        )
 
     reference_error = None
     last_reference = getattr(driver, "last_reference", None)
     if last_reference is not None:
         reference_error = float(np.linalg.norm(T_w_b[:3, 3] - last_reference.p_w))
 
-    record = FrameRecord(frame=k, t_s=world.time_s, T_w_b=T_w_b, quat_xyzw=world.quat_xyzw(),
-                         rpy_rad=rpy, gimbal_locked=locked, cones_in_view=in_view,
-                         detections=det_records, reference_error_m=reference_error)
+    record = FrameRecord(
+        frame=k,
+        t_s=world.time_s,
+        T_w_b=T_w_b,
+        quat_xyzw=world.quat_xyzw(),
+        rpy_rad=rpy,
+        gimbal_locked=locked,
+        cones_in_view=in_view,
+        detections=det_records,
+        reference_error_m=reference_error,
+    )
     cloud_w = None
     if depth_m is not None:
-        cloud_w = depth_to_world_points(depth_m, camera, T_w_b_est @ T_b_c,
-                                        stride=CLOUD_STRIDE_PX, far_m=far_m)
+        cloud_w = depth_to_world_points(
+            depth_m, camera, T_w_b_est @ T_b_c, stride=CLOUD_STRIDE_PX, far_m=far_m
+        )
     return (
         record,
         {m: np.array(v).reshape(-1, 3) for m, v in estimates_w.items()},

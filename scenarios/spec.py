@@ -53,7 +53,8 @@ METHODS: tuple[str, ...] = ("depth_image", "ground_plane", "known_height", "naiv
 CHECK_KINDS: dict[str, str] = {
     "max_error": "largest position error of `method` over all matched detections <= limit_m",
     "median_error": "median position error of `method` <= limit_m",
-    "error_bound": "every error of `method` within its accuracy bound (see scenarios.checks)",
+    "error_bound": "error / accuracy bound of `method` <= limit: worst for depth_image, median "
+    "otherwise, over cones fully in view, >= 12 px tall, 2-25 m away",
     "detection_rate": "detections / frames with a cone fully in view >= limit",
     "world_estimate_spread": "largest distance of `method`'s estimates from their mean <= limit_m",
     "camera_coords_span": "the cone's camera-frame coordinates move by >= limit_m",
@@ -132,8 +133,12 @@ class Check:
     def label(self) -> str:
         if self.name:
             return self.name
-        uses_method = self.kind not in ("detection_rate", "gimbal_lock_seen", "tracking_error",
-                                        "matched_cones")
+        uses_method = self.kind not in (
+            "detection_rate",
+            "gimbal_lock_seen",
+            "tracking_error",
+            "matched_cones",
+        )
         return f"{self.method} {self.kind}" if uses_method else self.kind
 
 
@@ -178,8 +183,15 @@ def _allowed(table: dict[str, Any], allowed: set[str], where: str, key: str) -> 
         raise _err(where, prefix + unknown[0], f"unknown key; expected one of {sorted(allowed)}")
 
 
-def _number(value: Any, where: str, key: str, *, lo: float | None = None,
-            hi: float | None = None, lo_open: bool = False) -> float:
+def _number(
+    value: Any,
+    where: str,
+    key: str,
+    *,
+    lo: float | None = None,
+    hi: float | None = None,
+    lo_open: bool = False,
+) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise _err(where, key, f"must be a number, got {value!r}")
     x = float(value)
@@ -209,8 +221,9 @@ def _times_increasing(times: list[float], where: str, key: str) -> None:
         raise _err(where, f"{key}[0].t", f"the first entry must be at t = 0, got {times[0]}")
     for i in range(1, len(times)):
         if times[i] <= times[i - 1]:
-            raise _err(where, f"{key}[{i}].t",
-                       f"times must increase, got {times[i]} after {times[i - 1]}")
+            raise _err(
+                where, f"{key}[{i}].t", f"times must increase, got {times[i]} after {times[i - 1]}"
+            )
 
 
 def keyframe_from_rpy_deg(t_s: float, position_w: Any, rpy_deg: Any) -> Keyframe:
@@ -235,11 +248,13 @@ def _flight(table: dict[str, Any], where: str) -> KinematicFlight | ControlledFl
             for needed in ("t", "position_w", "rpy_deg"):
                 if needed not in entry:
                     raise _err(where, f"{key}.{needed}", "missing")
-            keyframes.append(keyframe_from_rpy_deg(
-                _number(entry["t"], where, f"{key}.t", lo=0.0),
-                _vector(entry["position_w"], 3, where, f"{key}.position_w"),
-                _vector(entry["rpy_deg"], 3, where, f"{key}.rpy_deg"),
-            ))
+            keyframes.append(
+                keyframe_from_rpy_deg(
+                    _number(entry["t"], where, f"{key}.t", lo=0.0),
+                    _vector(entry["position_w"], 3, where, f"{key}.position_w"),
+                    _vector(entry["rpy_deg"], 3, where, f"{key}.rpy_deg"),
+                )
+            )
         _times_increasing([k.t_s for k in keyframes], where, "flight.keyframes")
         return KinematicFlight(tuple(keyframes))
     if mode == "controlled":
@@ -255,14 +270,16 @@ def _flight(table: dict[str, Any], where: str) -> KinematicFlight | ControlledFl
             for needed in ("t", "position_w"):
                 if needed not in entry:
                     raise _err(where, f"{key}.{needed}", "missing")
-            waypoints.append(Waypoint(
-                _number(entry["t"], where, f"{key}.t", lo=0.0),
-                _vector(entry["position_w"], 3, where, f"{key}.position_w"),
-                math.radians(_number(entry.get("yaw_deg", 0.0), where, f"{key}.yaw_deg")),
-            ))
+            waypoints.append(
+                Waypoint(
+                    _number(entry["t"], where, f"{key}.t", lo=0.0),
+                    _vector(entry["position_w"], 3, where, f"{key}.position_w"),
+                    math.radians(_number(entry.get("yaw_deg", 0.0), where, f"{key}.yaw_deg")),
+                )
+            )
         _times_increasing([w.t_s for w in waypoints], where, "flight.waypoints")
         return ControlledFlight(tuple(waypoints))
-    raise _err(where, "flight.mode", f"must be \"kinematic\" or \"controlled\", got {mode!r}")
+    raise _err(where, "flight.mode", f'must be "kinematic" or "controlled", got {mode!r}')
 
 
 def _checks(raw: Any, where: str) -> tuple[Check, ...]:
@@ -275,7 +292,9 @@ def _checks(raw: Any, where: str) -> tuple[Check, ...]:
         _allowed(entry, {"kind", "method", "limit", "limit_m", "name"}, where, key)
         kind = entry.get("kind")
         if kind not in CHECK_KINDS:
-            raise _err(where, f"{key}.kind", f"unknown check {kind!r}; valid: {sorted(CHECK_KINDS)}")
+            raise _err(
+                where, f"{key}.kind", f"unknown check {kind!r}; valid: {sorted(CHECK_KINDS)}"
+            )
         method = entry.get("method", "depth_image")
         if method not in METHODS:
             raise _err(where, f"{key}.method", f"unknown method {method!r}; valid: {list(METHODS)}")
@@ -303,8 +322,23 @@ def from_dict(data: dict[str, Any], where: str = "<scenario>") -> ScenarioSpec:
     ScenarioError
         Naming ``where`` and the offending key.
     """
-    _allowed(data, {"name", "description", "duration_s", "camera_rate_hz", "camera", "cones",
-                    "flight", "noise", "checks", "lesson"}, where, "")
+    _allowed(
+        data,
+        {
+            "name",
+            "description",
+            "duration_s",
+            "camera_rate_hz",
+            "camera",
+            "cones",
+            "flight",
+            "noise",
+            "checks",
+            "lesson",
+        },
+        where,
+        "",
+    )
     for needed in ("name", "flight", "cones"):
         if needed not in data:
             raise _err(where, needed, "missing")
@@ -338,13 +372,18 @@ def from_dict(data: dict[str, Any], where: str = "<scenario>") -> ScenarioSpec:
         else tuple(map(float, quat.from_axis_angle([0.0, 0.0, 1.0], first.yaw_rad)))
     )
     try:
-        scene = SceneConfig(camera=camera, cones_w=tuple(cones_w),
-                            start_position_w=first.position_w, start_quat_xyzw=start_quat_xyzw)
+        scene = SceneConfig(
+            camera=camera,
+            cones_w=tuple(cones_w),
+            start_position_w=first.position_w,
+            start_quat_xyzw=start_quat_xyzw,
+        )
     except ValueError as exc:
         raise _err(where, "cones", str(exc)) from None
 
-    rate = _number(data.get("camera_rate_hz", 10.0), where, "camera_rate_hz", lo=0.0,
-                   lo_open=True, hi=1000.0)
+    rate = _number(
+        data.get("camera_rate_hz", 10.0), where, "camera_rate_hz", lo=0.0, lo_open=True, hi=1000.0
+    )
     duration = None
     if "duration_s" in data:
         duration = _number(data["duration_s"], where, "duration_s", lo=0.0, lo_open=True)
@@ -353,16 +392,23 @@ def from_dict(data: dict[str, Any], where: str = "<scenario>") -> ScenarioSpec:
     _allowed(noise_table, {"position_std_m", "attitude_std_deg"}, where, "noise")
     noise = Noise(
         _number(noise_table.get("position_std_m", 0.0), where, "noise.position_std_m", lo=0.0),
-        _number(noise_table.get("attitude_std_deg", 0.0), where, "noise.attitude_std_deg",
-                lo=0.0),
+        _number(noise_table.get("attitude_std_deg", 0.0), where, "noise.attitude_std_deg", lo=0.0),
     )
     checks = _checks(data["checks"], where) if "checks" in data else ()
     lesson = data.get("lesson", "")
     if not isinstance(lesson, str):
         raise _err(where, "lesson", f"must be a string, got {type(lesson).__name__}")
-    return ScenarioSpec(name=name, description=description, scene=scene, flight=flight,
-                        camera_rate_hz=rate, duration_s=duration, noise=noise, checks=checks,
-                        lesson=lesson)
+    return ScenarioSpec(
+        name=name,
+        description=description,
+        scene=scene,
+        flight=flight,
+        camera_rate_hz=rate,
+        duration_s=duration,
+        noise=noise,
+        checks=checks,
+        lesson=lesson,
+    )
 
 
 def load_toml(path: str | Path) -> ScenarioSpec:

@@ -51,7 +51,9 @@ class ConeModel:
                 f"plate {self.base_width_m} m wide"
             )
         if len(self.color_rgb) != 3 or not all(0.0 <= c <= 1.0 for c in self.color_rgb):
-            raise ValueError(f"ConeModel.color_rgb must be 3 values in [0, 1], got {self.color_rgb}")
+            raise ValueError(
+                f"ConeModel.color_rgb must be 3 values in [0, 1], got {self.color_rgb}"
+            )
 
 
 TRAFFIC_CONE = ConeModel()

@@ -1,0 +1,121 @@
+"""The `vnav-demo` command line.
+
+- `vnav-demo list`: the built-in scenarios, one line each.
+- `vnav-demo run NAME|FILE.toml [...] [--all] [--out DIR] [--seed N] [--duration S] [--quiet]`:
+  runs scenarios headless, writes `DIR/<name>.rrd` and `DIR/<name>.json`, prints a summary.
+- `vnav-demo lecture`: the lecture's worked examples next to vnav's results.
+
+Exit status: 0 when every check passed, 1 when a check failed (or a run diverged), 2 for bad
+usage or bad input (one line on stderr, no traceback; nothing is written).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+
+__all__ = ["main"]
+
+PROG = "vnav-demo"
+
+
+class _UsageError(Exception):
+    """Raised instead of argparse's print-usage-and-exit, so `main` can say it in one line."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> None:  # type: ignore[override]
+        raise _UsageError(f"{self.prog}: error: {message} (see {PROG} --help)")
+
+
+def _lecture(args: argparse.Namespace) -> int:
+    from scenarios import lecture
+
+    outcomes = [lecture.evaluate(e) for e in lecture.EXAMPLES]
+    print("MIT 16.485 VNAV lecture 1: every worked example and quiz answer, computed by vnav")
+    print(lecture.table(outcomes))
+    return 0 if all(o.agrees for o in outcomes) else 1
+
+
+def _list(args: argparse.Namespace) -> int:
+    from scenarios import builtin
+
+    width = max(len(n) for n in builtin.names())
+    for name in builtin.names():
+        print(f"{name:<{width}}  {builtin.REGISTRY[name]()['description']}")
+    return 0
+
+
+def _run(args: argparse.Namespace) -> int:
+    from scenarios import run_command
+
+    return run_command.run(args)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser, one sub-parser per command."""
+    parser = _Parser(prog=PROG, description="vnav-sim demonstrations.")
+    sub = parser.add_subparsers(
+        dest="command", metavar="COMMAND", required=True, parser_class=_Parser
+    )
+    p = sub.add_parser(
+        "lecture",
+        help="print every worked example of VNAV lecture 1 next to vnav's result",
+        description="Print every worked example and quiz answer of MIT 16.485 VNAV lecture 1, "
+        "the lecture's answer next to vnav's. Exit status 1 if any disagrees.",
+    )
+    p.set_defaults(func=_lecture)
+
+    p = sub.add_parser(
+        "list",
+        help="list the built-in scenarios",
+        description="List the built-in scenarios with a one-line description.",
+    )
+    p.set_defaults(func=_list)
+
+    p = sub.add_parser(
+        "run",
+        help="run scenarios headless; write DIR/<name>.rrd and DIR/<name>.json",
+        description="Run built-in scenarios (by name) or scenario files (FILE.toml) headless. "
+        "Each writes DIR/<name>.rrd (open it with `rerun`) and DIR/<name>.json (error statistics "
+        "and checks). Exit status 0 if every check passed, 1 if one failed, 2 for bad input.",
+    )
+    p.add_argument(
+        "scenarios",
+        nargs="*",
+        metavar="NAME|FILE.toml",
+        help="built-in scenario names (see `vnav-demo list`) or TOML files",
+    )
+    p.add_argument("--all", action="store_true", help="run every built-in scenario")
+    p.add_argument(
+        "--out", default="recordings", metavar="DIR", help="output directory (default: recordings/)"
+    )
+    p.add_argument("--seed", type=int, default=1, metavar="N", help="random seed (default: 1)")
+    p.add_argument(
+        "--duration",
+        type=float,
+        default=None,
+        metavar="S",
+        help="stop each scenario after S simulated seconds",
+    )
+    p.add_argument("--quiet", action="store_true", help="print nothing but errors")
+    p.set_defaults(func=_run)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run `vnav-demo` with ``argv`` (default: ``sys.argv[1:]``); return the exit status."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except _UsageError as exc:
+        print(exc, file=sys.stderr)
+        return 2
+    except SystemExit as exc:  # --help
+        return int(exc.code or 0)
+    return int(args.func(args))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,300 @@
+"""Off-screen rendering of the onboard camera (RGB + metric depth in one pass, segmentation).
+
+One :func:`mujoco.mjr_render` fills the colour and the depth buffer; one
+:func:`mujoco.mjr_readPixels` reads both. The depth buffer is reversed-Z
+(``mjDEPTH_ZEROFAR``) and is linearised to planar z-depth in metres exactly as MuJoCo's own
+``mujoco.Renderer`` does (``mujoco/rendering/classic/renderer.py``).
+
+The onboard view leaves out the drone's geom group (:data:`sim.names.DRONE_GEOM_GROUP`): a real
+camera does not image its own housing. External views (``camera="chase"`` or a
+:class:`mujoco.MjvCamera`) show it.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+
+from sim import names
+from sim.gl import create_gl_context, mujoco
+from sim.world import World
+
+logger = logging.getLogger(__name__)
+
+SKY_DOME_MIN_FRACTION = 0.696
+"""Nearest ray distance of MuJoCo's skybox, as a fraction of zfar (measured, mujoco 4.0)."""
+SKY_THRESHOLD_FRACTION = 0.65
+"""Depth pixels whose ray is longer than this fraction of zfar are sky: set to zfar."""
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One rendered image.
+
+    Attributes
+    ----------
+    rgb : np.ndarray, shape (H, W, 3), uint8
+        Colour image, upright (row 0 at the top), OpenCV pixel convention.
+    depth : np.ndarray, shape (H, W), float32, or None
+        Planar z-depth along the optical axis, metres; where nothing was hit (sky) it reads the
+        far clipping distance.
+    segmentation : np.ndarray, shape (H, W), int32, or None
+        MuJoCo geom id seen at each pixel, -1 for background (sky).
+    time_s : float
+        Simulated time of the state rendered.
+    """
+
+    rgb: np.ndarray
+    depth: np.ndarray | None
+    segmentation: np.ndarray | None
+    time_s: float
+
+
+class Renderer:
+    """Renders a :class:`World`'s cameras off-screen at the configured resolution.
+
+    Parameters
+    ----------
+    world : World
+        The world to render; its current state is rendered at each call.
+    quality : {"fast", "high"}, optional
+        Overrides ``world.config.render_quality``. ``fast``: no shadow map, no multisampling.
+    width, height : int, optional
+        Image size; defaults to the onboard camera's configured size. Must fit the model's
+        off-screen buffer.
+
+    Use as a context manager (or call :meth:`close`) to free the OpenGL context.
+    """
+
+    def __init__(
+        self,
+        world: World,
+        *,
+        quality: str | None = None,
+        width: int | None = None,
+        height: int | None = None,
+    ) -> None:
+        self._gl = None
+        self._con = None
+        self.world = world
+        model = world.model
+        self.width = int(width if width is not None else world.config.camera.width)
+        self.height = int(height if height is not None else world.config.camera.height)
+        if not 0 < self.width <= model.vis.global_.offwidth:
+            raise ValueError(
+                f"width must be in [1, {model.vis.global_.offwidth}] (the off-screen buffer), "
+                f"got {self.width}"
+            )
+        if not 0 < self.height <= model.vis.global_.offheight:
+            raise ValueError(
+                f"height must be in [1, {model.vis.global_.offheight}] (the off-screen buffer), "
+                f"got {self.height}"
+            )
+        quality = quality if quality is not None else world.config.render_quality
+        if quality not in ("fast", "high"):
+            raise ValueError(f"quality must be 'fast' or 'high', got {quality!r}")
+        self.quality = quality
+
+        self._gl = create_gl_context(self.width, self.height)
+        # The context reads shadow map size and multisampling from the model when it is made.
+        saved = (model.vis.quality.shadowsize, model.vis.quality.offsamples)
+        if quality == "fast":
+            model.vis.quality.shadowsize, model.vis.quality.offsamples = 0, 0
+        else:
+            model.vis.quality.shadowsize, model.vis.quality.offsamples = 4096, 4
+        try:
+            self._con = mujoco.MjrContext(model, mujoco.mjtFontScale.mjFONTSCALE_150.value)
+        finally:
+            model.vis.quality.shadowsize, model.vis.quality.offsamples = saved
+        mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN.value, self._con)
+        self._con.readDepthMap = mujoco.mjtDepthMap.mjDEPTH_ZEROFAR
+
+        self._scene = mujoco.MjvScene(model, maxgeom=2000)
+        self._rect = mujoco.MjrRect(0, 0, self.width, self.height)
+        self._rgb = np.empty((self.height, self.width, 3), dtype=np.uint8)
+        self._depth = np.empty((self.height, self.width), dtype=np.float32)
+
+        self._onboard_option = mujoco.MjvOption()
+        self._onboard_option.geomgroup[names.DRONE_GEOM_GROUP] = 0
+        self._onboard_option.sitegroup[:] = 0
+        self._external_option = mujoco.MjvOption()
+        self._external_option.geomgroup[names.DRONE_GEOM_GROUP] = 1
+        self._external_option.sitegroup[:] = 0
+
+        self._shadows = quality == "high"
+        self._ray_cache: dict[tuple, np.ndarray] = {}
+
+    # ---------------------------------------------------------------- lifecycle
+    def close(self) -> None:
+        """Free the rendering context (idempotent)."""
+        if self._con is not None and self._gl is not None:
+            self._gl.make_current()
+            self._con.free()
+        self._con = None
+        if self._gl is not None:
+            self._gl.free()
+        self._gl = None
+
+    def __enter__(self) -> Renderer:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def __del__(self) -> None:
+        try:
+            self.close()
+        except Exception:  # interpreter shutdown: the GL library may be gone already
+            pass
+
+    # ---------------------------------------------------------------- rendering
+    def _camera(self, camera: str | int | mujoco.MjvCamera | None) -> tuple:
+        """Resolve ``camera`` to (MjvCamera, is_onboard)."""
+        if isinstance(camera, mujoco.MjvCamera):
+            return camera, False
+        model = self.world.model
+        if camera is None:
+            cam_id = self.world.camera_id
+        elif isinstance(camera, str):
+            cam_id = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, camera)
+            if cam_id < 0:
+                valid = [model.camera(i).name for i in range(model.ncam)]
+                raise ValueError(f"unknown camera {camera!r}; valid cameras are {valid}")
+        else:
+            cam_id = int(camera)
+            if not 0 <= cam_id < model.ncam:
+                raise ValueError(f"camera id must be in [0, {model.ncam}), got {camera}")
+        cam = mujoco.MjvCamera()
+        cam.type = mujoco.mjtCamera.mjCAMERA_FIXED
+        cam.fixedcamid = cam_id
+        return cam, cam_id == self.world.camera_id
+
+    def free_camera(
+        self, lookat_w: np.ndarray, distance_m: float, azimuth_deg: float, elevation_deg: float
+    ) -> mujoco.MjvCamera:
+        """A free (orbiting) camera looking at ``lookat_w`` for external pictures."""
+        cam = mujoco.MjvCamera()
+        cam.type = mujoco.mjtCamera.mjCAMERA_FREE
+        cam.lookat[:] = np.asarray(lookat_w, dtype=np.float64)
+        cam.distance = float(distance_m)
+        cam.azimuth = float(azimuth_deg)
+        cam.elevation = float(elevation_deg)
+        return cam
+
+    def render(
+        self,
+        *,
+        depth: bool = True,
+        segmentation: bool = False,
+        camera: str | int | mujoco.MjvCamera | None = None,
+        show_drone: bool | None = None,
+    ) -> Frame:
+        """Render the current state.
+
+        Parameters
+        ----------
+        depth : bool
+            Also return planar z-depth (same render pass as the colour image).
+        segmentation : bool
+            Also return per-pixel geom ids (one extra render pass).
+        camera : None, str, int or mujoco.MjvCamera
+            ``None``: the onboard camera. A camera name (e.g. ``"chase"``), id, or a free
+            camera from :meth:`free_camera` for external views.
+        show_drone : bool, optional
+            Draw the drone's own geoms; default: hidden for the onboard camera, shown otherwise.
+
+        Returns
+        -------
+        Frame
+        """
+        if self._con is None:
+            raise RuntimeError("render() called after close()")
+        cam, onboard = self._camera(camera)
+        if show_drone is None:
+            show_drone = not onboard
+        option = self._external_option if show_drone else self._onboard_option
+        model, data = self.world.model, self.world.data
+        self._gl.make_current()
+        scene = self._scene
+        mujoco.mjv_updateScene(
+            model, data, option, None, cam, mujoco.mjtCatBit.mjCAT_ALL.value, scene
+        )
+        scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = self._shadows
+        scene.flags[mujoco.mjtRndFlag.mjRND_SEGMENT] = False
+        scene.flags[mujoco.mjtRndFlag.mjRND_IDCOLOR] = False
+        mujoco.mjr_render(self._rect, scene, self._con)
+        mujoco.mjr_readPixels(self._rgb, self._depth if depth else None, self._rect, self._con)
+        rgb = np.flipud(self._rgb).copy()
+        depth_m = None
+        if depth:
+            depth_m = self._linearize(np.flipud(self._depth))
+            self._sky_to_far(depth_m, scene)
+
+        seg = None
+        if segmentation:
+            seg = self._segmentation(scene)
+        return Frame(rgb=rgb, depth=depth_m, segmentation=seg, time_s=float(data.time))
+
+    def _linearize(self, raw: np.ndarray) -> np.ndarray:
+        """Reversed-Z depth buffer -> planar z-depth in metres (as mujoco.Renderer does)."""
+        model = self.world.model
+        extent = model.stat.extent
+        znear = np.float32(model.vis.map.znear * extent)
+        zfar = np.float32(model.vis.map.zfar * extent)
+        # OpenGL perspective matrix terms in float32, as glFrustum computes them ...
+        c_coef = -(zfar + znear) / (zfar - znear)
+        d_coef = -(np.float32(2) * zfar * znear) / (zfar - znear)
+        # ... transformed for reversed Z (the window-to-NDC mapping is then the identity).
+        c_coef = np.float32(-0.5) * c_coef - np.float32(0.5)
+        d_coef = np.float32(-0.5) * d_coef
+        out_64 = float(d_coef) / (raw.astype(np.float64) + float(c_coef))
+        return out_64.astype(np.float32)
+
+    def _sky_to_far(self, depth_m: np.ndarray, scene: mujoco.MjvScene) -> None:
+        """Set sky pixels to the far clipping distance, in place.
+
+        The skybox is drawn as a dome about the camera whose ray distance is at least
+        :data:`SKY_DOME_MIN_FRACTION` of ``zfar`` (measured: 0.696 zfar, wherever the camera
+        is); everything real is nearer (``SceneConfig`` keeps the ground well inside it).
+        """
+        model = self.world.model
+        zfar = float(model.vis.map.zfar * model.stat.extent)
+        ray_per_depth = self._ray_per_depth(scene)
+        depth_m[depth_m * ray_per_depth > SKY_THRESHOLD_FRACTION * zfar] = zfar
+
+    def _ray_per_depth(self, scene: mujoco.MjvScene) -> np.ndarray:  # cached per fovy
+        """(H, W) ray length per unit planar depth, sqrt(1 + x^2 + y^2), for the view drawn."""
+        cam = scene.camera[0]
+        tan_half_fovy = (cam.frustum_top - cam.frustum_bottom) / 2.0 / cam.frustum_near
+        key = round(tan_half_fovy, 12)
+        cached = self._ray_cache.get(key)
+        if cached is None:
+            f_px = (self.height / 2.0) / tan_half_fovy
+            u = (np.arange(self.width) - (self.width - 1) / 2.0) / f_px
+            v = (np.arange(self.height) - (self.height - 1) / 2.0) / f_px
+            cached = np.sqrt(1.0 + u[None, :] ** 2 + v[:, None] ** 2).astype(np.float32)
+            self._ray_cache[key] = cached
+        return cached
+
+    def _segmentation(self, scene: mujoco.MjvScene) -> np.ndarray:
+        """Re-render the same scene with ID colours; return per-pixel geom ids (-1: none)."""
+        scene.flags[mujoco.mjtRndFlag.mjRND_SEGMENT] = True
+        scene.flags[mujoco.mjtRndFlag.mjRND_IDCOLOR] = True
+        try:
+            mujoco.mjr_render(self._rect, scene, self._con)
+            buf = np.empty((self.height, self.width, 3), dtype=np.uint8)
+            mujoco.mjr_readPixels(buf, None, self._rect, self._con)
+        finally:
+            scene.flags[mujoco.mjtRndFlag.mjRND_SEGMENT] = False
+            scene.flags[mujoco.mjtRndFlag.mjRND_IDCOLOR] = False
+        buf = np.flipud(buf).astype(np.int64)
+        segid = buf[..., 0] + (buf[..., 1] << 8) + (buf[..., 2] << 16)
+        ngeom = scene.ngeom
+        lut = np.full(ngeom + 1, -1, dtype=np.int32)
+        for g in scene.geoms[:ngeom]:
+            if g.segid != -1 and g.objtype == mujoco.mjtObj.mjOBJ_GEOM:
+                lut[g.segid + 1] = g.objid
+        segid = np.clip(segid, 0, ngeom)
+        return lut[segid]

@@ -1,0 +1,229 @@
+"""The `vnav-demo` command: a user's TOML scenario end to end, and every bad-input path."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+from rrd_tools import read_rows
+
+import scenarios.runner
+from scenarios import builtin
+from scenarios.cli import main
+from scenarios.runner import run_scenario
+
+PITCH_90_TOML = textwrap.dedent("""\
+    name = "pitch-ninety"
+    description = "nose straight down over a cone"
+    camera_rate_hz = 5.0
+
+    [camera]
+    position_b = [0.15, 0.0, 0.05]
+    pitch_down_deg = 0.0
+    fovy_deg = 60.0
+    width = 640
+    height = 480
+
+    [[cones]]
+    position_w = [1.5, 0.5, 0.0]
+
+    [flight]
+    mode = "kinematic"
+    keyframes = [
+      { t = 0.0, position_w = [0.0, 0.0, 4.0], rpy_deg = [0.0, 45.0, 0.0] },
+      { t = 2.0, position_w = [0.0, 0.0, 4.0], rpy_deg = [0.0, 90.0, 0.0] },
+      { t = 3.0, position_w = [0.0, 0.0, 4.0], rpy_deg = [0.0, 90.0, 0.0] },
+    ]
+
+    [[checks]]
+    kind = "max_error"
+    method = "depth_image"
+    limit_m = 0.1
+
+    [[checks]]
+    kind = "detection_rate"
+    limit = 0.95
+""")
+
+
+def test_toml_scenario_with_pitch_90_keyframe(tmp_path, capsys):
+    scenario = tmp_path / "pitch.toml"
+    scenario.write_text(PITCH_90_TOML)
+    out = tmp_path / "out"
+    assert main(["run", str(scenario), "--out", str(out), "--quiet"]) == 0
+    rep = json.loads((out / "pitch-ninety.json").read_text())
+    assert rep["passed"] and rep["frames"] == 16 and rep["detections"] == 16
+
+    # At t >= 2 s the body's x axis points straight down: the camera looks along world -z.
+    body = [r for r in read_rows(out / "pitch-ninety.rrd", "world/body") if "frame" in r]
+    _x_w, y_w, _z_w, w = body[-1]["Transform3D:quaternion"][0]
+    assert abs(y_w) == pytest.approx(np.sqrt(0.5), abs=1e-6) and abs(w) == pytest.approx(
+        np.sqrt(0.5), abs=1e-6
+    )
+
+    # The estimates in the file sit on the cone the file declares.
+    rows = [
+        r
+        for r in read_rows(out / "pitch-ninety.rrd", "world/cones/estimate/depth_image")
+        if r.get("Points3D:positions")
+    ]
+    p_w = np.array([p for r in rows for p in r["Points3D:positions"]])
+    assert len(p_w) == 16
+    assert np.max(np.linalg.norm(p_w[:, :2] - [1.5, 0.5], axis=1)) < 0.05
+
+
+def test_same_seed_same_json(tmp_path):
+    scenario = tmp_path / "s.toml"
+    scenario.write_text(
+        PITCH_90_TOML.replace("[[checks]]", "[noise]\nposition_std_m = 0.05\n\n[[checks]]", 1)
+    )
+    reports = []
+    for run in ("a", "b", "c"):
+        seed = "7" if run != "c" else "8"
+        assert main(
+            [
+                "run",
+                str(scenario),
+                "--out",
+                str(tmp_path / run),
+                "--seed",
+                seed,
+                "--quiet",
+                "--duration",
+                "1",
+            ]
+        ) in (0, 1)
+        rep = json.loads((tmp_path / run / "pitch-ninety.json").read_text())
+        rep.pop("timing_s")
+        reports.append(rep)
+    assert reports[0] == reports[1]
+    assert reports[0]["methods"] != reports[2]["methods"]  # the seed does drive the noise
+
+
+def test_list_names_every_builtin(capsys):
+    assert main(["list"]) == 0
+    listed = [line.split()[0] for line in capsys.readouterr().out.splitlines()]
+    assert listed == builtin.names()
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (
+            ["run", "no-such-scenario"],
+            r"unknown scenario 'no-such-scenario'; valid names: "
+            r"frame-problem, yaw-sweep",
+        ),
+        (["run"], r"no scenario given"),
+        (["run", "frame-problem", "--duration", "0"], r"--duration must be a positive"),
+        (["run", "frame-problem", "--seed", "x"], r"invalid int value: 'x'"),
+        (["frobnicate"], r"invalid choice: 'frobnicate'"),
+    ],
+)
+def test_bad_usage_exit_2_one_line(tmp_path, capsys, args, message):
+    out = tmp_path / "out"
+    assert main([*args, "--out", str(out)] if args[0] == "run" else args) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1
+    assert __import__("re").search(message, err)
+    assert not out.exists() or not any(out.iterdir())
+
+
+@pytest.mark.parametrize(
+    ("content", "message"),
+    [
+        ('name = "x"\n[camera\n', r"bad\.toml: invalid TOML: .*line 2"),
+        (
+            PITCH_90_TOML.replace("fovy_deg = 60.0", "fovy_deg = 200.0"),
+            r"bad\.toml: camera: CameraConfig.fovy_deg must be in \(0, 180\)",
+        ),
+        (
+            PITCH_90_TOML.replace("[0.0, 45.0, 0.0]", "[0.0, 45.0]"),
+            r"bad\.toml: flight\.keyframes\[0\]\.rpy_deg: must be a list of 3 numbers",
+        ),
+        (
+            PITCH_90_TOML.replace("position_w = [1.5, 0.5, 0.0]", "position_w = [1.5, 0.5, -1.0]"),
+            r"bad\.toml: cones: .*under the ground",
+        ),
+        (
+            PITCH_90_TOML.replace('mode = "kinematic"', 'mode = "teleport"'),
+            r"bad\.toml: flight\.mode: must be \"kinematic\" or \"controlled\"",
+        ),
+        (
+            PITCH_90_TOML.replace("camera_rate_hz", "camera_rate"),
+            r"bad\.toml: camera_rate: unknown key",
+        ),
+        (
+            PITCH_90_TOML.replace("{ t = 2.0", "{ t = 0.0"),
+            r"bad\.toml: flight\.keyframes\[1\]\.t: times must increase",
+        ),
+    ],
+)
+def test_bad_scenario_file_exit_2(tmp_path, capsys, content, message):
+    bad = tmp_path / "bad.toml"
+    bad.write_text(content)
+    out = tmp_path / "out"
+    assert main(["run", str(bad), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1
+    assert __import__("re").search(message, err), err
+    assert not out.exists() or not any(out.iterdir())
+
+
+def test_missing_file_and_unwritable_out_dir(tmp_path, capsys):
+    assert main(["run", str(tmp_path / "nope.toml"), "--out", str(tmp_path / "o")]) == 2
+    assert "nope.toml: no such scenario file" in capsys.readouterr().err
+    blocker = tmp_path / "a-file"
+    blocker.write_text("")
+    assert main(["run", "frame-problem", "--out", str(blocker / "sub")]) == 2
+    assert "cannot be written" in capsys.readouterr().err
+
+
+def test_command_line_process_has_no_traceback(tmp_path):
+    """The real console entry point: exit status 2 and one line, no Python traceback."""
+    env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
+    proc = subprocess.run(
+        [sys.executable, "-m", "scenarios", "run", "nope"],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert proc.returncode == 2
+    assert "Traceback" not in proc.stderr
+    assert proc.stderr.count("\n") == 1
+
+
+def test_interrupted_run_leaves_no_partial_file_and_keeps_the_old_one(tmp_path, monkeypatch):
+    spec = builtin.load("frame-problem")
+    rrd = tmp_path / "frame-problem.rrd"
+    rrd.write_bytes(b"an earlier recording")
+    calls = {"n": 0}
+    real_detect = scenarios.runner.detect_cones
+
+    def detect_then_fail(rgb):
+        calls["n"] += 1
+        if calls["n"] == 4:
+            raise KeyboardInterrupt
+        return real_detect(rgb)
+
+    monkeypatch.setattr(scenarios.runner, "detect_cones", detect_then_fail)
+    with pytest.raises(KeyboardInterrupt):
+        run_scenario(spec, rrd_path=rrd)
+    assert rrd.read_bytes() == b"an earlier recording"
+    assert [p.name for p in tmp_path.iterdir()] == [rrd.name]
+
+
+def test_lecture_command_prints_every_example_agreeing(capsys):
+    from scenarios import lecture
+
+    assert main(["lecture"]) == 0
+    out = capsys.readouterr().out
+    rows = [line for line in out.splitlines() if line.rstrip().endswith(("yes", "NO"))]
+    assert len(rows) == len(lecture.EXAMPLES)
+    assert all(line.rstrip().endswith("yes") for line in rows)

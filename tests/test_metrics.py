@@ -1,0 +1,87 @@
+"""Error statistics and estimate-to-truth matching."""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+import pytest
+
+from vnav.metrics import (
+    STATS,
+    error_stats,
+    horizontal_error,
+    match_nearest,
+    position_error,
+)
+
+
+def test_error_stats_known_values() -> None:
+    s = error_stats(np.array([3.0, 4.0, 0.0, 5.0]))
+    assert set(s) == set(STATS)
+    assert s["count"] == 4
+    assert s["mean"] == 3.0 and s["median"] == 3.5 and s["min"] == 0.0 and s["max"] == 5.0
+    assert s["rmse"] == pytest.approx(math.sqrt(50.0 / 4.0))
+    assert s["std"] == pytest.approx(np.std([3.0, 4.0, 0.0, 5.0]))
+
+
+def test_error_stats_empty() -> None:
+    s = error_stats(np.array([]))
+    assert s["count"] == 0
+    assert all(math.isnan(s[k]) for k in STATS if k != "count")
+
+
+def test_error_stats_bad_input() -> None:
+    with pytest.raises(ValueError, match="errors must be finite"):
+        error_stats(np.array([1.0, np.nan]))
+    with pytest.raises(ValueError, match="errors must be one-dimensional"):
+        error_stats(np.zeros((2, 2)))
+
+
+def test_position_and_horizontal_error() -> None:
+    ref = np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]])
+    est = np.array([[3.0, 4.0, 12.0], [1.0, 1.0, 1.0]])
+    np.testing.assert_allclose(position_error(ref, est), [13.0, 0.0])
+    np.testing.assert_allclose(horizontal_error(ref, est), [5.0, 0.0])
+    np.testing.assert_allclose(horizontal_error(ref[0], est[0]), [5.0])
+    with pytest.raises(ValueError, match="must both be"):
+        position_error(ref, est[:1])
+
+
+def test_match_nearest_exact_assignment() -> None:
+    # Greedy takes the closest pair (0, 0) at 0.9 and is left with (1, 1) at 3.0 (total 3.9);
+    # the optimum is (0, 1) + (1, 0) = 1.1 + 1.0.
+    ref = np.array([[1.1, 0.0], [3.0, 0.0]])
+    est = np.array([[2.0, 0.0], [0.0, 0.0]])
+    assert match_nearest(ref, est) == [(0, 1), (1, 0)]
+
+
+def test_match_nearest_unequal_sizes_and_gate() -> None:
+    ref = np.array([[0.0, 0.0, 0.0], [5.0, 0.0, 0.0], [9.0, 9.0, 0.0]])
+    est = np.array([[5.1, 0.0, 0.0], [0.2, 0.0, 0.0]])
+    assert match_nearest(ref, est) == [(0, 1), (1, 0)]
+    assert match_nearest(ref, est, max_distance=0.15) == [(1, 0)]
+    assert match_nearest(ref, np.zeros((0, 3))) == []
+
+
+def test_match_nearest_brute_force_is_optimal() -> None:
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        ref = rng.uniform(0, 10, size=(5, 2))
+        est = ref[rng.permutation(5)] + rng.normal(0, 1.5, size=(5, 2))
+        pairs = match_nearest(ref, est)
+        total = sum(np.linalg.norm(ref[i] - est[j]) for i, j in pairs)
+        best = min(
+            sum(np.linalg.norm(ref[i] - est[p[i]]) for i in range(5))
+            for p in itertools.permutations(range(5))
+        )
+        assert total == pytest.approx(best)
+
+
+def test_match_nearest_greedy_for_many() -> None:
+    ref = np.column_stack((np.arange(20.0), np.zeros(20)))
+    est = ref[::-1] + 0.1
+    pairs = match_nearest(ref, est)
+    assert len(pairs) == 20
+    assert all(abs(ref[i, 0] + 0.1 - est[j, 0]) < 1e-9 for i, j in pairs)

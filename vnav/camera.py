@@ -1,0 +1,261 @@
+"""The pinhole camera: intrinsics, projection, back-projection and viewing rays.
+
+Every function here works in the **optical** frame `c` (x right, y down, z forward) and in
+OpenCV pixel coordinates (u right, v down, the centre of the top-left pixel is (0, 0));
+see docs/CONVENTIONS.md. There is no lens distortion: MuJoCo renders an ideal pinhole.
+
+The model (Hartley & Zisserman, *Multiple View Geometry*, 2nd ed., eq. 6.1-6.5):
+
+    [u, v, 1]^T ~ K [x, y, z]^T,   K = [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]
+    u = fx x / z + cx,   v = fy y / z + cy                       (projection, z > 0)
+    x = (u - cx) z / fx, y = (v - cy) z / fy                       (back-projection, z = depth)
+
+Depth is **planar z-depth** in metres (the optical z coordinate), not the length of the ray.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["PinholeCamera"]
+
+
+def _as_points(name: str, p: np.ndarray, dim: int) -> np.ndarray:
+    """Return `p` as a float64 (N, dim) array; accept (dim,) as one point."""
+    arr = np.asarray(p, dtype=np.float64)
+    if arr.ndim == 1 and arr.shape[0] == dim:
+        arr = arr[None, :]
+    if arr.ndim != 2 or arr.shape[1] != dim:
+        raise ValueError(f"{name} must have shape ({dim},) or (N, {dim}), got shape {np.shape(p)}")
+    return arr
+
+
+@dataclass(frozen=True)
+class PinholeCamera:
+    """An ideal pinhole camera with square or rectangular pixels and no distortion.
+
+    Attributes
+    ----------
+    fx, fy : float
+        Focal lengths in pixels (positive, finite).
+    cx, cy : float
+        Principal point in OpenCV pixel coordinates (top-left pixel centre is (0, 0)).
+    width, height : int
+        Image size in pixels (positive).
+
+    Raises
+    ------
+    ValueError
+        On a non-positive or non-finite focal length, a non-finite principal point, or a
+        non-positive or non-integer image size.
+    """
+
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    width: int
+    height: int
+
+    def __post_init__(self) -> None:
+        for name in ("fx", "fy"):
+            value = getattr(self, name)
+            if not (
+                isinstance(value, int | float | np.floating | np.integer)
+                and math.isfinite(value)
+                and value > 0.0
+            ):
+                raise ValueError(
+                    f"PinholeCamera.{name} must be a positive finite focal length in pixels, "
+                    f"got {value!r}"
+                )
+            object.__setattr__(self, name, float(value))
+        for name in ("cx", "cy"):
+            value = getattr(self, name)
+            if not (
+                isinstance(value, int | float | np.floating | np.integer) and math.isfinite(value)
+            ):
+                raise ValueError(f"PinholeCamera.{name} must be finite, got {value!r}")
+            object.__setattr__(self, name, float(value))
+        for name in ("width", "height"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | np.integer) or value <= 0:
+                raise ValueError(
+                    f"PinholeCamera.{name} must be a positive int (pixels), got {value!r}"
+                )
+            object.__setattr__(self, name, int(value))
+
+    @classmethod
+    def from_fovy(cls, fovy_deg: float, width: int, height: int) -> PinholeCamera:
+        """The camera MuJoCo renders for a vertical field of view `fovy_deg`.
+
+        Square pixels with `fx = fy = (H / 2) / tan(fovy / 2)` and the principal point at the
+        image centre, `cx = (W - 1) / 2`, `cy = (H - 1) / 2` in OpenCV pixel-centre coordinates
+        (docs/CONVENTIONS.md; measured in /work/shared/REFERENCE.md).
+
+        Parameters
+        ----------
+        fovy_deg : float
+            Vertical field of view in degrees, in the open interval (0, 180).
+        width, height : int
+            Image size in pixels.
+
+        Raises
+        ------
+        ValueError
+            If `fovy_deg` is not finite or outside (0, 180), or the size is invalid.
+        """
+        fovy_deg = float(fovy_deg)
+        if not (math.isfinite(fovy_deg) and 0.0 < fovy_deg < 180.0):
+            raise ValueError(f"fovy_deg must be in the open interval (0, 180), got {fovy_deg!r}")
+        for name, value in (("width", width), ("height", height)):
+            if isinstance(value, bool) or not isinstance(value, int | np.integer) or value <= 0:
+                raise ValueError(f"{name} must be a positive int (pixels), got {value!r}")
+        f_px = (height / 2.0) / math.tan(math.radians(fovy_deg) / 2.0)
+        return cls(
+            fx=f_px,
+            fy=f_px,
+            cx=(width - 1) / 2.0,
+            cy=(height - 1) / 2.0,
+            width=width,
+            height=height,
+        )
+
+    @property
+    def K(self) -> np.ndarray:
+        """The (3, 3) float64 intrinsic matrix `[[fx, 0, cx], [0, fy, cy], [0, 0, 1]]`."""
+        return np.array(
+            [[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]], dtype=np.float64
+        )
+
+    @property
+    def fovy_deg(self) -> float:
+        """Vertical field of view in degrees, `2 atan((H / 2) / fy)`."""
+        return math.degrees(2.0 * math.atan((self.height / 2.0) / self.fy))
+
+    @property
+    def fovx_deg(self) -> float:
+        """Horizontal field of view in degrees, `2 atan((W / 2) / fx)`."""
+        return math.degrees(2.0 * math.atan((self.width / 2.0) / self.fx))
+
+    def project(self, p_c: np.ndarray) -> np.ndarray:
+        """Project points in the optical frame to pixels, `u = fx x/z + cx`, `v = fy y/z + cy`.
+
+        Parameters
+        ----------
+        p_c : array_like, shape (3,) or (N, 3)
+            Points in the optical frame, metres.
+
+        Returns
+        -------
+        uv : ndarray, shape (N, 2), float64
+            Pixel coordinates (OpenCV). A point at or behind the camera (`z <= 0`) or with a
+            non-finite coordinate gives a row of NaN. A (3,) input gives a (1, 2) result.
+            Pixels outside the image are returned as they are (see `in_image`).
+
+        Raises
+        ------
+        ValueError
+            If `p_c` does not have shape (3,) or (N, 3).
+        """
+        p_c = _as_points("p_c", p_c, 3)
+        z = p_c[:, 2]
+        valid = np.isfinite(p_c).all(axis=1) & (z > 0.0)
+        uv = np.full((p_c.shape[0], 2), np.nan, dtype=np.float64)
+        zv = z[valid]
+        uv[valid, 0] = self.fx * p_c[valid, 0] / zv + self.cx
+        uv[valid, 1] = self.fy * p_c[valid, 1] / zv + self.cy
+        return uv
+
+    def backproject(self, uv: np.ndarray, depth: float | np.ndarray) -> np.ndarray:
+        """Back-project pixels with planar z-depth to points in the optical frame.
+
+        `x = (u - cx) z / fx`, `y = (v - cy) z / fy`, `z = depth`: the exact inverse of
+        `project` for `z > 0`.
+
+        Parameters
+        ----------
+        uv : array_like, shape (2,) or (N, 2)
+            Pixel coordinates (OpenCV).
+        depth : float or array_like, shape (N,)
+            Planar z-depth in metres (the optical z coordinate, not the ray length), one value
+            for all pixels or one per pixel. Non-finite values propagate as NaN/inf.
+
+        Returns
+        -------
+        p_c : ndarray, shape (N, 3), float64
+            Points in the optical frame, metres.
+
+        Raises
+        ------
+        ValueError
+            If `uv` does not have shape (2,) or (N, 2), or `depth` is neither a scalar nor a
+            length-N vector.
+        """
+        uv = _as_points("uv", uv, 2)
+        z = np.asarray(depth, dtype=np.float64)
+        if z.ndim == 0:
+            z = np.full(uv.shape[0], float(z))
+        elif z.shape != (uv.shape[0],):
+            raise ValueError(
+                f"depth must be a scalar or have shape ({uv.shape[0]},) to match uv, "
+                f"got shape {z.shape}"
+            )
+        p_c = np.empty((uv.shape[0], 3), dtype=np.float64)
+        p_c[:, 0] = (uv[:, 0] - self.cx) * z / self.fx
+        p_c[:, 1] = (uv[:, 1] - self.cy) * z / self.fy
+        p_c[:, 2] = z
+        return p_c
+
+    def rays(self, uv: np.ndarray) -> np.ndarray:
+        """Unit viewing rays through pixels, in the optical frame.
+
+        The ray through `(u, v)` is `K^-1 [u, v, 1]^T` normalised; it points forward (z > 0).
+
+        Parameters
+        ----------
+        uv : array_like, shape (2,) or (N, 2)
+            Pixel coordinates (OpenCV).
+
+        Returns
+        -------
+        d_c : ndarray, shape (N, 3), float64
+            Unit direction vectors in the optical frame.
+
+        Raises
+        ------
+        ValueError
+            If `uv` does not have shape (2,) or (N, 2).
+        """
+        p_c = self.backproject(uv, 1.0)
+        return p_c / np.linalg.norm(p_c, axis=1, keepdims=True)
+
+    def in_image(self, uv: np.ndarray, margin_px: float = 0.0) -> np.ndarray:
+        """Whether pixels lie inside the image, shrunk by `margin_px` on every side.
+
+        A pixel centre is inside when `-0.5 + m <= u < W - 0.5 - m` and likewise for v (each
+        pixel covers `[c - 0.5, c + 0.5)` around its centre c). NaN rows are outside.
+
+        Parameters
+        ----------
+        uv : array_like, shape (2,) or (N, 2)
+            Pixel coordinates (OpenCV).
+        margin_px : float
+            Margin in pixels kept clear of the border.
+
+        Returns
+        -------
+        inside : ndarray, shape (N,), bool
+        """
+        uv = _as_points("uv", uv, 2)
+        lo = -0.5 + margin_px
+        with np.errstate(invalid="ignore"):
+            return (
+                (uv[:, 0] >= lo)
+                & (uv[:, 0] < self.width - 0.5 - margin_px)
+                & (uv[:, 1] >= lo)
+                & (uv[:, 1] < self.height - 0.5 - margin_px)
+            )

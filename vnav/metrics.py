@@ -1,0 +1,179 @@
+"""Error statistics of position estimates against ground truth, in the style of evo.
+
+evo (`evo/core/metrics.py`) reports every error series with the same statistics: rmse, mean,
+median, std, min, max. The same here, plus the count. Reference (ground truth) comes first in
+every argument list. Errors are Euclidean distances in metres.
+
+An empty series is not an error: `error_stats` returns count 0 and NaN for every statistic,
+so a table of several methods keeps its rows when one method never produced an estimate.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+
+__all__ = [
+    "STATS",
+    "error_stats",
+    "horizontal_error",
+    "match_nearest",
+    "position_error",
+]
+
+STATS = ("rmse", "mean", "median", "std", "min", "max", "count")
+"""The keys of `error_stats`, in display order."""
+
+_BRUTE_FORCE_MAX = 7
+"""Up to this many estimates or truths, matching tries every assignment (7! = 5040)."""
+
+
+def _points(x: np.ndarray, name: str) -> np.ndarray:
+    a = np.asarray(x, dtype=np.float64)
+    if a.ndim == 1:
+        a = a[None, :]
+    if a.ndim != 2 or a.shape[1] not in (2, 3):
+        raise ValueError(f"{name} must have shape (3,), (N, 3), (2,) or (N, 2); got {a.shape}")
+    return a
+
+
+def error_stats(errors: np.ndarray) -> dict[str, float]:
+    """Statistics of a series of non-negative errors (evo's set, plus `count`).
+
+    `rmse = sqrt(mean(e^2))`; `std` is the population standard deviation (ddof = 0, as evo).
+
+    Parameters
+    ----------
+    errors : array_like, shape (N,)
+        Errors, e.g. metres. Must be finite.
+
+    Returns
+    -------
+    dict
+        Keys `STATS`; `count` is an int. For N = 0 every other value is NaN.
+
+    Raises
+    ------
+    ValueError
+        If `errors` is not one-dimensional or holds NaN/inf.
+    """
+    e = np.asarray(errors, dtype=np.float64)
+    if e.ndim != 1:
+        raise ValueError(f"errors must be one-dimensional, got shape {e.shape}")
+    if not np.isfinite(e).all():
+        raise ValueError(f"errors must be finite; got {int((~np.isfinite(e)).sum())} NaN/inf")
+    if e.size == 0:
+        stats: dict[str, float] = {key: math.nan for key in STATS}
+        stats["count"] = 0
+        return stats
+    return {
+        "rmse": float(np.sqrt(np.mean(e**2))),
+        "mean": float(np.mean(e)),
+        "median": float(np.median(e)),
+        "std": float(np.std(e)),
+        "min": float(np.min(e)),
+        "max": float(np.max(e)),
+        "count": int(e.size),
+    }
+
+
+def position_error(p_ref: np.ndarray, p_est: np.ndarray) -> np.ndarray:
+    """Euclidean (3-D) distance per row, `|p_est - p_ref|`, shape (N,), metres.
+
+    Raises
+    ------
+    ValueError
+        If the shapes differ or are not (3,) / (N, 3).
+    """
+    a, b = _points(p_ref, "p_ref"), _points(p_est, "p_est")
+    if a.shape != b.shape or a.shape[1] != 3:
+        raise ValueError(f"p_ref and p_est must both be (N, 3); got {a.shape} and {b.shape}")
+    return np.linalg.norm(b - a, axis=1)
+
+
+def horizontal_error(p_ref: np.ndarray, p_est: np.ndarray) -> np.ndarray:
+    """Distance in the ground plane (world x, y; z ignored) per row, shape (N,), metres.
+
+    Raises
+    ------
+    ValueError
+        If the shapes differ or are not (3,) / (N, 3).
+    """
+    a, b = _points(p_ref, "p_ref"), _points(p_est, "p_est")
+    if a.shape != b.shape or a.shape[1] != 3:
+        raise ValueError(f"p_ref and p_est must both be (N, 3); got {a.shape} and {b.shape}")
+    return np.linalg.norm(b[:, :2] - a[:, :2], axis=1)
+
+
+def match_nearest(
+    p_ref: np.ndarray, p_est: np.ndarray, max_distance: float = math.inf
+) -> list[tuple[int, int]]:
+    """Pair estimates with true positions one-to-one, minimising the total distance.
+
+    Exact (every assignment tried) when either set has at most 7 points, else greedy: the
+    globally closest remaining pair first. Pairs farther apart than `max_distance` are left
+    unmatched. 2-D or 3-D points (pass `[:, :2]` to match in the ground plane).
+
+    Parameters
+    ----------
+    p_ref : array_like, shape (N, D)
+        True positions.
+    p_est : array_like, shape (M, D)
+        Estimates.
+    max_distance : float
+        Largest distance of a pair, same unit as the points.
+
+    Returns
+    -------
+    list of (i_ref, i_est)
+        Sorted by `i_ref`.
+
+    Raises
+    ------
+    ValueError
+        On mismatched dimensions or non-finite points.
+    """
+    if np.size(p_ref) == 0 or np.size(p_est) == 0:
+        return []
+    a, b = _points(p_ref, "p_ref"), _points(p_est, "p_est")
+    if a.shape[1] != b.shape[1]:
+        raise ValueError(f"p_ref and p_est must have the same dimension; got {a.shape}, {b.shape}")
+    if not (np.isfinite(a).all() and np.isfinite(b).all()):
+        raise ValueError("p_ref and p_est must be finite")
+    dist = np.linalg.norm(a[:, None, :] - b[None, :, :], axis=2)
+    allowed = dist <= max_distance
+    pairs: list[tuple[int, int]]
+    if min(dist.shape) <= _BRUTE_FORCE_MAX and max(dist.shape) <= 10:
+        pairs = _match_brute_force(dist, allowed)
+    else:
+        pairs = []
+        used_a: set[int] = set()
+        used_b: set[int] = set()
+        for flat in np.argsort(dist, axis=None, kind="stable"):
+            i, j = divmod(int(flat), dist.shape[1])
+            if not allowed[i, j]:
+                break
+            if i not in used_a and j not in used_b:
+                pairs.append((i, j))
+                used_a.add(i)
+                used_b.add(j)
+    return sorted(pairs)
+
+
+def _match_brute_force(dist: np.ndarray, allowed: np.ndarray) -> list[tuple[int, int]]:
+    """Most pairs first, then least total distance, over every partial assignment."""
+    n, m = dist.shape
+    transpose = n > m
+    if transpose:
+        dist, allowed = dist.T, allowed.T
+        n, m = m, n
+    best: tuple[int, float, list[tuple[int, int]]] = (0, 0.0, [])
+    for perm in itertools.permutations(range(m), n):
+        pairs = [(i, j) for i, j in enumerate(perm) if allowed[i, j]]
+        total = float(sum(dist[i, j] for i, j in pairs))
+        if len(pairs) > best[0] or (len(pairs) == best[0] and total < best[1]):
+            best = (len(pairs), total, pairs)
+    pairs = best[2]
+    return [(j, i) for i, j in pairs] if transpose else pairs

@@ -1,0 +1,535 @@
+"""Unit quaternions, scalar last ``[x, y, z, w]`` (lecture chapter 6).
+
+vnav stores a quaternion as ``[x, y, z, w]``, the lecture's ``q = [v; s]`` with
+``v = sin(theta/2) u`` and ``s = cos(theta/2)``. MuJoCo stores ``[w, x, y, z]``: convert with
+`xyzw_to_wxyz` / `wxyz_to_xyzw` exactly where data crosses that border; SciPy and Rerun are
+scalar last like vnav. ``q`` and ``-q`` are the same rotation (the double cover of SO(3) by
+S^3). Products are Hamilton's: ``to_matrix(multiply(a, b)) == to_matrix(a) @ to_matrix(b)``.
+
+Only unit quaternions are accepted: a non-unit input raises ``ValueError`` unless the caller
+opts in with ``normalize=True`` (where offered) or calls `normalize` first. Every function is
+batched over leading axes: a (..., 4) stack of quaternions. Conventions: docs/CONVENTIONS.md.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from vnav import _validate as _v
+from vnav._validate import FloatArray
+
+__all__ = [
+    "check_quaternion",
+    "conjugate",
+    "from_axis_angle",
+    "from_matrix",
+    "from_rotvec",
+    "multiply",
+    "normalize",
+    "slerp",
+    "to_axis_angle",
+    "to_matrix",
+    "to_rotvec",
+    "wxyz_to_xyzw",
+    "xyzw_to_wxyz",
+]
+
+_SMALL_ANGLE = 1e-4  # below it, sin(t/2)/t comes from its Taylor series
+_CHUNK = 8192  # rows per block in `to_matrix`: keeps the temporaries in cache
+_NORM_ATOL = 1e-6  # default tolerance on | |q| - 1 |
+
+
+def _squared_norm(q: FloatArray) -> FloatArray:
+    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    with np.errstate(over="ignore"):
+        return x * x + y * y + z * z + w * w
+
+
+def _check_norm(n2: FloatArray, name: str, atol: float, *, allow_non_unit: bool = False) -> None:
+    """Raise for a zero quaternion, or for a non-unit one unless ``allow_non_unit``."""
+    if n2.size == 0:
+        return
+    if np.any(n2 == 0.0):
+        raise ValueError(
+            f"{name} is the zero quaternion (norm 0), which is no rotation; a unit quaternion "
+            "[x, y, z, w] is required"
+        )
+    if allow_non_unit:
+        return
+    # | |q| - 1 | <= atol, tested on the squared norm: |q|^2 - 1 = (|q| - 1)(|q| + 1).
+    dev = np.abs(n2 - 1.0)
+    if np.any(dev > atol * (2.0 + atol)):
+        norm = np.sqrt(n2.flat[int(np.argmax(dev))])
+        where = "" if n2.ndim == 0 else " (worst of the stack)"
+        raise ValueError(
+            f"{name} must be a unit quaternion [x, y, z, w]; got norm {norm:.9g}{where}, "
+            f"|norm - 1| > {atol:g}; normalise explicitly with quat.normalize({name}) or pass "
+            "normalize=True where the function offers it"
+        )
+
+
+def check_quaternion(q: ArrayLike, name: str = "q", atol: float = _NORM_ATOL) -> FloatArray:
+    """Validate a unit quaternion ``[x, y, z, w]`` (or a stack) and return it as float64.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+    name : str
+        The argument's name, used in error messages.
+    atol : float
+        Largest accepted ``| |q| - 1 |``.
+
+    Returns
+    -------
+    q : ndarray, shape (..., 4), float64
+        The input (a view when it already was float64); never normalised.
+
+    Raises
+    ------
+    ValueError
+        If the shape is not (..., 4), an entry is NaN or inf, ``q`` is zero, or its norm
+        differs from 1 by more than ``atol`` (the message gives the norm received and points
+        at ``normalize=True``).
+    """
+    q = _v.vector(q, name, 4)
+    _check_norm(_squared_norm(q), name, atol)
+    return q
+
+
+def normalize(q: ArrayLike) -> FloatArray:
+    """``q / |q|``: the explicit opt-in for non-unit quaternions.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+
+    Returns
+    -------
+    ndarray, shape (..., 4)
+
+    Raises
+    ------
+    ValueError
+        If the shape is not (..., 4), an entry is NaN or inf, or ``q`` is zero.
+    """
+    q = _v.vector(q, "q", 4)
+    # Scale by the largest magnitude first, so that |q|^2 neither overflows nor underflows.
+    m = np.max(np.abs(q), axis=-1, keepdims=True)
+    _check_norm(m[..., 0], "q", 0.0, allow_non_unit=True)
+    q = q / m
+    return q / np.sqrt(_squared_norm(q))[..., None]
+
+
+_normalized = normalize  # for functions whose keyword argument `normalize` shadows it
+
+
+def _unit(q: ArrayLike, name: str, normalize_: bool) -> FloatArray:
+    return _normalized(q) if normalize_ else check_quaternion(q, name)
+
+
+def xyzw_to_wxyz(q: ArrayLike) -> FloatArray:
+    """Reorder scalar-last ``[x, y, z, w]`` (vnav, SciPy, Rerun) to ``[w, x, y, z]`` (MuJoCo).
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+
+    Returns
+    -------
+    ndarray, shape (..., 4), a new array
+
+    Raises
+    ------
+    ValueError
+        If the shape is not (..., 4) or an entry is NaN or inf.
+    """
+    q = _v.vector(q, "q_xyzw", 4)
+    return q[..., [3, 0, 1, 2]]
+
+
+def wxyz_to_xyzw(q: ArrayLike) -> FloatArray:
+    """Reorder ``[w, x, y, z]`` (MuJoCo) to scalar-last ``[x, y, z, w]`` (vnav).
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+
+    Returns
+    -------
+    ndarray, shape (..., 4), a new array
+
+    Raises
+    ------
+    ValueError
+        If the shape is not (..., 4) or an entry is NaN or inf.
+    """
+    q = _v.vector(q, "q_wxyz", 4)
+    return q[..., [1, 2, 3, 0]]
+
+
+def from_axis_angle(axis: ArrayLike, angle: ArrayLike) -> FloatArray:
+    """Quaternion ``[sin(angle/2) u, cos(angle/2)]`` of a rotation about ``axis`` (ch. 6).
+
+    Parameters
+    ----------
+    axis : array_like, shape (..., 3)
+        Rotation axis, any non-zero length: it is scaled to unit length (this is the axis's
+        direction being read, not a quaternion being normalised).
+    angle : float or array_like, shape (...)
+        Radians, broadcast against the axis's leading shape.
+
+    Returns
+    -------
+    q : ndarray, shape (..., 4)
+        ``[x, y, z, w]``; no sign canonicalisation (an angle beyond pi gives w < 0).
+
+    Raises
+    ------
+    ValueError
+        If ``axis`` is not (..., 3), is zero, or an input holds NaN or inf.
+    """
+    axis = _v.vector(axis, "axis")
+    angle = _v.scalar_or_array(angle, "angle")
+    n = np.sqrt(np.sum(axis * axis, axis=-1))
+    if np.any(n == 0.0):
+        raise ValueError("axis must be non-zero: a zero vector has no direction to rotate about")
+    u = axis / n[..., None]
+    half = 0.5 * angle
+    s = np.sin(half)
+    c = np.cos(half)
+    shape = np.broadcast_shapes(u.shape[:-1], half.shape)
+    q = np.empty((*shape, 4))
+    q[..., :3] = s[..., None] * u
+    q[..., 3] = c
+    return q
+
+
+def to_axis_angle(q: ArrayLike, *, normalize: bool = False) -> tuple[FloatArray, FloatArray]:
+    """Unit axis and angle in [0, pi] of a unit quaternion.
+
+    The sign is canonicalised first (``q`` and ``-q`` give the same answer); the angle is
+    ``2 atan2(|v|, |w|)``, accurate at every angle (unlike ``2 arccos(w)``).
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        ``[x, y, z, w]``.
+    normalize : bool
+        Accept a non-unit (non-zero) quaternion and normalise it.
+
+    Returns
+    -------
+    axis : ndarray, shape (..., 3)
+        Unit axis; ``[1, 0, 0]`` for the identity, whose axis is undefined.
+    angle : ndarray, shape (...)
+        Radians, in [0, pi].
+
+    Raises
+    ------
+    ValueError
+        See `check_quaternion`.
+    """
+    q = _unit(q, "q", normalize)
+    sign = np.where(q[..., 3] < 0.0, -1.0, 1.0)
+    v = q[..., :3] * sign[..., None]
+    w = q[..., 3] * sign
+    n = np.sqrt(np.sum(v * v, axis=-1))
+    angle = 2.0 * np.arctan2(n, w)
+    zero = n == 0.0
+    with np.errstate(invalid="ignore", divide="ignore"):
+        axis = v / n[..., None]
+    axis = np.where(zero[..., None], np.array([1.0, 0.0, 0.0]), axis)
+    return axis, angle
+
+
+def from_rotvec(rotvec: ArrayLike) -> FloatArray:
+    """Quaternion of a rotation vector ``theta u`` (lecture chapter 6 with chapter 5's axis).
+
+    ``q = [sin(theta/2)/theta * rotvec, cos(theta/2)]``, with a Taylor series of
+    ``sin(theta/2)/theta`` below 1e-4 rad.
+
+    Parameters
+    ----------
+    rotvec : array_like, shape (..., 3)
+        Radians.
+
+    Returns
+    -------
+    q : ndarray, shape (..., 4)
+        ``[x, y, z, w]``, w >= 0 for angles up to pi.
+
+    Raises
+    ------
+    ValueError
+        If ``rotvec`` is not (..., 3) or holds NaN or inf.
+    """
+    v = _v.vector(rotvec, "rotvec")
+    t2 = np.sum(v * v, axis=-1)
+    t = np.sqrt(t2)
+    small = t < _SMALL_ANGLE
+    with np.errstate(invalid="ignore", divide="ignore"):
+        k = np.sin(0.5 * t) / t
+    k = np.where(small, 0.5 - t2 / 48.0 * (1.0 - t2 / 80.0), k)
+    q = np.empty((*v.shape[:-1], 4))
+    q[..., :3] = k[..., None] * v
+    q[..., 3] = np.cos(0.5 * t)
+    return q
+
+
+def to_rotvec(q: ArrayLike, *, normalize: bool = False) -> FloatArray:
+    """Rotation vector ``theta u``, theta in [0, pi], of a unit quaternion.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        ``[x, y, z, w]``.
+    normalize : bool
+        Accept a non-unit (non-zero) quaternion and normalise it.
+
+    Returns
+    -------
+    rotvec : ndarray, shape (..., 3)
+
+    Raises
+    ------
+    ValueError
+        See `check_quaternion`.
+    """
+    q = _unit(q, "q", normalize)
+    sign = np.where(q[..., 3] < 0.0, -1.0, 1.0)
+    v = q[..., :3] * sign[..., None]
+    w = q[..., 3] * sign
+    n = np.sqrt(np.sum(v * v, axis=-1))
+    theta = 2.0 * np.arctan2(n, w)
+    # theta / n has no cancellation for n > 0; at n = 0 its limit is 2 / w.
+    with np.errstate(invalid="ignore", divide="ignore"):
+        k = np.where(n > 0.0, theta / n, 2.0 / w)
+    return k[..., None] * v
+
+
+def _to_matrix_block(q: FloatArray, out: FloatArray) -> tuple[float, float]:
+    """Fill ``out`` (M, 3, 3) with the rotations of ``q`` (M, 4), dividing by |q|^2.
+
+    Works on a contiguous transposed copy of the block, so every ufunc runs on contiguous
+    cache-resident rows, and writes the nine entries back with one transposing copy.
+    Returns the smallest and largest |q|^2 of the block (NaN if any entry is NaN).
+    """
+    x, y, z, w = q.T.copy()
+    res = np.empty((9, q.shape[0]))
+    xx, yy, zz = x * x, y * y, z * z
+    s = w * w
+    s += xx
+    s += yy
+    s += zz
+    n2_range = (float(s.min()), float(s.max()))
+    np.divide(2.0, s, out=s)  # 2 / |q|^2
+    xy, xz, yz = x * y, x * z, y * z
+    w *= s  # from here w holds 2 w / |q|^2 (and the products below carry the factor)
+    wx, wy, wz = np.multiply(w, x, out=x), np.multiply(w, y, out=y), np.multiply(w, z, out=z)
+    for a, b, i, j in ((yy, zz, 0, 0), (xx, zz, 1, 1), (xx, yy, 2, 2)):
+        # Diagonal: 1 - 2 (b^2 + c^2) / |q|^2.
+        r = np.add(a, b, out=res[3 * i + j])
+        r *= s
+        np.subtract(1.0, r, out=r)
+    for a, b, i, j in ((xy, wz, 0, 1), (xz, wy, 2, 0), (yz, wx, 1, 2)):
+        # R_ij = 2 (a - w c) / |q|^2, R_ji = 2 (a + w c) / |q|^2.
+        a *= s
+        np.subtract(a, b, out=res[3 * i + j])
+        np.add(a, b, out=res[3 * j + i])
+    out.reshape(-1, 9)[...] = res.T
+    return n2_range
+
+
+def to_matrix(q: ArrayLike, *, normalize: bool = False) -> FloatArray:
+    """Rotation matrix of a unit quaternion (lecture chapter 6).
+
+    The lecture's ``R(q)`` with ``q = [q1, q2, q3, q4]``, scalar q4:
+    ``R11 = q1^2 - q2^2 - q3^2 + q4^2``, ``R12 = 2 (q1 q2 - q3 q4)``, ...; written here in the
+    equivalent form ``R = I + (2/|q|^2) (...)`` (``R11 = 1 - 2 (q2^2 + q3^2)/|q|^2``), which for
+    a unit q is the same matrix and for an accepted q within the norm tolerance is still
+    exactly orthogonal.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        ``[x, y, z, w]``.
+    normalize : bool
+        Accept any non-zero quaternion (the formula divides by |q|^2 anyway).
+
+    Returns
+    -------
+    R : ndarray, shape (..., 3, 3)
+
+    Raises
+    ------
+    ValueError
+        If the shape is not (..., 4), an entry is NaN or inf, ``q`` is zero, or (unless
+        ``normalize``) its norm is not 1 within 1e-6.
+    """
+    q = _v.vector(q, "q", 4, finite=False)
+    flat = q.reshape(-1, 4)
+    out = np.empty((flat.shape[0], 3, 3))
+    # The norm test runs on the range of |q|^2 that each block reports (written so that a NaN
+    # fails it); only on failure is the full check run, to raise with the proper message.
+    lo_ok, hi_ok = ((1.0 - _NORM_ATOL) ** 2, (1.0 + _NORM_ATOL) ** 2)
+    if normalize:
+        lo_ok, hi_ok = np.finfo(np.float64).tiny, np.finfo(np.float64).max
+    valid = True
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        for start in range(0, flat.shape[0], _CHUNK):
+            stop = start + _CHUNK
+            lo, hi = _to_matrix_block(flat[start:stop], out[start:stop])
+            valid = valid and lo >= lo_ok and hi <= hi_ok
+    if not valid:
+        _v.check_finite(q, "q")
+        if normalize:
+            return to_matrix(_normalized(q))  # |q|^2 over- or underflowed in the blocks
+        _check_norm(_squared_norm(q), "q", _NORM_ATOL)
+    return out.reshape(*q.shape[:-1], 3, 3)
+
+
+def from_matrix(R: ArrayLike) -> FloatArray:
+    """Unit quaternion ``[x, y, z, w]``, w >= 0, of a rotation matrix.
+
+    Robust for every rotation: of the four expressions ``4w^2 = 1 + tr R``,
+    ``4x^2 = 1 + 2 R00 - tr R``, ... the largest is used (Shepperd 1978), in Markley's form
+    (Markley 2008, "Unit Quaternion from Rotation Matrix", J. Guid. Control Dyn. 31(2)): the
+    corresponding column of the symmetric 4x4 matrix whose dominant eigenvector is q,
+    normalised. No division by a small w.
+
+    Parameters
+    ----------
+    R : array_like, shape (..., 3, 3)
+        Rotation matrices (validated with `vnav.so3.check_rotation`).
+
+    Returns
+    -------
+    q : ndarray, shape (..., 4)
+        ``[x, y, z, w]`` with w >= 0 (at w = 0, a rotation by pi, either sign is valid).
+
+    Raises
+    ------
+    ValueError
+        If ``R`` is not a rotation (see `vnav.so3.check_rotation`).
+    """
+    from vnav.so3 import check_rotation
+
+    R = check_rotation(R)
+    R00, R01, R02 = R[..., 0, 0], R[..., 0, 1], R[..., 0, 2]
+    R10, R11, R12 = R[..., 1, 0], R[..., 1, 1], R[..., 1, 2]
+    R20, R21, R22 = R[..., 2, 0], R[..., 2, 1], R[..., 2, 2]
+    tr = R00 + R11 + R22
+    # Candidate columns (each is 4 q_k q, scaled), one per dominant component k in x, y, z, w.
+    cand = np.empty((*R.shape[:-2], 4, 4))
+    cand[..., 0, :] = np.stack([1.0 + 2.0 * R00 - tr, R01 + R10, R02 + R20, R21 - R12], -1)
+    cand[..., 1, :] = np.stack([R01 + R10, 1.0 + 2.0 * R11 - tr, R12 + R21, R02 - R20], -1)
+    cand[..., 2, :] = np.stack([R02 + R20, R12 + R21, 1.0 + 2.0 * R22 - tr, R10 - R01], -1)
+    cand[..., 3, :] = np.stack([R21 - R12, R02 - R20, R10 - R01, 1.0 + tr], -1)
+    k = np.argmax(np.stack([R00, R11, R22, tr], -1), axis=-1)
+    q = np.take_along_axis(cand, k[..., None, None], axis=-2)[..., 0, :]
+    q /= np.linalg.norm(q, axis=-1, keepdims=True)
+    q *= np.where(q[..., 3] < 0.0, -1.0, 1.0)[..., None]
+    return q
+
+
+def multiply(a: ArrayLike, b: ArrayLike) -> FloatArray:
+    """Hamilton product ``a (x) b``: the rotation b first, then a (lecture chapter 6).
+
+    With ``a = [u; s]``, ``b = [v; t]``: ``a (x) b = [s v + t u + u x v; s t - u . v]``, so
+    ``to_matrix(multiply(a, b)) == to_matrix(a) @ to_matrix(b)``.
+
+    Parameters
+    ----------
+    a, b : array_like, shape (..., 4)
+        Unit quaternions ``[x, y, z, w]``, broadcast against each other.
+
+    Returns
+    -------
+    ndarray, shape (..., 4)
+
+    Raises
+    ------
+    ValueError
+        See `check_quaternion` (for ``a`` and ``b``).
+    """
+    a = check_quaternion(a, "a")
+    b = check_quaternion(b, "b")
+    ax, ay, az, aw = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
+    bx, by, bz, bw = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
+    return np.stack(
+        [
+            aw * bx + bw * ax + ay * bz - az * by,
+            aw * by + bw * ay + az * bx - ax * bz,
+            aw * bz + bw * az + ax * by - ay * bx,
+            aw * bw - ax * bx - ay * by - az * bz,
+        ],
+        axis=-1,
+    )
+
+
+def conjugate(q: ArrayLike) -> FloatArray:
+    """``[-v; s]``, the inverse of a unit quaternion (lecture chapter 6).
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+
+    Returns
+    -------
+    ndarray, shape (..., 4)
+
+    Raises
+    ------
+    ValueError
+        If the shape is not (..., 4) or an entry is NaN or inf.
+    """
+    q = _v.vector(q, "q", 4)
+    out = -q
+    out[..., 3] = q[..., 3]
+    return out
+
+
+def slerp(q0: ArrayLike, q1: ArrayLike, t: ArrayLike) -> FloatArray:
+    """Spherical linear interpolation along the shorter arc (Shoemake 1985).
+
+    ``q1`` is negated where ``q0 . q1 < 0`` (q and -q are one rotation), so the path turns by
+    at most pi. ``slerp(q0, q1, 0) == q0``, ``slerp(q0, q1, 1) == +-q1``. The angle between the
+    two 4-vectors is ``2 atan2(|q1 - q0|, |q1 + q0|)``, accurate when they are close (unlike
+    ``arccos(q0 . q1)``); below 1e-12 rad the weights are linear.
+
+    Parameters
+    ----------
+    q0, q1 : array_like, shape (..., 4)
+        Unit quaternions ``[x, y, z, w]``.
+    t : float or array_like, shape (...)
+        Interpolation parameter, usually in [0, 1]; broadcast against the quaternions' leading
+        shape (a (T,) array of times with single q0, q1 gives (T, 4)).
+
+    Returns
+    -------
+    ndarray, shape (..., 4)
+        Unit quaternions.
+
+    Raises
+    ------
+    ValueError
+        See `check_quaternion` (for ``q0`` and ``q1``); also if ``t`` is NaN or inf.
+    """
+    q0 = check_quaternion(q0, "q0")
+    q1 = check_quaternion(q1, "q1")
+    t = _v.scalar_or_array(t, "t")
+    dot = np.sum(q0 * q1, axis=-1)
+    q1 = np.where((dot < 0.0)[..., None], -q1, q1)
+    # Angle between the two unit 4-vectors, accurate for close and for opposite ones.
+    d = q1 - q0
+    s = q1 + q0
+    omega = 2.0 * np.arctan2(np.sqrt(np.sum(d * d, axis=-1)), np.sqrt(np.sum(s * s, axis=-1)))
+    t, omega = np.broadcast_arrays(t, omega)
+    sin_omega = np.sin(omega)
+    tiny = sin_omega < 1e-12
+    with np.errstate(invalid="ignore", divide="ignore"):
+        w0 = np.where(tiny, 1.0 - t, np.sin((1.0 - t) * omega) / sin_omega)
+        w1 = np.where(tiny, t, np.sin(t * omega) / sin_omega)
+    q = w0[..., None] * q0 + w1[..., None] * q1
+    return q / np.sqrt(np.sum(q * q, axis=-1))[..., None]

@@ -1,0 +1,167 @@
+"""Rigid-body transforms, the group SE(3), as 4x4 homogeneous matrices (lecture chapter 7).
+
+``T_a_b = [[R_a_b, t_a_b], [0, 0, 0, 1]]`` is the pose of frame b in frame a: it maps
+b-coordinates into a, ``p_a = R_a_b @ p_b + t_a_b`` (`apply`). Composition is plain ``@`` and
+the inner letters cancel, ``T_a_c = T_a_b @ T_b_c``; the inverse has the closed form
+``T_b_a = [[R^T, -R^T t], [0, 1]]`` (`invert`). Arrays are the interchange format: (4, 4)
+float64, or (..., 4, 4) stacks where a function says so. Conventions: docs/CONVENTIONS.md.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from vnav import _validate as _v
+from vnav import so3
+from vnav._validate import FloatArray
+
+__all__ = ["apply", "check_transform", "invert", "make"]
+
+_BOTTOM = np.array([0.0, 0.0, 0.0, 1.0])
+# `apply` adds the translation to blocks of this many points at once: broadcasting a (3,)
+# vector over (N, 3) rows runs an inner loop of length 3, ~4x slower than long rows.
+_T_BLOCK = 512
+# Rows per chunk in `apply` (3 MB of output): the sum with t reads it back from cache.
+_CHUNK = 131072
+
+
+def make(R: ArrayLike, t: ArrayLike) -> FloatArray:
+    """Homogeneous transform ``[[R, t], [0, 0, 0, 1]]`` (lecture chapter 7).
+
+    Parameters
+    ----------
+    R : array_like, shape (..., 3, 3)
+        Rotation ``R_a_b`` (validated with `vnav.so3.check_rotation`).
+    t : array_like, shape (..., 3)
+        Translation ``t_a_b``, the position of b's origin in a. Leading shapes broadcast.
+
+    Returns
+    -------
+    T : ndarray, shape (..., 4, 4)
+
+    Raises
+    ------
+    ValueError
+        If ``R`` is not a rotation, or ``t`` is not (..., 3) or holds NaN or inf.
+    """
+    R = so3.check_rotation(R, "R")
+    t = _v.vector(t, "t")
+    try:
+        batch = np.broadcast_shapes(R.shape[:-2], t.shape[:-1])
+    except ValueError as exc:
+        raise ValueError(
+            f"R and t leading shapes must broadcast; got R {R.shape} and t {t.shape}"
+        ) from exc
+    T = np.zeros((*batch, 4, 4))
+    T[..., :3, :3] = R
+    T[..., :3, 3] = t
+    T[..., 3, 3] = 1.0
+    return T
+
+
+def check_transform(T: ArrayLike, name: str = "T", atol: float = 1e-9) -> FloatArray:
+    """Validate a homogeneous transform (or a stack) and return it as float64.
+
+    Parameters
+    ----------
+    T : array_like, shape (..., 4, 4)
+    name : str
+        The argument's name, used in error messages.
+    atol : float
+        Tolerance on the rotation block (see `vnav.so3.check_rotation`); the bottom row must be
+        exactly ``[0, 0, 0, 1]``.
+
+    Returns
+    -------
+    T : ndarray, shape (..., 4, 4), float64
+
+    Raises
+    ------
+    ValueError
+        If the shape is not (..., 4, 4) (the message gives the shape received), an entry is NaN
+        or inf, the bottom row is not ``[0, 0, 0, 1]`` (the message gives the row received), or
+        the rotation block is not a rotation.
+    """
+    T = _v.matrix(T, name, 4)
+    bottom = T[..., 3, :]
+    if np.any(bottom != _BOTTOM):
+        bad = bottom.reshape(-1, 4)[np.any(bottom.reshape(-1, 4) != _BOTTOM, axis=-1)][0]
+        raise ValueError(
+            f"{name} must have bottom row [0, 0, 0, 1] (a homogeneous rigid transform); "
+            f"got bottom row {np.array2string(bad, separator=', ')}"
+        )
+    so3.check_rotation(T[..., :3, :3], f"the rotation block {name}[:3, :3]", atol)
+    return T
+
+
+def invert(T: ArrayLike) -> FloatArray:
+    """Inverse transform in closed form, ``[[R^T, -R^T t], [0, 1]]`` (lecture chapter 7).
+
+    ``T_b_a = invert(T_a_b)``. Never a general matrix inverse: exact for any rotation block and
+    a dozen multiplications.
+
+    Parameters
+    ----------
+    T : array_like, shape (..., 4, 4)
+
+    Returns
+    -------
+    ndarray, shape (..., 4, 4)
+
+    Raises
+    ------
+    ValueError
+        If ``T`` is not a rigid transform (see `check_transform`).
+    """
+    T = check_transform(T)
+    Rt = np.swapaxes(T[..., :3, :3], -1, -2)
+    out = np.zeros_like(T)
+    out[..., :3, :3] = Rt
+    out[..., :3, 3] = -np.matmul(Rt, T[..., :3, 3, None])[..., 0]
+    out[..., 3, 3] = 1.0
+    return out
+
+
+def apply(T: ArrayLike, p: ArrayLike) -> FloatArray:
+    """Transform points: ``p_a = R_a_b @ p_b + t_a_b`` for ``T = T_a_b`` (lecture chapter 7).
+
+    Parameters
+    ----------
+    T : array_like, shape (4, 4)
+        The transform ``T_a_b``.
+    p : array_like, shape (3,) or (N, 3) (any (..., 3))
+        Points ``p_b``, one per row. NaN rows pass through as NaN (so masked point sets, such
+        as points behind a camera, keep their rows); only the shape is checked.
+
+    Returns
+    -------
+    ndarray, same shape as ``p``
+        Points ``p_a``.
+
+    Raises
+    ------
+    ValueError
+        If ``T`` is not a rigid transform or ``p`` does not end with a dimension of 3.
+    """
+    T = check_transform(T)
+    if T.ndim != 2:
+        raise ValueError(f"T must have shape (4, 4); got shape {T.shape}")
+    p = _v.vector(p, "p", finite=False)
+    R = T[:3, :3]
+    t = T[:3, 3]
+    if p.ndim == 1:
+        return R @ p + t
+    flat = p.reshape(-1, 3)
+    out = np.empty(flat.shape)
+    t_rows = np.tile(t, _T_BLOCK)
+    # Per chunk (a few MB, still in cache for the second step): out = p R^T in one BLAS call,
+    # then + t on long rows of interleaved [x0 y0 z0 x1 y1 z1 ...].
+    for start in range(0, flat.shape[0], _CHUNK):
+        chunk = out[start : start + _CHUNK]
+        np.matmul(flat[start : start + _CHUNK], R.T, out=chunk)
+        n_block = chunk.shape[0] // _T_BLOCK * _T_BLOCK
+        rows = chunk[:n_block].reshape(-1, 3 * _T_BLOCK)  # a view
+        np.add(rows, t_rows, out=rows)
+        chunk[n_block:] += t
+    return out.reshape(p.shape)
