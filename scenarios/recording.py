@@ -3,11 +3,10 @@
 Entity tree (docs/CONVENTIONS.md for the frames)::
 
     world                          ViewCoordinates RIGHT_HAND_Z_UP (static)
-    world/ground                   a grid on z = 0 (static)
     world/body                     Transform3D T_w_b, every camera frame
     world/body/camera              Transform3D T_b_c + Pinhole (true intrinsics, RDF) (static)
     world/body/camera/image        JPEG-compressed RGB
-    world/body/camera/depth        planar z-depth, PNG-encoded 16-bit millimetres
+    world/body/camera/depth        planar z-depth, PNG-encoded 16-bit millimetres, every 5th
     world/body/camera/detections   Boxes2D + Points2D (apex, base keypoints)
     world/cones/truth              Points3D of the true base centres (static)
     world/cones/estimate/<method>  Points3D per method, every camera frame
@@ -29,6 +28,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
@@ -41,6 +41,12 @@ from vnav.camera import PinholeCamera
 from vnav.detect import ConeDetection
 
 APPLICATION_ID = "vnav-sim"
+DEPTH_LOG_EVERY = 5
+"""The depth image is logged every 5th camera frame: a rolled camera's depth image barely
+compresses (about 100 KB as PNG) and the viewer shows the latest one in between."""
+DEPTH_MANTISSA_BITS = 6
+"""Logged depth keeps 6 significant bits (relative step <= 1/64; display only: estimates use
+the full float depth)."""
 JPEG_QUALITY = 80
 DEPTH_MM_MAX = np.iinfo(np.uint16).max
 
@@ -51,6 +57,22 @@ METHOD_COLORS: dict[str, tuple[int, int, int]] = {
     "naive": (255, 40, 40),
 }
 TRUTH_COLOR = (255, 255, 255)
+
+
+def depth_for_display_mm(depth_m: np.ndarray) -> np.ndarray:
+    """Planar depth in metres -> uint16 millimetres for a PNG, 0 where there is no return.
+
+    Rounded to :data:`DEPTH_MANTISSA_BITS` significant bits (steps of 2**k mm, at most 1/64 of
+    the depth), so the far ground compresses; beyond 65.535 m (and the sky) it becomes 0.
+    """
+    depth_mm = np.nan_to_num(depth_m, nan=0.0, posinf=0.0).astype(np.float32) * 1000.0
+    # Round the float32 mantissa (23 bits) to its top bits: integer ops on the bit pattern.
+    drop = 23 - DEPTH_MANTISSA_BITS
+    bits = depth_mm.view(np.uint32)
+    bits += np.uint32(1 << (drop - 1))
+    bits &= np.uint32(~((1 << drop) - 1) & 0xFFFFFFFF)
+    depth_mm[depth_mm > DEPTH_MM_MAX] = 0.0
+    return np.rint(depth_mm).astype(np.uint16)
 
 
 def rerun_uv(uv_opencv: np.ndarray) -> np.ndarray:
@@ -80,30 +102,86 @@ def _pose_transform(T_parent_child: np.ndarray) -> rr.Transform3D:
     )
 
 
-def _ground_grid(half_size_m: float, spacing_m: float) -> list[np.ndarray]:
-    ticks = np.arange(-half_size_m, half_size_m + 1e-9, spacing_m)
-    strips = []
-    for x in ticks:
-        strips.append(np.array([[x, -half_size_m, 0.0], [x, half_size_m, 0.0]]))
-        strips.append(np.array([[-half_size_m, x, 0.0], [half_size_m, x, 0.0]]))
-    return strips
+def blueprint(eye_w=None, look_target_w=None) -> rrb.Blueprint:
+    """The default layout: 3D world, camera image, depth, error time series, description.
 
-
-def blueprint() -> rrb.Blueprint:
-    """The default layout: 3D world, the camera's view, error time series, description."""
+    Parameters
+    ----------
+    eye_w, look_target_w : array_like, shape (3,), optional
+        Where the 3D view's eye starts and what it looks at, world frame (z up).
+    """
+    eye = None
+    if eye_w is not None and look_target_w is not None:
+        eye = rrb.EyeControls3D(position=eye_w, look_target=look_target_w, eye_up=[0, 0, 1])
+    good = [f"+ /metrics/error/{m}" for m in ("depth_image", "ground_plane", "known_height")]
     return rrb.Blueprint(
         rrb.Horizontal(
-            rrb.Spatial3DView(name="world", origin="world"),
             rrb.Vertical(
-                rrb.Spatial2DView(name="camera", origin="world/body/camera"),
-                rrb.TimeSeriesView(name="errors (m)", origin="metrics"),
+                rrb.Spatial3DView(
+                    name="world",
+                    origin="world",
+                    # The depth image would also be drawn back-projected in 3D; the world-frame
+                    # cloud computed by vnav (world/depth_cloud) is the one to look at here.
+                    contents=["+ $origin/**", "- /world/body/camera/depth"],
+                    eye_controls=eye,
+                ),
                 rrb.TextDocumentView(name="scenario", origin="description"),
-                row_shares=[3, 2, 1],
+                row_shares=[4, 1],
+            ),
+            rrb.Vertical(
+                rrb.Tabs(
+                    rrb.Spatial2DView(
+                        name="camera",
+                        origin="world/body/camera",
+                        contents=["+ $origin/image", "+ $origin/detections/**"],
+                    ),
+                    rrb.Spatial2DView(
+                        name="depth",
+                        origin="world/body/camera",
+                        contents=["+ $origin/depth", "+ $origin/detections/**"],
+                    ),
+                ),
+                rrb.TimeSeriesView(name="position error (m)", origin="metrics", contents=good),
+                rrb.TimeSeriesView(
+                    name="naive error and range (m)",
+                    origin="metrics",
+                    contents=["+ /metrics/error/naive", "+ /metrics/range_m"],
+                ),
+                row_shares=[3, 2, 2],
             ),
             column_shares=[3, 2],
         ),
         collapse_panels=True,
     )
+
+
+FLUSH_EVERY_FRAMES = 50
+"""Buffered camera frames are sent to the file in column batches of this many."""
+
+
+@dataclass
+class _FrameBuffer:
+    """One camera frame waiting to be sent (see :meth:`Recording.log_frame`)."""
+
+    frame: int
+    t_s: float
+    t_w_b: np.ndarray
+    quat_xyzw: np.ndarray
+    jpeg: bytes
+    depth_png: bytes | None
+    boxes_xywh: np.ndarray
+    keypoints_uv: np.ndarray
+    estimates_w: dict[str, np.ndarray]
+    errors_m: dict[str, float]
+    range_m: float | None
+    cloud_w: np.ndarray | None
+
+
+def _time_columns(rows: list[_FrameBuffer]) -> list[rr.TimeColumn]:
+    return [
+        rr.TimeColumn("frame", sequence=[f.frame for f in rows]),
+        rr.TimeColumn("sim_time", duration=[f.t_s for f in rows]),
+    ]
 
 
 class Recording:
@@ -123,6 +201,7 @@ class Recording:
         self.rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id)
         self.rec.save(str(self._tmp))
         self._open = True
+        self._frames: list[_FrameBuffer] = []
 
     # ------------------------------------------------------------------ static content
     def log_setup(
@@ -132,18 +211,12 @@ class Recording:
         T_b_c: np.ndarray,
         cones_w: np.ndarray,
         description_md: str,
-        ground_half_size_m: float = 30.0,
+        eye_w: np.ndarray | None = None,
+        look_target_w: np.ndarray | None = None,
     ) -> None:
         """Log what does not change over the run: axes, mount, intrinsics, truth, text."""
         rec = self.rec
         rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-        rec.log(
-            "world/ground",
-            rr.LineStrips3D(
-                _ground_grid(ground_half_size_m, 5.0), colors=[(90, 90, 90)], radii=0.01
-            ),
-            static=True,
-        )
         rec.log("world/body/camera", _pose_transform(T_b_c), static=True)
         rec.log(
             "world/body/camera",
@@ -160,7 +233,7 @@ class Recording:
             rr.Points3D(
                 cones_w,
                 colors=[TRUTH_COLOR],
-                radii=0.12,
+                radii=0.2,
                 labels=[f"cone {i}" for i in range(len(cones_w))],
             ),
             static=True,
@@ -179,7 +252,29 @@ class Recording:
         rec.log(
             "description", rr.TextDocument(description_md, media_type="text/markdown"), static=True
         )
-        rec.send_blueprint(blueprint())
+        # Styles, logged once: per-frame rows carry only positions (see _flush).
+        for method, color in METHOD_COLORS.items():
+            rec.log(
+                f"world/cones/estimate/{method}",
+                rr.Points3D.from_fields(colors=[color], radii=0.12),
+                static=True,
+            )
+        rec.log(
+            "world/depth_cloud",
+            rr.Points3D.from_fields(colors=[(150, 150, 200)], radii=0.04),
+            static=True,
+        )
+        rec.log(
+            "world/body/camera/detections",
+            rr.Boxes2D.from_fields(colors=[(255, 220, 0)]),
+            static=True,
+        )
+        rec.log(
+            "world/body/camera/detections/keypoints",
+            rr.Points2D.from_fields(radii=2.5),
+            static=True,
+        )
+        rec.send_blueprint(blueprint(eye_w, look_target_w))
 
     # ------------------------------------------------------------------ per camera frame
     def log_frame(
@@ -196,79 +291,149 @@ class Recording:
         range_m: float | None,
         cloud_w: np.ndarray | None,
     ) -> None:
-        """Log one camera frame on both timelines (``frame`` and ``sim_time``).
+        """Queue one camera frame for the ``frame`` and ``sim_time`` timelines.
+
+        Frames are buffered and sent as columns (``send_columns``) every
+        :data:`FLUSH_EVERY_FRAMES` frames and at :meth:`commit`: one Arrow batch per entity
+        instead of a dozen ``log`` calls per frame, which is what keeps recording cheap next
+        to rendering.
 
         Parameters
         ----------
+        T_w_b : ndarray, shape (4, 4)
+            Body pose in the world (logged parent-from-child on ``world/body``).
+        rgb : ndarray, shape (H, W, 3), uint8
+            The camera image (JPEG-encoded here).
+        depth_m : ndarray, shape (H, W), or None
+            Planar z-depth, metres (logged every :data:`DEPTH_LOG_EVERY` frames).
+        detections : sequence of ConeDetection
         estimates_w : mapping of method -> ndarray, shape (K, 3)
             Every estimate of this frame (one row per detection that gave one).
         errors_m : mapping of method -> float
             This frame's mean position error per method (absent: no estimate).
+        range_m : float or None
+            Mean range of the matched cones, metres.
+        cloud_w : ndarray, shape (M, 3), or None
+            Decimated depth image in world coordinates.
         """
-        rec = self.rec
-        rec.set_time("frame", sequence=frame)
-        rec.set_time("sim_time", duration=t_s)
-        rec.log("world/body", _pose_transform(T_w_b))
-
         bgr = cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)
         ok, jpeg = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
         if not ok:
             raise RuntimeError("OpenCV could not JPEG-encode the camera image")
-        rec.log(
-            "world/body/camera/image",
-            rr.EncodedImage(contents=jpeg.tobytes(), media_type="image/jpeg"),
-        )
-        if depth_m is not None:
-            depth_mm = np.clip(
-                np.nan_to_num(depth_m, nan=0.0, posinf=0.0) * 1000.0, 0, DEPTH_MM_MAX
-            ).astype(np.uint16)
-            ok, png = cv2.imencode(".png", depth_mm)
+        png = None
+        if depth_m is not None and frame % DEPTH_LOG_EVERY == 0:
+            ok, png = cv2.imencode(".png", depth_for_display_mm(depth_m))
             if not ok:
                 raise RuntimeError("OpenCV could not PNG-encode the depth image")
-            rec.log(
-                "world/body/camera/depth",
-                rr.EncodedDepthImage(png.tobytes(), media_type="image/png", meter=1000.0),
+        self._frames.append(
+            _FrameBuffer(
+                frame=frame,
+                t_s=t_s,
+                t_w_b=T_w_b[:3, 3].copy(),
+                # vnav and Rerun both order quaternions x, y, z, w: no reordering here.
+                quat_xyzw=quat.from_matrix(T_w_b[:3, :3]),
+                jpeg=jpeg.tobytes(),
+                depth_png=None if png is None else png.tobytes(),
+                boxes_xywh=np.array([d.bbox for d in detections], dtype=np.float64).reshape(-1, 4),
+                keypoints_uv=np.array(
+                    [uv for d in detections for uv in (d.apex_uv, d.base_uv)], dtype=np.float64
+                ).reshape(-1, 2),
+                estimates_w={
+                    m: np.asarray(v, dtype=np.float64).reshape(-1, 3)
+                    for m, v in estimates_w.items()
+                },
+                errors_m=dict(errors_m),
+                range_m=range_m,
+                cloud_w=None if cloud_w is None else np.asarray(cloud_w, np.float32),
             )
+        )
+        if len(self._frames) >= FLUSH_EVERY_FRAMES:
+            self._flush()
 
-        if detections:
-            mins = rerun_uv([d.bbox[:2] for d in detections]) - 0.5
-            sizes = np.array([d.bbox[2:] for d in detections], dtype=np.float64)
-            keypoints = np.concatenate([[d.apex_uv, d.base_uv] for d in detections])
-            rec.log(
-                "world/body/camera/detections",
-                rr.Boxes2D(
-                    mins=mins,
-                    sizes=sizes,
-                    colors=[(255, 220, 0)],
-                    labels=[f"{d.area_px} px" for d in detections],
-                ),
-            )
-            rec.log(
-                "world/body/camera/detections/keypoints",
-                rr.Points2D(
-                    rerun_uv(keypoints),
-                    radii=2.5,
-                    colors=[(255, 0, 255), (0, 255, 255)] * len(detections),
-                ),
-            )
-        else:
-            rec.log("world/body/camera/detections", rr.Clear(recursive=True))
+    def _flush(self) -> None:
+        """Send the buffered frames as one column batch per entity."""
+        frames, self._frames = self._frames, []
+        if not frames:
+            return
+        rec = self.rec
 
+        def send(entity: str, rows: list[_FrameBuffer], columns) -> None:
+            if rows:
+                rec.send_columns(entity, indexes=_time_columns(rows), columns=columns)
+
+        send(
+            "world/body",
+            frames,
+            rr.Transform3D.columns(
+                translation=np.array([f.t_w_b for f in frames]),
+                quaternion=np.array([f.quat_xyzw for f in frames]),
+            ),
+        )
+        send(
+            "world/body/camera/image",
+            frames,
+            rr.EncodedImage.columns(
+                blob=[f.jpeg for f in frames],
+                media_type=["image/jpeg"] * len(frames),
+            ),
+        )
+        with_depth = [f for f in frames if f.depth_png is not None]
+        send(
+            "world/body/camera/depth",
+            with_depth,
+            rr.EncodedDepthImage.columns(
+                blob=[f.depth_png for f in with_depth],
+                media_type=["image/png"] * len(with_depth),
+                meter=[1000.0] * len(with_depth),
+            ),
+        )
+        boxes = np.concatenate([f.boxes_xywh for f in frames])
+        send(
+            "world/body/camera/detections",
+            frames,
+            rr.Boxes2D.columns(
+                # Pixels x .. x+w-1 (OpenCV centres) cover [x - 0.5, x + w - 0.5] in OpenCV
+                # coordinates: centre x + (w - 1) / 2, which rerun_uv shifts by 0.5.
+                centers=rerun_uv(boxes[:, :2] + (boxes[:, 2:] - 1.0) / 2.0),
+                half_sizes=boxes[:, 2:] / 2.0,
+            ).partition([len(f.boxes_xywh) for f in frames]),
+        )
+        send(
+            "world/body/camera/detections/keypoints",
+            frames,
+            rr.Points2D.columns(
+                positions=rerun_uv(np.concatenate([f.keypoints_uv for f in frames])),
+                # apex magenta, base cyan
+                colors=np.tile(
+                    [0xFF00FFFF, 0x00FFFFFF], sum(len(f.boxes_xywh) for f in frames)
+                ).astype(np.uint32),
+            ).partition([len(f.keypoints_uv) for f in frames]),
+        )
         for method in METHOD_COLORS:
-            points = estimates_w.get(method)
-            if points is not None and len(points):
-                rec.log(
-                    f"world/cones/estimate/{method}",
-                    rr.Points3D(points, colors=[METHOD_COLORS[method]], radii=0.08),
-                )
-            else:
-                rec.log(f"world/cones/estimate/{method}", rr.Clear(recursive=False))
-            if method in errors_m:
-                rec.log(f"metrics/error/{method}", rr.Scalars(errors_m[method]))
-        if range_m is not None:
-            rec.log("metrics/range_m", rr.Scalars(range_m))
-        if cloud_w is not None:
-            rec.log("world/depth_cloud", rr.Points3D(cloud_w, colors=[(150, 150, 200)], radii=0.03))
+            points = [f.estimates_w.get(method, np.zeros((0, 3))) for f in frames]
+            send(
+                f"world/cones/estimate/{method}",
+                frames,
+                rr.Points3D.columns(
+                    positions=np.concatenate(points),
+                ).partition([len(p) for p in points]),
+            )
+            rows = [f for f in frames if method in f.errors_m]
+            send(
+                f"metrics/error/{method}",
+                rows,
+                rr.Scalars.columns(scalars=[f.errors_m[method] for f in rows]),
+            )
+        rows = [f for f in frames if f.range_m is not None]
+        send("metrics/range_m", rows, rr.Scalars.columns(scalars=[f.range_m for f in rows]))
+        rows = [f for f in frames if f.cloud_w is not None]
+        send(
+            "world/depth_cloud",
+            rows,
+            rr.Points3D.columns(
+                positions=np.concatenate([f.cloud_w for f in rows]) if rows else np.zeros((0, 3)),
+            ).partition([len(f.cloud_w) for f in rows]),
+        )
 
     def log_trajectory(self, positions_w: np.ndarray) -> None:
         """The whole flown path of the body origin, shape (N, 3), static."""
@@ -292,6 +457,7 @@ class Recording:
 
     def _close(self) -> None:
         if self._open:
+            self._flush()
             self._open = False
             self.rec.disconnect()  # writes the footer; without it the file cannot be read
 

@@ -124,7 +124,7 @@ def cone_points_w(p_base_w: np.ndarray, cone: ConeModel = TRAFFIC_CONE) -> np.nd
             for z in (0.0, cone.base_thickness_m)
         ]
     )
-    return np.vstack([[*p_base_w, 0.0, 0.0, cone.height_m], p_base_w + corners])
+    return np.vstack([p_base_w + np.array([0.0, 0.0, cone.height_m]), p_base_w + corners])
 
 
 def cones_fully_in_view(
@@ -143,6 +143,21 @@ def cones_fully_in_view(
         if np.ptp(uv[:, 1]) >= min_height_px:
             visible.append(i)
     return visible
+
+
+def _view_from(spec: ScenarioSpec, cones_w: np.ndarray) -> dict[str, np.ndarray]:
+    """A 3D-view eye behind and above the start, looking between the drone and the cones."""
+    start_w = np.asarray(spec.scene.start_position_w)
+    target_w = 0.5 * (start_w + cones_w.mean(axis=0))
+    heading_w = cones_w.mean(axis=0) - start_w
+    heading_w[2] = 0.0
+    norm = np.linalg.norm(heading_w)
+    heading_w = heading_w / norm if norm > 1e-6 else np.array([1.0, 0.0, 0.0])
+    distance_m = max(8.0, 1.5 * float(np.linalg.norm(cones_w.mean(axis=0) - start_w)))
+    side_w = np.array([-heading_w[1], heading_w[0], 0.0])
+    eye_w = target_w - distance_m * heading_w + 0.6 * distance_m * side_w
+    eye_w[2] = target_w[2] + 0.7 * distance_m
+    return {"eye_w": eye_w, "look_target_w": target_w}
 
 
 def _noisy_pose(T_w_b: np.ndarray, spec: ScenarioSpec, rng: np.random.Generator) -> np.ndarray:
@@ -212,7 +227,11 @@ def run_scenario(
     try:
         if recording:
             recording.log_setup(
-                camera=camera, T_b_c=T_b_c, cones_w=cones_w, description_md=describe(spec, seed)
+                camera=camera,
+                T_b_c=T_b_c,
+                cones_w=cones_w,
+                description_md=describe(spec, seed),
+                **_view_from(spec, cones_w),
             )
         with Renderer(world) as renderer:
             for k in range(n_frames):

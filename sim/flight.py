@@ -511,12 +511,18 @@ class KeyframePlayer:
         world.set_pose(keyframes.pose(world.time_s))
 
     def step(self, n: int = 1) -> None:
-        """Advance ``n`` time steps, placing the body at the interpolated pose."""
+        """Advance ``n`` time steps, placing the body at the interpolated pose.
+
+        Nothing is integrated, so only the last of the ``n`` poses is written: the state after
+        ``step(n)`` equals that after ``n`` calls of ``step(1)`` (up to the rounding of the
+        accumulated time), at the cost of one.
+        """
+        if int(n) <= 0:
+            return
         dt = float(self.world.model.opt.timestep)
-        for _ in range(int(n)):
-            t = self.world.time_s + dt
-            self.world.set_time(t)
-            self.world.set_pose(self.keyframes.pose(t))
+        t = self.world.time_s + int(n) * dt
+        self.world.set_time(t)
+        self.world.set_pose(self.keyframes.pose(t))
 
 
 def attitude_error_rad(R_a: np.ndarray, R_b: np.ndarray) -> float:

@@ -132,7 +132,7 @@ def test_detection_keypoints_in_rerun_pixel_convention(recorded):
         for r in read_rows(rrd, "world/body/camera/detections/keypoints")
         if "frame" in r and r.get("Points2D:positions")
     }
-    apex_w = [*np.array(spec.scene.cones_w[0]), 0.0, 0.0, TRAFFIC_CONE.height_m]
+    apex_w = np.array(spec.scene.cones_w[0]) + np.array([0.0, 0.0, TRAFFIC_CONE.height_m])
     offsets = []
     for f in result.frames:
         if f.frame not in rows or not f.cones_in_view:

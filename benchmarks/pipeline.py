@@ -1,0 +1,92 @@
+"""End-to-end scenario speed: frames per second, share of each stage, .rrd bytes per frame.
+
+Runs built-in scenarios exactly as `vnav-demo run` does (640x480, recording to a temporary
+directory) and prints, per scenario and in total: frames, frames per second, milliseconds per
+frame of each stage (physics, render, detect, localize, log), the overhead ratio
+(detect + localize + log) / render (target <= 0.5), and the average bytes of the .rrd per
+frame (target <= 60 KB). The total wall time of all built-ins is the figure behind
+"`vnav-demo run --all` finishes within 2 minutes" (target <= 120 s).
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from pathlib import Path
+
+from scenarios import builtin, checks, report
+from scenarios.runner import run_scenario
+
+STAGES = ("physics", "render", "detect", "localize", "log")
+TARGETS = {"overhead_ratio": 0.5, "rrd_bytes_per_frame": 60_000, "all_wall_s": 120.0}
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--scenario", action="append", choices=builtin.names(),
+                        help="scenario to run (repeatable; default: every built-in)")
+
+
+def _run_one(name: str, out: Path) -> dict:
+    spec = builtin.load(name)
+    rrd = out / f"{name}.rrd"
+    start = time.perf_counter()
+    result = run_scenario(spec, seed=1, rrd_path=rrd)
+    rep = report.build(result, [checks.evaluate(c, result) for c in spec.checks])
+    report.write(out / f"{name}.json", rep)
+    wall_s = time.perf_counter() - start
+    frames = len(result.frames)
+    ms = {k: 1e3 * result.timing_s[k] / frames for k in STAGES}
+    return {
+        "frames": frames,
+        "wall_s": wall_s,
+        "fps": frames / wall_s,
+        "ms_per_frame": ms,
+        "overhead_ratio": (ms["detect"] + ms["localize"] + ms["log"]) / ms["render"],
+        "rrd_bytes": rrd.stat().st_size,
+        "rrd_bytes_per_frame": rrd.stat().st_size / frames,
+        "passed": rep["passed"],
+    }
+
+
+def run(args: argparse.Namespace) -> dict:
+    names = getattr(args, "scenario", None) or builtin.names()
+    with tempfile.TemporaryDirectory(prefix="vnav-bench-") as tmp:
+        start = time.perf_counter()
+        per = {name: _run_one(name, Path(tmp)) for name in names}
+        all_wall_s = time.perf_counter() - start
+    frames = sum(p["frames"] for p in per.values())
+    total_ms = {k: sum(p["ms_per_frame"][k] * p["frames"] for p in per.values()) / frames
+                for k in STAGES}
+    figures = {
+        "scenarios": per,
+        "total": {
+            "frames": frames,
+            "all_wall_s": all_wall_s,
+            "fps": frames / all_wall_s,
+            "ms_per_frame": total_ms,
+            "overhead_ratio": (total_ms["detect"] + total_ms["localize"] + total_ms["log"])
+            / total_ms["render"],
+            "rrd_bytes_per_frame": sum(p["rrd_bytes"] for p in per.values()) / frames,
+        },
+        "targets": TARGETS,
+    }
+    if not args.json:
+        header = (f"{'scenario':<19}{'frames':>7}{'fps':>7}" + "".join(f"{s:>10}" for s in STAGES)
+                  + f"{'overhead':>10}{'KB/frame':>10}")
+        print("pipeline at 640x480, ms per frame by stage; overhead = (detect + localize + log)"
+              " / render")
+        print(header)
+        print("-" * len(header))
+        rows = [*per.items(), ("ALL", figures["total"])]
+        for name, p in rows:
+            print(f"{name:<19}{p['frames']:>7}{p['fps']:>7.1f}"
+                  + "".join(f"{p['ms_per_frame'][s]:>10.2f}" for s in STAGES)
+                  + f"{p['overhead_ratio']:>10.2f}{p['rrd_bytes_per_frame'] / 1e3:>10.1f}")
+        t = figures["total"]
+        print(f"\nwall time, {len(per)} scenarios: {all_wall_s:.1f} s (target <= "
+              f"{TARGETS['all_wall_s']:.0f} s)")
+        print(f"overhead ratio: {t['overhead_ratio']:.2f} (target <= {TARGETS['overhead_ratio']})")
+        print(f".rrd bytes per frame: {t['rrd_bytes_per_frame'] / 1e3:.1f} KB (target <= "
+              f"{TARGETS['rrd_bytes_per_frame'] / 1e3:.0f} KB)")
+    return figures
