@@ -23,8 +23,12 @@ TARGETS = {"overhead_ratio": 0.5, "rrd_bytes_per_frame": 60_000, "all_wall_s": 1
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--scenario", action="append", choices=builtin.names(),
-                        help="scenario to run (repeatable; default: every built-in)")
+    parser.add_argument(
+        "--scenario",
+        action="append",
+        choices=builtin.names(),
+        help="scenario to run (repeatable; default: every built-in)",
+    )
 
 
 def _run_one(name: str, out: Path) -> dict:
@@ -56,8 +60,9 @@ def run(args: argparse.Namespace) -> dict:
         per = {name: _run_one(name, Path(tmp)) for name in names}
         all_wall_s = time.perf_counter() - start
     frames = sum(p["frames"] for p in per.values())
-    total_ms = {k: sum(p["ms_per_frame"][k] * p["frames"] for p in per.values()) / frames
-                for k in STAGES}
+    total_ms = {
+        k: sum(p["ms_per_frame"][k] * p["frames"] for p in per.values()) / frames for k in STAGES
+    }
     figures = {
         "scenarios": per,
         "total": {
@@ -72,21 +77,32 @@ def run(args: argparse.Namespace) -> dict:
         "targets": TARGETS,
     }
     if not args.json:
-        header = (f"{'scenario':<19}{'frames':>7}{'fps':>7}" + "".join(f"{s:>10}" for s in STAGES)
-                  + f"{'overhead':>10}{'KB/frame':>10}")
-        print("pipeline at 640x480, ms per frame by stage; overhead = (detect + localize + log)"
-              " / render")
+        header = (
+            f"{'scenario':<19}{'frames':>7}{'fps':>7}"
+            + "".join(f"{s:>10}" for s in STAGES)
+            + f"{'overhead':>10}{'KB/frame':>10}"
+        )
+        print(
+            "pipeline at 640x480, ms per frame by stage; overhead = (detect + localize + log)"
+            " / render"
+        )
         print(header)
         print("-" * len(header))
         rows = [*per.items(), ("ALL", figures["total"])]
         for name, p in rows:
-            print(f"{name:<19}{p['frames']:>7}{p['fps']:>7.1f}"
-                  + "".join(f"{p['ms_per_frame'][s]:>10.2f}" for s in STAGES)
-                  + f"{p['overhead_ratio']:>10.2f}{p['rrd_bytes_per_frame'] / 1e3:>10.1f}")
+            print(
+                f"{name:<19}{p['frames']:>7}{p['fps']:>7.1f}"
+                + "".join(f"{p['ms_per_frame'][s]:>10.2f}" for s in STAGES)
+                + f"{p['overhead_ratio']:>10.2f}{p['rrd_bytes_per_frame'] / 1e3:>10.1f}"
+            )
         t = figures["total"]
-        print(f"\nwall time, {len(per)} scenarios: {all_wall_s:.1f} s (target <= "
-              f"{TARGETS['all_wall_s']:.0f} s)")
+        print(
+            f"\nwall time, {len(per)} scenarios: {all_wall_s:.1f} s (target <= "
+            f"{TARGETS['all_wall_s']:.0f} s)"
+        )
         print(f"overhead ratio: {t['overhead_ratio']:.2f} (target <= {TARGETS['overhead_ratio']})")
-        print(f".rrd bytes per frame: {t['rrd_bytes_per_frame'] / 1e3:.1f} KB (target <= "
-              f"{TARGETS['rrd_bytes_per_frame'] / 1e3:.0f} KB)")
+        print(
+            f".rrd bytes per frame: {t['rrd_bytes_per_frame'] / 1e3:.1f} KB (target <= "
+            f"{TARGETS['rrd_bytes_per_frame'] / 1e3:.0f} KB)"
+        )
     return figures

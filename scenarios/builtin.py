@@ -159,18 +159,9 @@ def gimbal_lock() -> Scenario:
 
 
 def orbit() -> Scenario:
-    # The controller circles the cone at 6 m radius, 4 m up, heading always at the cone.
-    radius_m, height_m, n = 6.0, 4.0, 12
-    waypoints = [{"t": 0.0, "position_w": [-radius_m, 0.0, height_m], "yaw_deg": 0.0}]
-    for i in range(1, n + 1):
-        angle = math.pi + 2.0 * math.pi * i / n
-        waypoints.append(
-            {
-                "t": 2.0 + 1.5 * i,
-                "position_w": [radius_m * math.cos(angle), radius_m * math.sin(angle), height_m],
-                "yaw_deg": math.degrees(angle + math.pi),
-            }
-        )
+    # The controller circles the cone at 6 m radius, 4 m up, heading always at the cone; the
+    # camera is pitched down by the angle under which the cone is seen from the circle.
+    radius_m, height_m = 6.0, 4.0
     return {
         "name": "orbit",
         "description": "The geometric controller flies a circle around the cone, camera on it.",
@@ -179,12 +170,18 @@ def orbit() -> Scenario:
         "camera_rate_hz": 10.0,
         "camera": {"pitch_down_deg": math.degrees(math.atan2(height_m, radius_m))},
         "cones": [{"position_w": [0.0, 0.0, 0.0]}],
-        "flight": {"mode": "controlled", "waypoints": waypoints},
-        "duration_s": waypoints[-1]["t"] + 1.0,
+        "flight": {
+            "mode": "orbit",
+            "center_w": [0.0, 0.0, 0.0],
+            "radius_m": radius_m,
+            "height_m": height_m,
+            "period_s": 16.0,
+            "turns": 1.0,
+        },
         "checks": [
             *ACCURACY_CHECKS,
             _check("detection_rate", 0.95, name="cone detected whenever fully in view"),
-            _check("tracking_error", 0.5, name="controller tracking error (m)"),
+            _check("tracking_error", 0.3, name="controller tracking error (m)"),
         ],
     }
 

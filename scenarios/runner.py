@@ -25,8 +25,14 @@ from pathlib import Path
 import numpy as np
 
 from scenarios.recording import Recording
-from scenarios.spec import METHODS, ControlledFlight, KinematicFlight, ScenarioSpec
-from sim.flight import Autopilot, KeyframePlayer, KeyframeTrajectory, MinimumJerkTrajectory
+from scenarios.spec import METHODS, ControlledFlight, KinematicFlight, OrbitFlight, ScenarioSpec
+from sim.flight import (
+    Autopilot,
+    KeyframePlayer,
+    KeyframeTrajectory,
+    MinimumJerkTrajectory,
+    OrbitTrajectory,
+)
 from sim.render import Renderer
 from sim.world import World
 from vnav import metrics, quat, se3, so3
@@ -178,6 +184,16 @@ def _driver(world: World, spec: ScenarioSpec):
         if len(times) == 1:
             times, T_w_b = [0.0, 1.0], [T_w_b[0], T_w_b[0]]
         return KeyframePlayer(world, KeyframeTrajectory(times, np.array(T_w_b)))
+    if isinstance(flight, OrbitFlight):
+        orbit = OrbitTrajectory(
+            flight.center_w,
+            flight.radius_m,
+            flight.height_m,
+            flight.period_s,
+            flight.start_angle_rad,
+            flight.ramp_s,
+        )
+        return Autopilot(world, orbit)
     assert isinstance(flight, ControlledFlight)
     wps = flight.waypoints
     if len(wps) == 1:

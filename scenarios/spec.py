@@ -19,6 +19,9 @@ A scenario file (TOML) holds, in user units (metres, degrees, seconds)::
     keyframes = [ { t = 0.0, position_w = [0, 0, 10], rpy_deg = [0, 0, 0] }, ... ]
     # mode = "controlled"     # waypoints flown by the geometric controller
     # waypoints = [ { t = 0.0, position_w = [0, 0, 10], yaw_deg = 0.0 }, ... ]
+    # mode = "orbit"          # a smooth circle, heading at the centre (controller)
+    # center_w = [0, 0, 0]; radius_m = 6.0; height_m = 4.0; period_s = 20.0 (< 0: clockwise)
+    # turns = 1.0; start_angle_deg = 180.0; ramp_s = 3.0
 
     [noise]                   # optional, drawn from the run's seed
     position_std_m = 0.0      # error added to the body position the estimator is given
@@ -113,6 +116,33 @@ class ControlledFlight:
 
 
 @dataclass(frozen=True)
+class OrbitFlight:
+    """A smooth circle around a point, flown by the controller, heading at the centre."""
+
+    center_w: tuple[float, float, float]
+    radius_m: float
+    height_m: float
+    period_s: float
+    turns: float = 1.0
+    start_angle_rad: float = math.pi
+    ramp_s: float = 3.0
+    mode: str = "orbit"
+
+    @property
+    def end_s(self) -> float:
+        # The ramp covers half the angle it would at full speed (sim.flight.OrbitTrajectory).
+        return self.ramp_s / 2.0 + self.turns * abs(self.period_s)
+
+    @property
+    def start_position_w(self) -> tuple[float, float, float]:
+        return (
+            self.center_w[0] + self.radius_m * math.cos(self.start_angle_rad),
+            self.center_w[1] + self.radius_m * math.sin(self.start_angle_rad),
+            self.height_m,
+        )
+
+
+@dataclass(frozen=True)
 class Noise:
     """Errors added to the body pose the estimator is given (the truth is untouched)."""
 
@@ -149,7 +179,7 @@ class ScenarioSpec:
     name: str
     description: str
     scene: SceneConfig
-    flight: KinematicFlight | ControlledFlight
+    flight: KinematicFlight | ControlledFlight | OrbitFlight
     camera_rate_hz: float = 10.0
     duration_s: float | None = None
     noise: Noise = field(default_factory=Noise)
@@ -279,7 +309,40 @@ def _flight(table: dict[str, Any], where: str) -> KinematicFlight | ControlledFl
             )
         _times_increasing([w.t_s for w in waypoints], where, "flight.waypoints")
         return ControlledFlight(tuple(waypoints))
-    raise _err(where, "flight.mode", f'must be "kinematic" or "controlled", got {mode!r}')
+    if mode == "orbit":
+        keys = {
+            "mode",
+            "center_w",
+            "radius_m",
+            "height_m",
+            "period_s",
+            "turns",
+            "start_angle_deg",
+            "ramp_s",
+        }
+        _allowed(table, keys, where, "flight")
+        for needed in ("center_w", "radius_m", "height_m", "period_s"):
+            if needed not in table:
+                raise _err(where, f"flight.{needed}", "missing")
+        period = _number(table["period_s"], where, "flight.period_s")
+        if abs(period) < 1.0:
+            raise _err(
+                where,
+                "flight.period_s",
+                f"must be at least 1 s in magnitude (negative: clockwise), got {period}",
+            )
+        return OrbitFlight(
+            center_w=_vector(table["center_w"], 3, where, "flight.center_w"),
+            radius_m=_number(table["radius_m"], where, "flight.radius_m", lo=0.0, lo_open=True),
+            height_m=_number(table["height_m"], where, "flight.height_m", lo=0.0, lo_open=True),
+            period_s=period,
+            turns=_number(table.get("turns", 1.0), where, "flight.turns", lo=0.0, lo_open=True),
+            start_angle_rad=math.radians(
+                _number(table.get("start_angle_deg", 180.0), where, "flight.start_angle_deg")
+            ),
+            ramp_s=_number(table.get("ramp_s", 3.0), where, "flight.ramp_s", lo=0.0),
+        )
+    raise _err(where, "flight.mode", f'must be "kinematic", "controlled" or "orbit", got {mode!r}')
 
 
 def _checks(raw: Any, where: str) -> tuple[Check, ...]:
@@ -365,17 +428,22 @@ def from_dict(data: dict[str, Any], where: str = "<scenario>") -> ScenarioSpec:
         cones_w.append(_vector(entry["position_w"], 3, where, f"cones[{i}].position_w"))
 
     flight = _flight(_table(data["flight"], where, "flight"), where)
-    first = flight.keyframes[0] if isinstance(flight, KinematicFlight) else flight.waypoints[0]
-    start_quat_xyzw = (
-        first.quat_xyzw
-        if isinstance(first, Keyframe)
-        else tuple(map(float, quat.from_axis_angle([0.0, 0.0, 1.0], first.yaw_rad)))
-    )
+    if isinstance(flight, KinematicFlight):
+        start_position_w = flight.keyframes[0].position_w
+        start_quat_xyzw = flight.keyframes[0].quat_xyzw
+    else:
+        if isinstance(flight, ControlledFlight):
+            start_position_w = flight.waypoints[0].position_w
+            start_yaw_rad = flight.waypoints[0].yaw_rad
+        else:
+            start_position_w = flight.start_position_w
+            start_yaw_rad = flight.start_angle_rad + math.pi  # heading at the centre
+        start_quat_xyzw = tuple(map(float, quat.from_axis_angle([0.0, 0.0, 1.0], start_yaw_rad)))
     try:
         scene = SceneConfig(
             camera=camera,
             cones_w=tuple(cones_w),
-            start_position_w=first.position_w,
+            start_position_w=start_position_w,
             start_quat_xyzw=start_quat_xyzw,
         )
     except ValueError as exc:

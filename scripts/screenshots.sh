@@ -3,13 +3,14 @@
 # the Rerun viewer (the one that ships in rerun-sdk) on a virtual display, save a screenshot.
 #
 # Needs Debian's xvfb and mesa-vulkan-drivers (the viewer renders through Mesa's Vulkan
-# software rasteriser, lavapipe); installs them with apt-get if missing. Run from anywhere:
+# software rasteriser, lavapipe) and xdotool (to park the pointer outside the window, where
+# it shows no hover tooltip); installs them with apt-get if missing. Run from anywhere:
 #   bash scripts/screenshots.sh [SCENARIO ...]
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 missing=()
-for pkg in xvfb mesa-vulkan-drivers; do
+for pkg in xvfb mesa-vulkan-drivers xdotool; do
   dpkg -s "$pkg" >/dev/null 2>&1 || missing+=("$pkg")
 done
 if [ ${#missing[@]} -gt 0 ]; then
@@ -33,6 +34,7 @@ Xvfb "$display" -screen 0 1600x1000x24 >/dev/null 2>&1 &
 xvfb_pid=$!
 trap 'kill $xvfb_pid 2>/dev/null; rm -rf "$rec_dir"' EXIT
 sleep 1
+DISPLAY="$display" xdotool mousemove 1599 999
 
 for name in "${scenarios[@]}"; do
   .venv/bin/vnav-demo run "$name" --out "$rec_dir" --quiet || true

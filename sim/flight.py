@@ -405,6 +405,87 @@ class Mixer:
         return float(w[0]), w[1:]
 
 
+class OrbitTrajectory:
+    """A circle at constant height around a point, heading at the centre, entered smoothly.
+
+    The angle about the centre is ``phi(t) = phi0 + integral of w(t)``, where the angular rate
+    ``w`` rises from 0 to ``2 pi / period`` over ``ramp_s`` seconds with the minimum-jerk
+    blend (so acceleration is continuous) and stays there; position, velocity and acceleration
+    follow analytically (``a = r phi'' t_hat - r phi'^2 r_hat``), the feed-forward the
+    geometric controller needs. The body's x axis points at the centre (``yaw = phi + pi``).
+
+    Parameters
+    ----------
+    center_w : array_like, shape (3,)
+        Point circled; only its x and y matter.
+    radius_m : float
+        Circle radius, metres, > 0.
+    height_m : float
+        Flight height (world z), metres.
+    period_s : float
+        Time per revolution at full speed, seconds, > 0 (negative: clockwise).
+    start_angle_rad : float
+        ``phi0``: where on the circle the flight starts (0: on the centre's +x side).
+    ramp_s : float
+        Time to reach full angular speed, seconds, >= 0.
+    """
+
+    def __init__(
+        self,
+        center_w,
+        radius_m: float,
+        height_m: float,
+        period_s: float,
+        start_angle_rad: float = 0.0,
+        ramp_s: float = 3.0,
+    ) -> None:
+        c = np.asarray(center_w, dtype=np.float64)
+        if c.shape != (3,) or not np.all(np.isfinite(c)):
+            raise ValueError(f"center_w must be 3 finite numbers, got {center_w!r}")
+        values = (radius_m, height_m, period_s, start_angle_rad, ramp_s)
+        if not all(math.isfinite(float(v)) for v in values):
+            raise ValueError(f"orbit parameters must be finite, got {values}")
+        if radius_m <= 0.0 or period_s == 0.0 or ramp_s < 0.0:
+            raise ValueError(
+                f"need radius_m > 0, period_s != 0 and ramp_s >= 0; got radius_m={radius_m}, "
+                f"period_s={period_s}, ramp_s={ramp_s}"
+            )
+        self.center_w = c
+        self.radius_m = float(radius_m)
+        self.height_m = float(height_m)
+        self.rate_rad_s = 2.0 * math.pi / float(period_s)
+        self.start_angle_rad = float(start_angle_rad)
+        self.ramp_s = float(ramp_s)
+
+    def _angle(self, t_s: float) -> tuple[float, float, float]:
+        """phi, phi', phi'' at time t_s."""
+        w, T = self.rate_rad_s, self.ramp_s
+        t = max(float(t_s), 0.0)
+        if T > 0.0 and t < T:
+            s = t / T
+            # w(t) = w B(s), B = 10 s^3 - 15 s^4 + 6 s^5; its integral is w T (5/2 s^4 - 3 s^5
+            # + s^6).
+            b, db, _ = _min_jerk(np.asarray(s))
+            integral = w * T * (2.5 * s**4 - 3.0 * s**5 + s**6)
+            return self.start_angle_rad + integral, w * float(b), w * float(db) / T
+        ramp_angle = w * T * 0.5  # the integral of B over [0, 1] is 1/2
+        return self.start_angle_rad + ramp_angle + w * (t - T), w, 0.0
+
+    def sample(self, t_s: float) -> Reference:
+        """The reference at time ``t_s`` (seconds)."""
+        phi, dphi, ddphi = self._angle(t_s)
+        r_hat = np.array([math.cos(phi), math.sin(phi), 0.0])
+        t_hat = np.array([-math.sin(phi), math.cos(phi), 0.0])
+        r = self.radius_m
+        p_w = np.array([self.center_w[0], self.center_w[1], self.height_m]) + r * r_hat
+        return Reference(
+            p_w=p_w,
+            v_w=r * dphi * t_hat,
+            a_w=r * ddphi * t_hat - r * dphi**2 * r_hat,
+            yaw_rad=phi + math.pi,
+        )
+
+
 # ------------------------------------------------------------------------------- autopilot
 class Autopilot:
     """Flies a :class:`World` along a reference with the geometric controller and mixer.

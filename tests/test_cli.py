@@ -152,7 +152,7 @@ def test_bad_usage_exit_2_one_line(tmp_path, capsys, args, message):
         ),
         (
             PITCH_90_TOML.replace('mode = "kinematic"', 'mode = "teleport"'),
-            r"bad\.toml: flight\.mode: must be \"kinematic\" or \"controlled\"",
+            r"bad\.toml: flight\.mode: must be \"kinematic\", \"controlled\" or \"orbit\"",
         ),
         (
             PITCH_90_TOML.replace("camera_rate_hz", "camera_rate"),

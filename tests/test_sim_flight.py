@@ -144,3 +144,42 @@ def test_keyframes_are_exact_including_90_deg_pitch() -> None:
     player.step(60)
     np.testing.assert_allclose(world.T_w_b(), T1, atol=1e-12)
     np.testing.assert_allclose(world.data.qvel, 0.0)
+
+
+def test_orbit_reference_derivatives_match_finite_differences():
+    """Velocity and acceleration feed-forward are the derivatives of the position reference."""
+    from sim.flight import OrbitTrajectory
+
+    orbit = OrbitTrajectory([1.0, -2.0, 0.0], 6.0, 4.0, period_s=-12.0, start_angle_rad=0.3)
+    h = 1e-4
+    for t in (0.0, 0.7, 1.5, 2.9, 3.0, 3.1, 8.0):
+        ref = orbit.sample(t)
+        before, after = orbit.sample(t - h), orbit.sample(t + h)
+        if t > 0.0:  # the reference holds still before t = 0
+            assert np.allclose(ref.v_w, (after.p_w - before.p_w) / (2 * h), atol=1e-6)
+            assert np.allclose(ref.a_w, (after.v_w - before.v_w) / (2 * h), atol=1e-5)
+        assert np.linalg.norm(ref.p_w[:2] - [1.0, -2.0]) == pytest.approx(6.0, abs=1e-12)
+        assert ref.p_w[2] == 4.0
+        # Heading at the centre: the body x axis points from the drone to the centre.
+        to_centre = np.array([1.0, -2.0]) - ref.p_w[:2]
+        heading = np.array([np.cos(ref.yaw_rad), np.sin(ref.yaw_rad)])
+        assert np.allclose(heading, to_centre / np.linalg.norm(to_centre), atol=1e-12)
+    assert np.allclose(orbit.sample(0.0).v_w, 0.0)  # starts at rest
+    # Full speed after the ramp: |v| = r |2 pi / period|.
+    assert np.linalg.norm(orbit.sample(5.0).v_w) == pytest.approx(6.0 * 2 * np.pi / 12.0)
+
+
+def test_orbit_flown_by_the_controller_stays_on_the_circle():
+    from sim.flight import OrbitTrajectory
+
+    orbit = OrbitTrajectory([0.0, 0.0, 0.0], 6.0, 4.0, period_s=16.0, start_angle_rad=np.pi)
+    start = orbit.sample(0.0)
+    world = World.from_config(
+        SceneConfig(start_position_w=tuple(start.p_w), start_quat_xyzw=(0.0, 0.0, 0.0, 1.0))
+    )
+    pilot = Autopilot(world, orbit)
+    worst_radius_m = 0.0
+    for _ in range(int(17.5 / 0.01)):
+        pilot.step(1)
+        worst_radius_m = max(worst_radius_m, abs(np.linalg.norm(world.position_w()[:2]) - 6.0))
+    assert worst_radius_m < 0.1  # ground truth: MuJoCo's body position

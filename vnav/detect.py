@@ -288,8 +288,11 @@ def _describe_blob(
 def extreme_point(crop: np.ndarray, x0: int, y0: int, direction_uv: np.ndarray) -> np.ndarray:
     """The blob's extreme point along a unit image direction, to sub-pixel precision.
 
-    The mean of the pixel centres within 1 px of the largest projection `s = p . d`, moved
-    by half a pixel's extent along `d` (`0.5 (|d_u| + |d_v|)`) from the centres to the edge.
+    Along `d`: the largest projection `s = p . d` of a pixel centre, moved by half a pixel's
+    extent along `d` (`0.5 (|d_u| + |d_v|)`) from the centre to the edge (for `d` along an
+    image axis the silhouette's edge lies within one pixel beyond the last covered centre, so
+    half a pixel is its unbiased estimate). Across `d`: the mean of the pixel centres within
+    1 px of the largest projection (the middle of the extreme edge).
 
     Parameters
     ----------
@@ -304,7 +307,10 @@ def extreme_point(crop: np.ndarray, x0: int, y0: int, direction_uv: np.ndarray) 
     """
     rows, cols = np.nonzero(crop)
     uv = np.column_stack((cols + x0, rows + y0)).astype(np.float64)
-    s = uv @ direction_uv
-    near = uv[s >= s.max() - 1.0]
-    half = 0.5 * (abs(direction_uv[0]) + abs(direction_uv[1]))
-    return near.mean(axis=0) + half * direction_uv
+    d = np.asarray(direction_uv, dtype=np.float64)
+    s = uv @ d
+    s_max = float(s.max())
+    near = uv[s >= s_max - 1.0]
+    half = 0.5 * (abs(d[0]) + abs(d[1]))
+    across = np.array([-d[1], d[0]])
+    return (s_max + half) * d + float((near @ across).mean()) * across

@@ -4,7 +4,8 @@ Every estimate goes through the lecture's chain (VNAV lecture 1, chapter 0)
 
     p_w = T_w_b @ T_b_c @ p_c = T_w_c @ p_c
 
-and differs only in how the depth along the viewing ray is found:
+and differs only in how the depth along the viewing ray is found. A detection that touches the
+image border (the cone may be cut off) gets no estimate from any method.
 
 1. `depth_image`: the rendered planar depth over the cone's mask, back-projected to world
    points on the cone's visible surface; the axis is found by fitting the cone's known
@@ -12,15 +13,20 @@ and differs only in how the depth along the viewing ray is found:
    dependent radius, started from the per-point correction "surface point + r(z) along the
    horizontal viewing direction" and its median). The base-centre height is the lowest
    surface point (2nd percentile). Needs no ground plane.
-2. `ground_plane`: the ray through the bottom of the blob along the image of the vertical
-   direction (the near bottom edge of the base plate) meets the ground z = 0 at `g_w`; the
-   base centre lies behind it, away from the camera, by the base plate's mean support distance
-   `a (4 / pi)` for a square of half-width `a` and unknown yaw (between `a` and `a sqrt(2)`).
+2. `ground_plane`: the ray through the bottom pixel (where the image of the cone's axis, the
+   line through the apex along the image of the vertical, leaves the blob: the near bottom
+   edge of the base plate) meets the ground z = 0 at `g_w`; the base centre lies behind it,
+   away from the camera, by the plate's mean distance from centre to edge along the bearing,
+   `1.122 a` for a square of half-width `a` and unknown yaw (between `a` and `a sqrt(2)`).
    A ray parallel to or pointing away from the ground gives no estimate.
 3. `known_height`: similar triangles generalised to a tilted camera: the two rays through the
-   apex pixel and the blob's bottom pixel must hold the points `p_base + (0, 0, H)` and
-   `p_base - s b` (`b` the horizontal bearing, `s` the support distance); the two ray lengths
+   apex pixel and the bottom pixel must hold the points `p_base + (0, 0, H)` and
+   `p_base - s b` (`b` the horizontal bearing, `s` that edge distance); the two ray lengths
    are the least-squares solution of those three linear equations. Needs no ground plane.
+   The apex is located from the area of the silhouette's top triangle (`apex_pixel`), not
+   from its top-most pixel, which lies several pixels below the apex of a thin, distant tip.
+   Refused when ill-conditioned (apex over the base plate's image in a steep view, or one
+   pixel moving the estimate by more than 10% of range).
 4. `naive`: the lecture's mistake, camera-frame coordinates added to the drone's position as
    if they were world coordinates, `p_naive = t_w_b + p_c`, with `p_c` the best available
    estimate (depth image, else ground plane, else known height) in the camera frame.
@@ -40,13 +46,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from vnav import se3
 from vnav.camera import PinholeCamera
 from vnav.cone import TRAFFIC_CONE, ConeModel
-from vnav.detect import ConeDetection, extreme_point
+from vnav.detect import ConeDetection
 
 __all__ = [
+    "MAX_RANGE_ERROR_PER_PX",
+    "MIN_TRIANGLE_FRACTION",
     "ConeEstimates",
-    "base_support_distance",
+    "apex_pixel",
+    "base_axis_distance",
     "bottom_pixel",
     "depth_to_world_points",
     "estimate_from_depth",
@@ -54,6 +64,7 @@ __all__ = [
     "estimate_from_known_height",
     "localize",
     "naive_estimate",
+    "triangle_fraction",
     "vertical_direction_uv",
 ]
 
@@ -101,21 +112,15 @@ class ConeEstimates:
 
 
 def _check_transform(T: np.ndarray, name: str) -> np.ndarray:
-    """A 4x4 finite rigid transform (rotation orthonormal to 1e-6, last row 0 0 0 1)."""
-    T = np.asarray(T, dtype=np.float64)
+    """One 4x4 rigid transform, validated by `vnav.se3.check_transform` (its default tolerance,
+    1e-9 on `R^T R - I`: MuJoCo's float64 poses are orthonormal to about 1e-15).
+
+    A thin wrapper only because `se3.check_transform` also accepts stacks `(..., 4, 4)`, and
+    every function here takes exactly one pose.
+    """
+    T = se3.check_transform(T, name)
     if T.shape != (4, 4):
-        raise ValueError(f"{name} must be a 4x4 transform, got shape {T.shape}")
-    if not np.isfinite(T).all():
-        raise ValueError(f"{name} must be finite, got NaN or inf entries")
-    if not np.allclose(T[3], (0.0, 0.0, 0.0, 1.0), atol=1e-12):
-        raise ValueError(f"{name} must have last row [0, 0, 0, 1], got {T[3]}")
-    R = T[:3, :3]
-    err = np.abs(R.T @ R - np.eye(3)).max()
-    if err > 1e-6 or np.linalg.det(R) <= 0.0:
-        raise ValueError(
-            f"{name} must hold a rotation (R^T R = I to 1e-6, det +1), got |R^T R - I| = "
-            f"{err:.2e}, det {np.linalg.det(R):.6f}"
-        )
+        raise ValueError(f"{name} must be a single 4x4 transform, got shape {T.shape}")
     return T
 
 
@@ -146,15 +151,17 @@ def _check_detection(detection: ConeDetection, camera: PinholeCamera) -> None:
 # ------------------------------------------------------------------------------ geometry
 
 
-def base_support_distance(cone: ConeModel = TRAFFIC_CONE) -> float:
-    """Mean distance from the base centre to the base plate's edge nearest the camera, metres.
+def base_axis_distance(cone: ConeModel = TRAFFIC_CONE) -> float:
+    """Mean distance from the base centre to the base plate's near edge along the bearing, m.
 
-    For a square of half-width `a` seen from a far point at bearing angle `psi` to a face
-    normal, the support distance is `a (|cos psi| + |sin psi|)`; its mean over `psi` uniform
-    in [0, pi/4] is `a (4 / pi)` (between `a` and `a sqrt(2)`, so the error is at most
-    0.18 a = 3.4 cm for the standard cone).
+    The plate is a square of half-width `a` at an unknown yaw `psi` (folded into [0, pi/4])
+    relative to the horizontal bearing from the camera; the vertical plane through the camera
+    and the cone's axis (whose image is the cone's image axis) leaves the plate's footprint
+    `a / cos(psi)` from the centre. Its mean over `psi` uniform in [0, pi/4] is
+    `a (4 / pi) ln(1 + sqrt 2) = 1.122 a` (between `a` and `a sqrt 2`, so the error is at most
+    0.29 a = 5.5 cm and its standard deviation 0.12 a = 2.3 cm for the standard cone).
     """
-    return 0.5 * cone.base_width_m * 4.0 / math.pi
+    return 0.5 * cone.base_width_m * 4.0 / math.pi * math.log(1.0 + math.sqrt(2.0))
 
 
 def _ray_w(camera: PinholeCamera, T_w_c: np.ndarray, uv: np.ndarray) -> np.ndarray:
@@ -187,37 +194,144 @@ def vertical_direction_uv(
     return d / norm
 
 
-def bottom_pixel(detection: ConeDetection, camera: PinholeCamera, T_w_c: np.ndarray) -> np.ndarray:
-    """The blob's extreme pixel along the image of the downward vertical, (2,) float64.
+def triangle_fraction(elevation_rad: float, cone: ConeModel = TRAFFIC_CONE) -> float:
+    """Fraction of the silhouette's length, from the apex down, that is the body's triangle.
 
-    The image of the base plate's bottom edge nearest the camera. Falls back to
-    `detection.base_uv` when the vertical is undefined at the blob (camera looking straight
-    down at it).
+    Seen at elevation `e` (line of sight below the horizontal; orthographic approximation),
+    the apex lies `(H - t) cos e` above the image of the body's base circle's centre and the
+    plate's far top corners at most `a sin e` above it (`a` the plate's half-width), the
+    plate's near bottom edge `a sin e + t cos e` below it. Down to the plate's far corners the
+    silhouette is the triangle between the apex and the two tangents to the body's base, so
+    `f(e) = ((H - t) cos e - a sin e) / ((H - t) cos e + 2 a sin e + t cos e)` when positive,
+    else 0: at about 74 deg (standard cone) and steeper the apex projects onto the base plate
+    and the cone's height cannot be read off the image.
     """
+    H, t, a = cone.height_m, cone.base_thickness_m, 0.5 * cone.base_width_m
+    c, s = math.cos(elevation_rad), math.sin(elevation_rad)
+    top = (H - t) * c - a * s
+    return max(top, 0.0) / ((H - t) * c + 2.0 * a * s + t * c)
+
+
+def _image_frame(
+    detection: ConeDetection, camera: PinholeCamera, T_w_c: np.ndarray
+) -> tuple[np.ndarray, float] | None:
+    """`(d, e)`: the image of the downward vertical at the blob and the elevation (radians)
+    of the line of sight through the blob's centroid below the horizontal; None at the nadir."""
     d = vertical_direction_uv(camera, T_w_c, detection.centroid_uv)
     if d is None:
+        return None
+    ray = _ray_w(camera, T_w_c, detection.centroid_uv)
+    return d, math.asin(float(np.clip(-ray[2], -1.0, 1.0)))
+
+
+def apex_pixel(detection: ConeDetection, d: np.ndarray, fraction: float) -> np.ndarray | None:
+    """The apex's image from the area of the silhouette's top triangle, (2,) float64, or None.
+
+    With `t` the pixel coordinate along the image vertical `d` (down), the triangle between
+    the apex (at `t0`) and the two tangents to the body's base has cross-section width
+    `k (t - t0)`, so its area above `tau` is `N(tau) = (k / 2) (tau - t0)^2`: `sqrt N` is a
+    straight line in `tau` that crosses zero at the apex. `N` is counted from the mask, each
+    pixel spread uniformly over `[t_i - 1/2, t_i + 1/2]` (a unit square's extent along `d`,
+    matching its variance), and the line is fitted on `tau` from where `N` reaches 3 px down to
+    `0.85 fraction` of the blob's length (`fraction` from `triangle_fraction`). Counting
+    pixels measures area without bias, where the top-most pixel is several pixels below the
+    apex of a thin tip and edge lines fitted to the top rows are biased by the rows whose
+    width rounds up to one pixel. The apex's coordinate across `d` is the mean of the
+    triangle's pixels in the upper half of that range (the triangle is symmetric about the
+    image of the cone's axis).
+
+    None when fewer than three samples are usable or the fit is not a widening triangle.
+    """
+    uv = detection.pixels_uv()
+    dp = np.array([-d[1], d[0]])
+    t, s = uv @ d, uv @ dp
+    t_top = float(t.min()) - 0.5
+    length = float(t.max()) + 0.5 - t_top
+    t_end = t_top + 0.85 * fraction * length
+    tau = np.arange(t_top + 0.5, t_end + 1e-9, 0.5)
+    if tau.size < 3:
+        return None
+    area = np.clip(tau[:, None] - t[None, :] + 0.5, 0.0, 1.0).sum(axis=1)
+    use = area >= 3.0  # the first pixels of a thin tip are the least reliable
+    if use.sum() < 3:
+        return None
+    A = np.column_stack((tau[use], np.ones(int(use.sum()))))
+    (slope, offset), *_ = np.linalg.lstsq(A, np.sqrt(area[use]), rcond=None)
+    if not slope > 0.0:
+        return None
+    t0 = -offset / slope
+    upper = t <= t0 + 0.5 * (t_end - t0) + 0.5
+    s0 = float(s[upper].mean()) if upper.any() else float(s.mean())
+    return t0 * d + s0 * dp
+
+
+def _boundary_along(uv: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """The blob's boundary points farthest along `d`, one per image column (or row).
+
+    Columns when `d` is closer to the image's v axis, else rows; in each, the extreme pixel
+    centre moved half a pixel outwards along that axis (the silhouette's edge lies within half
+    a pixel of it and this is its unbiased estimate over the unknown sub-pixel phase).
+    Returns (M, 2) `(u, v)` points sorted along the other axis.
+    """
+    along = 1 if abs(d[1]) >= abs(d[0]) else 0
+    lat = 1 - along
+    sign = 1.0 if d[along] >= 0.0 else -1.0
+    keys, inverse = np.unique(uv[:, lat], return_inverse=True)
+    extreme = np.full(keys.size, -np.inf)
+    np.maximum.at(extreme, inverse, sign * uv[:, along])
+    out = np.empty((keys.size, 2))
+    out[:, lat] = keys
+    out[:, along] = sign * (extreme + 0.5)
+    return out
+
+
+def bottom_pixel(
+    detection: ConeDetection,
+    camera: PinholeCamera,
+    T_w_c: np.ndarray,
+    apex_uv: np.ndarray | None = None,
+) -> np.ndarray:
+    """Where the image of the cone's axis leaves the blob at the bottom, (2,) float64.
+
+    The image of the vertical through the apex (the line through `apex_uv` along the image of
+    the downward vertical) meets the blob's lower boundary (`_boundary_along`, interpolated
+    linearly between columns) at the image of the base plate's near bottom edge, in the
+    vertical plane through the camera and the cone's axis: `base_axis_distance` from the base
+    centre towards the camera. Without `apex_uv` the axis passes through `apex_pixel` (else
+    the detector's apex). Falls back to `detection.base_uv` when the vertical is undefined at
+    the blob (camera looking straight down at it).
+    """
+    frame = _image_frame(detection, camera, T_w_c)
+    if frame is None:
         return np.asarray(detection.base_uv, dtype=np.float64)
-    x0, y0, _, _ = detection.bbox
-    return extreme_point(detection.mask, x0, y0, d)
+    d, elevation = frame
+    if apex_uv is None:
+        apex_uv = apex_pixel(detection, d, max(triangle_fraction(elevation), 0.5))
+        if apex_uv is None:
+            apex_uv = np.asarray(detection.apex_uv, dtype=np.float64)
+    return _axis_exit(detection.pixels_uv(), d, np.asarray(apex_uv, dtype=np.float64))
 
 
-def _top_pixel(detection: ConeDetection, camera: PinholeCamera, T_w_c: np.ndarray) -> np.ndarray:
-    """The apex pixel.
-
-    The blob's extreme pixel against the image of the downward vertical (the apex is the
-    highest point of the cone, so it is the farthest from the vertical vanishing point while
-    the camera sees it outside the body's outline). The detector's sub-pixel two-edge fit
-    replaces it when the two agree to 3 px (the fit assumes an upright cone in the image and
-    can lock onto the base plate's edges in a rolled or steep view).
-    """
-    d = vertical_direction_uv(camera, T_w_c, detection.centroid_uv)
-    if d is None:
-        return np.asarray(detection.apex_uv, dtype=np.float64)
-    x0, y0, _, _ = detection.bbox
-    top = extreme_point(detection.mask, x0, y0, -d)
-    if detection.apex_from_edges and np.linalg.norm(detection.apex_uv - top) < 3.0:
-        return np.asarray(detection.apex_uv, dtype=np.float64)
-    return top
+def _axis_exit(uv: np.ndarray, d: np.ndarray, apex_uv: np.ndarray) -> np.ndarray:
+    """Intersection of the line `apex_uv + lambda d` with the blob's lower boundary."""
+    pts = _boundary_along(uv, d)
+    dp = np.array([-d[1], d[0]])
+    off = (pts - apex_uv) @ dp
+    best = None
+    if pts.shape[0] == 1 or np.all(off > 0) or np.all(off < 0):
+        best = pts[int(np.argmin(np.abs(off)))]
+    else:
+        for j in range(pts.shape[0] - 1):
+            o0, o1 = off[j], off[j + 1]
+            if o0 == 0.0 or o0 * o1 < 0.0:
+                p = pts[j] + (pts[j + 1] - pts[j]) * (o0 / (o0 - o1))
+                if best is None or p @ d > best @ d:
+                    best = p
+        if off[-1] == 0.0 and (best is None or pts[-1] @ d > best @ d):
+            best = pts[-1]
+    assert best is not None
+    # Back onto the axis line exactly (the interpolation is along the boundary).
+    return apex_uv + float((best - apex_uv) @ d) * d
 
 
 def _horizontal_unit(v: np.ndarray) -> np.ndarray | None:
@@ -237,18 +351,22 @@ def estimate_from_ground_plane(
 ) -> np.ndarray | None:
     """Base centre from the ray through the blob's bottom pixel meeting the ground z = 0.
 
-    `g_w = t_w_c + lambda d_w` with `lambda = -z_c / d_z` (`d_w` the unit ray in the world),
-    then `p_w = g_w + s b` with `b` the horizontal bearing from the camera and `s` the
-    base plate's mean support distance (`base_support_distance`).
+    `g_w = t_w_c + lambda d_w` with `lambda = -z_c / d_z` (`d_w` the unit ray in the world
+    through `bottom_pixel`, the base plate's near bottom edge on the cone's image axis), then
+    `p_w = g_w + s b` with `b` the horizontal bearing from the camera and `s` the mean distance
+    from the base centre to that edge (`base_axis_distance`).
 
     Returns
     -------
     p_w : ndarray, shape (3,), or None
-        None when the camera is not above the ground or the ray is parallel to the ground or
-        points away from it (`d_z >= -1e-9`).
+        None when the detection touches the image border (the cone may be cut off: its bottom
+        may be outside the image), when the camera is not above the ground, or when the ray
+        is parallel to the ground or points away from it (`d_z >= -1e-9`).
     """
     _check_detection(detection, camera)
     T_w_c = _check_transform(T_w_c, "T_w_c")
+    if detection.touches_border:
+        return None
     t_w_c = T_w_c[:3, 3]
     d_w = _ray_w(camera, T_w_c, bottom_pixel(detection, camera, T_w_c))
     if t_w_c[2] <= 0.0 or d_w[2] >= -1e-9:
@@ -259,7 +377,34 @@ def estimate_from_ground_plane(
     b = _horizontal_unit(g_w - t_w_c)
     if b is None:
         return g_w
-    return g_w + base_support_distance(cone) * b
+    return g_w + base_axis_distance(cone) * b
+
+
+MIN_TRIANGLE_FRACTION = 0.10
+"""`estimate_from_known_height` needs at least this `triangle_fraction` of the silhouette (the
+apex clear of the base plate's image): up to about 69 deg of elevation for the standard cone."""
+
+MAX_RANGE_ERROR_PER_PX = 0.10
+"""`estimate_from_known_height` gives no estimate when one pixel of error in the apex or the
+bottom pixel (along the image vertical) moves it by more than this fraction of its range."""
+
+
+def _solve_known_height(
+    c_w: np.ndarray,
+    a_w: np.ndarray,
+    g_w: np.ndarray,
+    height_m: float,
+    s: float,
+) -> tuple[np.ndarray, float, float, float] | None:
+    """`(p_w, alpha, gamma, residual)` of the 3x2 least-squares triangle, or None."""
+    b = _horizontal_unit(g_w)
+    if b is None or float(np.dot(a_w, g_w)) > math.cos(1e-4):
+        return None
+    A = np.column_stack((a_w, -g_w))
+    rhs = np.array([0.0, 0.0, height_m]) + s * b
+    (alpha, gamma), *_ = np.linalg.lstsq(A, rhs, rcond=None)
+    residual = float(np.linalg.norm(A @ np.array([alpha, gamma]) - rhs))
+    return c_w + gamma * g_w + s * b, float(alpha), float(gamma), residual
 
 
 def estimate_from_known_height(
@@ -271,38 +416,77 @@ def estimate_from_known_height(
     """Base centre from the cone's known height and its apparent size (generalised similar
     triangles).
 
-    With `c = t_w_c`, unit world rays `a` (apex pixel) and `g` (bottom pixel), horizontal
-    bearing `b` and support distance `s`, the apex `c + alpha a` and the bottom edge point
+    With `c = t_w_c`, unit world rays `a` (through `apex_pixel`) and `g` (through
+    `bottom_pixel`, the plate's near bottom edge on the cone's image axis), horizontal
+    bearing `b` and `s = base_axis_distance`, the apex `c + alpha a` and the edge point
     `c + gamma g` satisfy `alpha a - gamma g = (0, 0, H) + s b`; `(alpha, gamma)` is the
     least-squares solution and `p_w = c + gamma g + s b`. For a level camera and a distant cone
     this reduces to `Z = f H / h_px`.
 
+    Conditioning. The estimate is refused (None) when the triangle cannot be measured well:
+
+    - the apex must be clear of the base plate's image: `triangle_fraction(e) >=
+      MIN_TRIANGLE_FRACTION` at the line of sight's elevation `e` (up to about 69 deg for the
+      standard cone; looking down more steeply the apex projects inside the cone's outline
+      and its height is foreshortened onto the plate);
+    - one pixel of error in the apex or the bottom pixel, along the image vertical, may move
+      the estimate by at most `MAX_RANGE_ERROR_PER_PX` of its range (the sensitivity of the
+      least-squares solution, by finite differences): a cone only a few pixels tall gives no
+      estimate rather than a wrong one.
+
     Returns
     -------
     p_w : ndarray, shape (3,), or None
-        None when the two rays are (nearly) parallel, a ray length comes out non-positive or
-        the equations are inconsistent (residual above 25% of H).
+        None when the detection touches the image border (apex or base may be cut off), the
+        geometry is ill-conditioned (above), the two rays are (nearly) parallel, a ray length
+        comes out non-positive or the equations are inconsistent (residual above 25% of H).
     """
     _check_detection(detection, camera)
     T_w_c = _check_transform(T_w_c, "T_w_c")
+    if detection.touches_border:
+        return None
+    frame = _image_frame(detection, camera, T_w_c)
+    if frame is None:
+        logger.debug("known height: camera looks straight down at the cone")
+        return None
+    d, elevation = frame
+    fraction = triangle_fraction(elevation, cone)
+    if fraction < MIN_TRIANGLE_FRACTION:
+        logger.debug(
+            "known height: apex over the base plate (elevation %.1f deg)", math.degrees(elevation)
+        )
+        return None
+    apex_uv = apex_pixel(detection, d, fraction)
+    if apex_uv is None:
+        logger.debug("known height: no apex fit")
+        return None
+    bottom_uv = _axis_exit(detection.pixels_uv(), d, apex_uv)
     c_w = T_w_c[:3, 3]
-    a_w = _ray_w(camera, T_w_c, _top_pixel(detection, camera, T_w_c))
-    g_w = _ray_w(camera, T_w_c, bottom_pixel(detection, camera, T_w_c))
-    b = _horizontal_unit(g_w)
-    s = base_support_distance(cone)
-    if b is None or float(np.dot(a_w, g_w)) > math.cos(1e-4):
+    s = base_axis_distance(cone)
+
+    def solve(apex: np.ndarray, bottom: np.ndarray):
+        return _solve_known_height(
+            c_w, _ray_w(camera, T_w_c, apex), _ray_w(camera, T_w_c, bottom), cone.height_m, s
+        )
+
+    solution = solve(apex_uv, bottom_uv)
+    if solution is None:
         logger.debug("known height: degenerate rays")
         return None
-    A = np.column_stack((a_w, -g_w))
-    rhs = np.array([0.0, 0.0, cone.height_m]) + s * b
-    (alpha, gamma), *_ = np.linalg.lstsq(A, rhs, rcond=None)
-    residual = float(np.linalg.norm(A @ np.array([alpha, gamma]) - rhs))
+    p_w, alpha, gamma, residual = solution
     if alpha <= 0.0 or gamma <= 0.0 or residual > 0.25 * cone.height_m:
         logger.debug(
             "known height: inconsistent (alpha %.3g, gamma %.3g, res %.3g)", alpha, gamma, residual
         )
         return None
-    return c_w + gamma * g_w + s * b
+    range_m = float(np.linalg.norm(p_w - c_w))
+    for da, db in ((d, 0.0 * d), (0.0 * d, d)):
+        moved = solve(apex_uv + da, bottom_uv + db)
+        shift = np.inf if moved is None else float(np.linalg.norm(moved[0] - p_w))
+        if shift > MAX_RANGE_ERROR_PER_PX * range_m:
+            logger.debug("known height: 1 px moves the estimate %.3g m at %.3g m", shift, range_m)
+            return None
+    return p_w
 
 
 def estimate_from_depth(
@@ -338,7 +522,9 @@ def estimate_from_depth(
     Returns
     -------
     p_w : ndarray, shape (3,), or None
-        None when fewer than 5 valid depth pixels fall on the cone's body.
+        None when the detection touches the image border (part of the cone is outside the
+        image, so the lowest visible point need not be the base and the axis fit is
+        unconstrained) or fewer than 5 valid depth pixels fall on the cone's body.
 
     Raises
     ------
@@ -355,6 +541,8 @@ def estimate_from_depth(
             f"depth must be finite under the detection's mask; got {int((~np.isfinite(z_c)).sum())}"
             f" non-finite of {z_c.size} pixels"
         )
+    if detection.touches_border:
+        return None
     uv = detection.pixels_uv()
     valid = (z_c > 0.0) & (z_c < far_m)
     if valid.sum() < _MIN_DEPTH_POINTS:
@@ -457,6 +645,11 @@ def localize(
     Returns
     -------
     ConeEstimates
+        A method's field is None when it gives no estimate (see each `estimate_from_*`). Every
+        field is None when the detection touches the image border (`touches_border`): part of
+        the cone may be outside the image (apex or base missing, the depth-image axis fit
+        unconstrained), and no estimate is better than a wrong one. Inputs are still
+        validated first.
 
     Raises
     ------
