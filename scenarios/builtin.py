@@ -79,6 +79,7 @@ def yaw_sweep() -> Scenario:
     ]
     return {
         "name": "yaw-sweep",
+        "view": "coordinates",
         "description": "Chapters 0 and 3: the drone yaws through 360 deg in place; the cone's "
         "camera coordinates change, its world estimate does not.",
         "lesson": "A rotation changes coordinates, not the point: p_b = R_b_w (p_w - t_w_b) "
@@ -108,6 +109,7 @@ def transform_composer() -> Scenario:
     ]
     return {
         "name": "transform-composer",
+        "view": "coordinates",
         "description": "Chapter 8: body translation and yaw swept; the cone in world, body "
         "and camera frames side by side.",
         "lesson": "T_w_c = T_w_b T_b_c: the composer of chapter 8, running on a simulated drone.",
@@ -132,6 +134,7 @@ def gimbal_lock() -> Scenario:
 
     return {
         "name": "gimbal-lock",
+        "view": "attitude",
         "description": "Chapter 4: a kinematic pitch-up through 90 deg; roll/pitch/yaw "
         "degenerate, the quaternion and the estimates do not.",
         "lesson": "At pitch = -90 deg only yaw + roll is defined (gimbal lock): the extracted "

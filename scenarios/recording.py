@@ -14,6 +14,8 @@ Entity tree (docs/CONVENTIONS.md for the frames)::
     world/trajectory               LineStrips3D of the flown path (static, at the end)
     metrics/error/<method>         Scalars, metres
     metrics/range_m                Scalars, metres
+    attitude/rpy_deg, quat_xyzw    roll/pitch/yaw (deg) and quaternion of R_w_b; gimbal_locked
+    coordinates/cone0_<frame>      cone 0 in world, body, camera (truth) and its estimate
     description                    TextDocument (markdown)
 
 Transforms are logged parent-from-child (Rerun's default relation), which is exactly vnav's
@@ -102,14 +104,22 @@ def _pose_transform(T_parent_child: np.ndarray) -> rr.Transform3D:
     )
 
 
-def blueprint(eye_w=None, look_target_w=None) -> rrb.Blueprint:
+VIEWS: dict[str, int] = {"errors": 0, "coordinates": 1, "attitude": 2}
+"""Tabs of the lower right panel, by the name a scenario's ``view`` key uses."""
+
+
+def blueprint(eye_w=None, look_target_w=None, view: str = "errors") -> rrb.Blueprint:
     """The default layout: 3D world, camera image, depth, error time series, description.
 
     Parameters
     ----------
     eye_w, look_target_w : array_like, shape (3,), optional
         Where the 3D view's eye starts and what it looks at, world frame (z up).
+    view : {"errors", "coordinates", "attitude"}
+        The tab shown first below the error plot (see :data:`VIEWS`).
     """
+    if view not in VIEWS:
+        raise ValueError(f"view must be one of {list(VIEWS)}, got {view!r}")
     eye = None
     if eye_w is not None and look_target_w is not None:
         eye = rrb.EyeControls3D(position=eye_w, look_target=look_target_w, eye_up=[0, 0, 1])
@@ -142,12 +152,32 @@ def blueprint(eye_w=None, look_target_w=None) -> rrb.Blueprint:
                     ),
                 ),
                 rrb.TimeSeriesView(name="position error (m)", origin="metrics", contents=good),
-                rrb.TimeSeriesView(
-                    name="naive error and range (m)",
-                    origin="metrics",
-                    contents=["+ /metrics/error/naive", "+ /metrics/range_m"],
+                rrb.Tabs(
+                    rrb.TimeSeriesView(
+                        name="naive error and range (m)",
+                        origin="metrics",
+                        contents=["+ /metrics/error/naive", "+ /metrics/range_m"],
+                    ),
+                    rrb.Grid(
+                        *[
+                            rrb.TimeSeriesView(
+                                name=f"cone 0 in {f} (m)", origin=f"coordinates/cone0_{f}"
+                            )
+                            for f in ("world", "body", "camera", "estimate_world")
+                        ],
+                        name="cone 0 in each frame",
+                    ),
+                    rrb.Vertical(
+                        rrb.TimeSeriesView(
+                            name="roll, pitch, yaw (deg)", origin="attitude/rpy_deg"
+                        ),
+                        rrb.TimeSeriesView(name="quaternion xyzw", origin="attitude/quat_xyzw"),
+                        rrb.TimeSeriesView(name="gimbal lock", origin="attitude/gimbal_locked"),
+                        name="attitude",
+                    ),
+                    active_tab=VIEWS[view],
                 ),
-                row_shares=[3, 2, 2],
+                row_shares=[3, 2, 3],
             ),
             column_shares=[3, 2],
         ),
@@ -175,6 +205,9 @@ class _FrameBuffer:
     errors_m: dict[str, float]
     range_m: float | None
     cloud_w: np.ndarray | None
+    rpy_deg: np.ndarray
+    gimbal_locked: bool
+    cone_coords: dict[str, np.ndarray]
 
 
 def _time_columns(rows: list[_FrameBuffer]) -> list[rr.TimeColumn]:
@@ -213,6 +246,7 @@ class Recording:
         description_md: str,
         eye_w: np.ndarray | None = None,
         look_target_w: np.ndarray | None = None,
+        view: str = "errors",
     ) -> None:
         """Log what does not change over the run: axes, mount, intrinsics, truth, text."""
         rec = self.rec
@@ -252,6 +286,28 @@ class Recording:
         rec.log(
             "description", rr.TextDocument(description_md, media_type="text/markdown"), static=True
         )
+        xyz = [(230, 80, 80), (80, 200, 80), (80, 120, 240)]
+        rec.log(
+            "attitude/rpy_deg",
+            rr.SeriesLines(colors=xyz, names=["roll", "pitch", "yaw"]),
+            static=True,
+        )
+        rec.log(
+            "attitude/quat_xyzw",
+            rr.SeriesLines(colors=[*xyz, (220, 220, 220)], names=["x", "y", "z", "w"]),
+            static=True,
+        )
+        rec.log(
+            "attitude/gimbal_locked",
+            rr.SeriesLines(colors=[(255, 200, 0)], names=["gimbal lock"]),
+            static=True,
+        )
+        for frame_name in ("world", "body", "camera", "estimate_world"):
+            rec.log(
+                f"coordinates/cone0_{frame_name}",
+                rr.SeriesLines(colors=xyz, names=[f"{a} ({frame_name})" for a in "xyz"]),
+                static=True,
+            )
         # Styles, logged once: per-frame rows carry only positions (see _flush).
         for method, color in METHOD_COLORS.items():
             rec.log(
@@ -274,7 +330,7 @@ class Recording:
             rr.Points2D.from_fields(radii=2.5),
             static=True,
         )
-        rec.send_blueprint(blueprint(eye_w, look_target_w))
+        rec.send_blueprint(blueprint(eye_w, look_target_w, view))
 
     # ------------------------------------------------------------------ per camera frame
     def log_frame(
@@ -290,6 +346,9 @@ class Recording:
         errors_m: Mapping[str, float],
         range_m: float | None,
         cloud_w: np.ndarray | None,
+        rpy_rad: np.ndarray,
+        gimbal_locked: bool,
+        cone_coords: Mapping[str, np.ndarray],
     ) -> None:
         """Queue one camera frame for the ``frame`` and ``sim_time`` timelines.
 
@@ -315,6 +374,12 @@ class Recording:
             Mean range of the matched cones, metres.
         cloud_w : ndarray, shape (M, 3), or None
             Decimated depth image in world coordinates.
+        rpy_rad : ndarray, shape (3,)
+            Roll, pitch, yaw of ``R_w_b`` (``vnav.so3.to_rpy``), radians; logged in degrees.
+        gimbal_locked : bool
+            Whether those angles are at the gimbal lock.
+        cone_coords : mapping of name -> ndarray, shape (3,)
+            Cone 0's coordinates in several frames (e.g. ``world``, ``body``, ``camera``).
         """
         bgr = cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)
         ok, jpeg = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
@@ -345,6 +410,9 @@ class Recording:
                 errors_m=dict(errors_m),
                 range_m=range_m,
                 cloud_w=None if cloud_w is None else np.asarray(cloud_w, np.float32),
+                rpy_deg=np.degrees(np.asarray(rpy_rad, dtype=np.float64)),
+                gimbal_locked=bool(gimbal_locked),
+                cone_coords={k: np.asarray(v, dtype=np.float64) for k, v in cone_coords.items()},
             )
         )
         if len(self._frames) >= FLUSH_EVERY_FRAMES:
@@ -426,6 +494,28 @@ class Recording:
             )
         rows = [f for f in frames if f.range_m is not None]
         send("metrics/range_m", rows, rr.Scalars.columns(scalars=[f.range_m for f in rows]))
+        send(
+            "attitude/rpy_deg",
+            frames,
+            rr.Scalars.columns(scalars=np.array([f.rpy_deg for f in frames])),
+        )
+        send(
+            "attitude/quat_xyzw",
+            frames,
+            rr.Scalars.columns(scalars=np.array([f.quat_xyzw for f in frames])),
+        )
+        send(
+            "attitude/gimbal_locked",
+            frames,
+            rr.Scalars.columns(scalars=[float(f.gimbal_locked) for f in frames]),
+        )
+        for name in dict.fromkeys(k for f in frames for k in f.cone_coords):
+            rows = [f for f in frames if name in f.cone_coords]
+            send(
+                f"coordinates/cone0_{name.replace(' ', '_')}",
+                rows,
+                rr.Scalars.columns(scalars=np.array([f.cone_coords[name] for f in rows])),
+            )
         rows = [f for f in frames if f.cloud_w is not None]
         send(
             "world/depth_cloud",

@@ -141,12 +141,13 @@ def cones_fully_in_view(
 ) -> list[int]:
     """Indices of cones whose apex and base corners all project inside the image (truth only)."""
     T_c_w = se3.invert(T_w_c)
+    points_w = np.concatenate([cone_points_w(p_w) for p_w in cones_w])  # one call for all
+    uv = camera.project(se3.apply(T_c_w, points_w)).reshape(len(cones_w), -1, 2)
     visible = []
-    for i, p_w in enumerate(cones_w):
-        uv = camera.project(se3.apply(T_c_w, cone_points_w(p_w)))
-        if not np.isfinite(uv).all() or not camera.in_image(uv).all():
+    for i, uv_i in enumerate(uv):
+        if not np.isfinite(uv_i).all() or not camera.in_image(uv_i).all():
             continue
-        if np.ptp(uv[:, 1]) >= min_height_px:
+        if np.ptp(uv_i[:, 1]) >= min_height_px:
             visible.append(i)
     return visible
 
@@ -248,6 +249,7 @@ def run_scenario(
                 cones_w=cones_w,
                 description_md=describe(spec, seed),
                 **_view_from(spec, cones_w),
+                view=spec.view,
             )
         with Renderer(world) as renderer:
             for k in range(n_frames):
@@ -289,6 +291,9 @@ def run_scenario(
                         errors_m=errors_m,
                         range_m=range_m,
                         cloud_w=cloud_w,
+                        rpy_rad=record.rpy_rad,
+                        gimbal_locked=record.gimbal_locked,
+                        cone_coords=_cone0_coordinates(record, T_b_c, cones_w),
                     )
                 t5 = time.perf_counter()
                 for key, seconds in zip(
@@ -400,6 +405,31 @@ def _evaluate_frame(
         float(np.mean(ranges)) if ranges else None,
         cloud_w,
     )
+
+
+def _cone0_coordinates(
+    record: FrameRecord, T_b_c: np.ndarray, cones_w: np.ndarray
+) -> dict[str, np.ndarray]:
+    """Cone 0's true base centre in world, body and camera frames, and its depth estimate.
+
+    The lecture's chapter 8 composer: ``p_b = T_b_w p_w`` and ``p_c = T_c_b p_b``.
+    """
+    p_w = cones_w[0]
+    T_b_w = se3.invert(record.T_w_b)
+    p_b = se3.apply(T_b_w, p_w)
+    p_c = se3.apply(se3.invert(T_b_c), p_b)
+    out = {"world": p_w, "body": p_b, "camera": p_c}
+    estimate = next(
+        (
+            d.estimates_w.get("depth_image")
+            for d in record.detections
+            if d.cone_index == 0 and "depth_image" in d.estimates_w
+        ),
+        None,
+    )
+    if estimate is not None:
+        out["estimate_world"] = estimate
+    return out
 
 
 def describe(spec: ScenarioSpec, seed: int) -> str:

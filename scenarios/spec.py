@@ -27,6 +27,9 @@ A scenario file (TOML) holds, in user units (metres, degrees, seconds)::
     position_std_m = 0.0      # error added to the body position the estimator is given
     attitude_std_deg = 0.0    # error (random rotation vector) added to its attitude
 
+    view = "coordinates"      # optional: first tab in the recording (errors, coordinates,
+                              # attitude)
+
     [[checks]]                # optional; default: the accuracy bounds of every method
     kind = "max_error"
     method = "depth_image"
@@ -52,6 +55,9 @@ from vnav import quat, so3
 
 METHODS: tuple[str, ...] = ("depth_image", "ground_plane", "known_height", "naive")
 """Localisation methods, in report order. ``naive`` is the lecture's chapter 0 mistake."""
+
+VIEW_NAMES: tuple[str, ...] = ("errors", "coordinates", "attitude")
+"""Values of the optional ``view`` key: which tab the recording shows first."""
 
 CHECK_KINDS: dict[str, str] = {
     "max_error": "largest position error of `method` over all matched detections <= limit_m",
@@ -185,6 +191,8 @@ class ScenarioSpec:
     noise: Noise = field(default_factory=Noise)
     checks: tuple[Check, ...] = ()
     lesson: str = ""
+    view: str = "errors"
+    """The recording's first tab below the error plot: errors, coordinates or attitude."""
 
     @property
     def end_s(self) -> float:
@@ -398,6 +406,7 @@ def from_dict(data: dict[str, Any], where: str = "<scenario>") -> ScenarioSpec:
             "noise",
             "checks",
             "lesson",
+            "view",
         },
         where,
         "",
@@ -466,7 +475,11 @@ def from_dict(data: dict[str, Any], where: str = "<scenario>") -> ScenarioSpec:
     lesson = data.get("lesson", "")
     if not isinstance(lesson, str):
         raise _err(where, "lesson", f"must be a string, got {type(lesson).__name__}")
+    view = data.get("view", "errors")
+    if view not in VIEW_NAMES:
+        raise _err(where, "view", f"must be one of {list(VIEW_NAMES)}, got {view!r}")
     return ScenarioSpec(
+        view=view,
         name=name,
         description=description,
         scene=scene,

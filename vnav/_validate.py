@@ -63,21 +63,29 @@ def check_shape(
     return a
 
 
+_SMALL = 64
+"""Arrays up to this many entries are checked element-wise (see check_finite)."""
+
+
 def check_finite(a: FloatArray, name: str) -> FloatArray:
     """Check that ``a`` holds no NaN or inf.
 
-    A single reduction (the sum) finds them: NaN and inf propagate through it. Only when the sum
-    is not finite (a NaN, an inf, or an overflow of huge values) is the element-wise test run to
-    tell which.
+    For a large array a single reduction (the sum) finds them: NaN and inf propagate through it.
+    Only when the sum is not finite (a NaN, an inf, or an overflow of huge values) is the
+    element-wise test run to tell which. Small arrays are tested element-wise at once.
 
     Raises
     ------
     ValueError
         Naming ``name`` and how many entries are NaN or inf.
     """
-    with np.errstate(over="ignore", invalid="ignore"):
-        total = np.add.reduce(a, axis=None) if a.size else 0.0
-    if not np.isfinite(total):
+    if a.size <= _SMALL:
+        # A pose or a point: one element-wise test is cheaper than entering np.errstate.
+        all_finite = bool(np.isfinite(a).all())
+    else:
+        with np.errstate(over="ignore", invalid="ignore"):
+            all_finite = bool(np.isfinite(np.add.reduce(a, axis=None)))
+    if not all_finite:
         bad = ~np.isfinite(a)
         if bad.any():
             n_nan = int(np.isnan(a).sum())
