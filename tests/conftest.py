@@ -14,3 +14,41 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 settings.register_profile("ci", derandomize=True, deadline=None)
 if os.environ.get("CI"):
     settings.load_profile("ci")
+
+
+import dataclasses  # noqa: E402
+
+import pytest  # noqa: E402
+
+BUILTIN_TEST_RATE_HZ = 5.0
+"""Built-in scenarios run in tests at 5 Hz instead of 10: the same flights, half the frames."""
+
+
+@dataclasses.dataclass
+class BuiltinRun:
+    spec: object
+    result: object
+    judged: list
+    report: dict
+    rrd: object
+    json_path: object
+
+
+@pytest.fixture(scope="session")
+def builtin_runs(tmp_path_factory):
+    """Every built-in scenario, run once per session with its recording and report written."""
+    from scenarios import builtin, checks, report
+    from scenarios.runner import run_scenario
+
+    out = tmp_path_factory.mktemp("builtin-runs")
+    runs = {}
+    for name in builtin.names():
+        spec = dataclasses.replace(builtin.load(name), camera_rate_hz=BUILTIN_TEST_RATE_HZ)
+        rrd = out / f"{name}.rrd"
+        result = run_scenario(spec, seed=3, rrd_path=rrd)
+        judged = [checks.evaluate(c, result) for c in spec.checks]
+        rep = report.build(result, judged)
+        json_path = out / f"{name}.json"
+        report.write(json_path, rep)
+        runs[name] = BuiltinRun(spec, result, judged, rep, rrd, json_path)
+    return runs

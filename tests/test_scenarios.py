@@ -6,31 +6,22 @@ half the frames.
 
 from __future__ import annotations
 
-import dataclasses
 import itertools
 import json
 import math
 
 import numpy as np
 import pytest
+from conftest import BUILTIN_TEST_RATE_HZ as TEST_RATE_HZ
 
-from scenarios import builtin, checks, report
-from scenarios.runner import run_scenario
+from scenarios import builtin, checks
 from scenarios.spec import CHECK_KINDS, METHODS
 from vnav import quat, se3, so3
 
-TEST_RATE_HZ = 5.0
-
 
 @pytest.fixture(scope="module")
-def runs():
-    out = {}
-    for name in builtin.names():
-        spec = dataclasses.replace(builtin.load(name), camera_rate_hz=TEST_RATE_HZ)
-        result = run_scenario(spec, seed=3)
-        judged = [checks.evaluate(c, result) for c in spec.checks]
-        out[name] = (spec, result, judged, report.build(result, judged))
-    return out
+def runs(builtin_runs):
+    return {n: (r.spec, r.result, r.judged, r.report) for n, r in builtin_runs.items()}
 
 
 @pytest.mark.parametrize("name", builtin.names())
