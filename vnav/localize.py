@@ -110,14 +110,45 @@ class ConeEstimates:
 
 # ----------------------------------------------------------------------------- validation
 
+_ATOL_FAST = 1e-10
+"""`_check_transform`'s shortcut accepts a rotation block only this close to orthonormal (ten
+times tighter than `se3.check_transform`'s default, 1e-9), so everything it accepts the full
+check accepts too; anything else goes through the full check and its error messages."""
+
+
+def _clearly_rigid(T: np.ndarray) -> bool:
+    """True when `T` is a float64 (4, 4) array that `se3.check_transform` certainly accepts:
+    finite, bottom row exactly [0, 0, 0, 1], `max |R^T R - I| <= _ATOL_FAST` and `det R > 0`.
+    Plain float arithmetic: about 2 us where the general (batched) check takes about 40 us."""
+    if type(T) is not np.ndarray or T.dtype != np.float64 or T.shape != (4, 4):
+        return False
+    (a, b, c, tx), (d, e, f, ty), (g, h, i, tz), bottom = T.tolist()
+    if bottom != [0.0, 0.0, 0.0, 1.0]:
+        return False
+    if not math.isfinite(a + b + c + d + e + f + g + h + i + tx + ty + tz):
+        return False  # a NaN or inf (or an overflow): let the full check say which
+    err = max(
+        abs(a * a + d * d + g * g - 1.0),
+        abs(b * b + e * e + h * h - 1.0),
+        abs(c * c + f * f + i * i - 1.0),
+        abs(a * b + d * e + g * h),
+        abs(a * c + d * f + g * i),
+        abs(b * c + e * f + h * i),
+    )
+    det = a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
+    return err <= _ATOL_FAST and det > 0.0
+
 
 def _check_transform(T: np.ndarray, name: str) -> np.ndarray:
     """One 4x4 rigid transform, validated by `vnav.se3.check_transform` (its default tolerance,
     1e-9 on `R^T R - I`: MuJoCo's float64 poses are orthonormal to about 1e-15).
 
-    A thin wrapper only because `se3.check_transform` also accepts stacks `(..., 4, 4)`, and
-    every function here takes exactly one pose.
+    A thin wrapper because `se3.check_transform` also accepts stacks `(..., 4, 4)`, and every
+    function here takes exactly one pose; a float64 (4, 4) pose that is orthonormal to 1e-10
+    skips the general check (`_clearly_rigid`), which accepts it anyway.
     """
+    if _clearly_rigid(T):
+        return T
     T = se3.check_transform(T, name)
     if T.shape != (4, 4):
         raise ValueError(f"{name} must be a single 4x4 transform, got shape {T.shape}")
@@ -148,6 +179,20 @@ def _check_detection(detection: ConeDetection, camera: PinholeCamera) -> None:
         )
 
 
+def _depth_under_mask(detection: ConeDetection, depth: np.ndarray) -> np.ndarray:
+    """The (validated) depth image's values over the detection's mask, float64, checked finite.
+
+    In `pixels_uv` order (row-major over the mask)."""
+    x0, y0, w, h = detection.bbox
+    z_c = depth[y0 : y0 + h, x0 : x0 + w][detection.mask].astype(np.float64)
+    if not np.isfinite(z_c).all():
+        raise ValueError(
+            f"depth must be finite under the detection's mask; got {int((~np.isfinite(z_c)).sum())}"
+            f" non-finite of {z_c.size} pixels"
+        )
+    return z_c
+
+
 # ------------------------------------------------------------------------------ geometry
 
 
@@ -162,6 +207,112 @@ def base_axis_distance(cone: ConeModel = TRAFFIC_CONE) -> float:
     0.29 a = 5.5 cm and its standard deviation 0.12 a = 2.3 cm for the standard cone).
     """
     return 0.5 * cone.base_width_m * 4.0 / math.pi * math.log(1.0 + math.sqrt(2.0))
+
+
+class _View:
+    """One detection seen by one validated camera pose: the pieces every method shares.
+
+    The pose and the intrinsics are held as Python floats (3-vectors and 3x3 products in plain
+    arithmetic cost a fraction of numpy's per-call overhead); the pixel list, the image
+    vertical, the apex fits and the blob's lower boundary are computed once, on first use.
+    """
+
+    __slots__ = (
+        "R",
+        "_apex",
+        "_boundary",
+        "_exit",
+        "_frame",
+        "_uv",
+        "cx",
+        "cy",
+        "detection",
+        "fx",
+        "fy",
+        "t",
+    )
+
+    def __init__(self, detection: ConeDetection, camera: PinholeCamera, T_w_c: np.ndarray):
+        self.detection = detection
+        self.fx, self.fy, self.cx, self.cy = camera.fx, camera.fy, camera.cx, camera.cy
+        rows = T_w_c.tolist()
+        self.R = (rows[0][:3], rows[1][:3], rows[2][:3])
+        self.t = (rows[0][3], rows[1][3], rows[2][3])
+        self._uv: np.ndarray | None = None
+        self._frame: tuple[np.ndarray, float] | bool | None = False
+        self._apex: dict[float, np.ndarray | None] = {}
+        self._boundary: np.ndarray | None = None
+        self._exit: dict[tuple[float, float], np.ndarray] = {}
+
+    def uv(self) -> np.ndarray:
+        """`detection.pixels_uv()`, computed once."""
+        if self._uv is None:
+            self._uv = self.detection.pixels_uv()
+        return self._uv
+
+    def ray(self, u: float, v: float) -> tuple[float, float, float]:
+        """Unit ray through pixel `(u, v)` in world coordinates (`R_w_c K^-1 [u, v, 1]`)."""
+        x = (u - self.cx) / self.fx
+        y = (v - self.cy) / self.fy
+        norm = math.sqrt(x * x + y * y + 1.0)
+        x, y, z = x / norm, y / norm, 1.0 / norm
+        r0, r1, r2 = self.R
+        return (
+            r0[0] * x + r0[1] * y + r0[2] * z,
+            r1[0] * x + r1[1] * y + r1[2] * z,
+            r2[0] * x + r2[1] * y + r2[2] * z,
+        )
+
+    def vertical(self, u: float, v: float) -> tuple[float, float] | None:
+        """`vertical_direction_uv` at pixel `(u, v)` as two floats, or None."""
+        m0, m1, m2 = -self.R[2][0], -self.R[2][1], -self.R[2][2]
+        n0 = self.fx * m0 + self.cx * m2
+        n1 = self.fy * m1 + self.cy * m2
+        d0, d1 = n0 - u * m2, n1 - v * m2
+        norm = math.hypot(d0, d1)
+        scale = math.sqrt(n0 * n0 + n1 * n1 + m2 * m2)
+        if norm < 1e-9 * max(scale, 1.0):
+            return None
+        return d0 / norm, d1 / norm
+
+    def frame(self) -> tuple[np.ndarray, float] | None:
+        """`_image_frame`: `(d, elevation)` at the blob's centroid, or None; computed once."""
+        if self._frame is False:
+            u, v = (float(x) for x in self.detection.centroid_uv[:2])
+            d = self.vertical(u, v)
+            if d is None:
+                self._frame = None
+            else:
+                ray_z = self.ray(u, v)[2]
+                self._frame = (np.array(d), math.asin(min(max(-ray_z, -1.0), 1.0)))
+        return self._frame  # type: ignore[return-value]
+
+    def apex(self, d: np.ndarray, fraction: float) -> np.ndarray | None:
+        """`apex_pixel(detection, d, fraction)` for the frame's `d`, memoised on `fraction`."""
+        if fraction not in self._apex:
+            self._apex[fraction] = _apex_pixel(self.uv(), d, fraction)
+        return self._apex[fraction]
+
+    def axis_exit(self, d: np.ndarray, apex_uv: np.ndarray) -> np.ndarray:
+        """`_axis_exit` for the frame's `d`, the blob's lower boundary computed once, the exit
+        memoised on the apex."""
+        key = (float(apex_uv[0]), float(apex_uv[1]))
+        if key not in self._exit:
+            if self._boundary is None:
+                self._boundary = _boundary_from_mask(self.detection, float(d[0]), float(d[1]))
+            self._exit[key] = _exit_on_boundary(self._boundary, d, apex_uv)
+        return self._exit[key]
+
+    def bottom(self) -> np.ndarray:
+        """`bottom_pixel(detection, camera, T_w_c)`."""
+        frame = self.frame()
+        if frame is None:
+            return np.asarray(self.detection.base_uv, dtype=np.float64)
+        d, elevation = frame
+        apex_uv = self.apex(d, max(triangle_fraction(elevation), 0.5))
+        if apex_uv is None:
+            apex_uv = np.asarray(self.detection.apex_uv, dtype=np.float64)
+        return self.axis_exit(d, apex_uv)
 
 
 def _ray_w(camera: PinholeCamera, T_w_c: np.ndarray, uv: np.ndarray) -> np.ndarray:
@@ -217,11 +368,7 @@ def _image_frame(
 ) -> tuple[np.ndarray, float] | None:
     """`(d, e)`: the image of the downward vertical at the blob and the elevation (radians)
     of the line of sight through the blob's centroid below the horizontal; None at the nadir."""
-    d = vertical_direction_uv(camera, T_w_c, detection.centroid_uv)
-    if d is None:
-        return None
-    ray = _ray_w(camera, T_w_c, detection.centroid_uv)
-    return d, math.asin(float(np.clip(-ray[2], -1.0, 1.0)))
+    return _View(detection, camera, T_w_c).frame()
 
 
 def apex_pixel(detection: ConeDetection, d: np.ndarray, fraction: float) -> np.ndarray | None:
@@ -242,27 +389,50 @@ def apex_pixel(detection: ConeDetection, d: np.ndarray, fraction: float) -> np.n
 
     None when fewer than three samples are usable or the fit is not a widening triangle.
     """
-    uv = detection.pixels_uv()
-    dp = np.array([-d[1], d[0]])
-    t, s = uv @ d, uv @ dp
-    t_top = float(t.min()) - 0.5
-    length = float(t.max()) + 0.5 - t_top
+    return _apex_pixel(detection.pixels_uv(), np.asarray(d, dtype=np.float64), fraction)
+
+
+def _apex_pixel(uv: np.ndarray, d: np.ndarray, fraction: float) -> np.ndarray | None:
+    """`apex_pixel` on the pixel centres `uv` (N, 2)."""
+    d0, d1 = float(d[0]), float(d[1])
+    t, s = uv @ d, uv @ np.array([-d1, d0])
+    n = t.size
+    ts = np.sort(t)
+    t_top = float(ts[0]) - 0.5
+    length = float(ts[-1]) + 0.5 - t_top
     t_end = t_top + 0.85 * fraction * length
     tau = np.arange(t_top + 0.5, t_end + 1e-9, 0.5)
     if tau.size < 3:
         return None
-    area = np.clip(tau[:, None] - t[None, :] + 0.5, 0.0, 1.0).sum(axis=1)
+    # N(tau) = sum_i clip(tau - t_i + 1/2, 0, 1): of the sorted t_i, those at or above
+    # tau - 1/2 count 1 each, those within (tau - 1/2, tau + 1/2) count tau + 1/2 - t_i
+    # (cumulative sums of t_i - t_top: small, and exact for pixel-aligned t).
+    ts -= t_top
+    csum = np.empty(n + 1)
+    csum[0] = 0.0
+    np.cumsum(ts, out=csum[1:])
+    rel = tau - t_top
+    lo = np.searchsorted(ts, rel - 0.5, side="right")
+    hi = np.searchsorted(ts, rel + 0.5, side="left")
+    area = lo + (hi - lo) * (rel + 0.5) - (csum[hi] - csum[lo])
     use = area >= 3.0  # the first pixels of a thin tip are the least reliable
-    if use.sum() < 3:
+    n_use = int(np.count_nonzero(use))
+    if n_use < 3:
         return None
-    A = np.column_stack((tau[use], np.ones(int(use.sum()))))
-    (slope, offset), *_ = np.linalg.lstsq(A, np.sqrt(area[use]), rcond=None)
+    # Least-squares line sqrt(N) = slope tau + offset (centred normal equations).
+    x, y = tau[use], np.sqrt(area[use])
+    x_mean, y_mean = float(np.add.reduce(x)) / n_use, float(np.add.reduce(y)) / n_use
+    x -= x_mean
+    y -= y_mean
+    slope = float(x @ y) / float(x @ x)
+    offset = y_mean - slope * x_mean
     if not slope > 0.0:
         return None
     t0 = -offset / slope
     upper = t <= t0 + 0.5 * (t_end - t0) + 0.5
-    s0 = float(s[upper].mean()) if upper.any() else float(s.mean())
-    return t0 * d + s0 * dp
+    n_upper = int(np.count_nonzero(upper))
+    s0 = float(np.add.reduce(s[upper])) / n_upper if n_upper else float(np.add.reduce(s)) / n
+    return np.array([t0 * d0 + s0 * -d1, t0 * d1 + s0 * d0])
 
 
 def _boundary_along(uv: np.ndarray, d: np.ndarray) -> np.ndarray:
@@ -285,6 +455,32 @@ def _boundary_along(uv: np.ndarray, d: np.ndarray) -> np.ndarray:
     return out
 
 
+def _boundary_from_mask(detection: ConeDetection, d0: float, d1: float) -> np.ndarray:
+    """`_boundary_along(detection.pixels_uv(), (d0, d1))`, read off the cropped mask directly
+    (first / last set pixel of each column or row), without the pixel list."""
+    mask = detection.mask
+    x0, y0 = detection.bbox[0], detection.bbox[1]
+    if abs(d1) >= abs(d0):  # one point per column, extreme in v
+        keys = np.flatnonzero(mask.any(axis=0))
+        if d1 >= 0.0:
+            along = (mask.shape[0] - 1 + y0 + 0.5) - np.argmax(mask[::-1], axis=0)[keys]
+        else:
+            along = np.argmax(mask, axis=0)[keys] + (y0 - 0.5)
+        out = np.empty((keys.size, 2))
+        out[:, 0] = keys + x0
+        out[:, 1] = along
+    else:  # one point per row, extreme in u
+        keys = np.flatnonzero(mask.any(axis=1))
+        if d0 >= 0.0:
+            along = (mask.shape[1] - 1 + x0 + 0.5) - np.argmax(mask[:, ::-1], axis=1)[keys]
+        else:
+            along = np.argmax(mask, axis=1)[keys] + (x0 - 0.5)
+        out = np.empty((keys.size, 2))
+        out[:, 0] = along
+        out[:, 1] = keys + y0
+    return out
+
+
 def bottom_pixel(
     detection: ConeDetection,
     camera: PinholeCamera,
@@ -301,37 +497,51 @@ def bottom_pixel(
     the detector's apex). Falls back to `detection.base_uv` when the vertical is undefined at
     the blob (camera looking straight down at it).
     """
-    frame = _image_frame(detection, camera, T_w_c)
+    view = _View(detection, camera, T_w_c)
+    if apex_uv is None:
+        return view.bottom()
+    frame = view.frame()
     if frame is None:
         return np.asarray(detection.base_uv, dtype=np.float64)
-    d, elevation = frame
-    if apex_uv is None:
-        apex_uv = apex_pixel(detection, d, max(triangle_fraction(elevation), 0.5))
-        if apex_uv is None:
-            apex_uv = np.asarray(detection.apex_uv, dtype=np.float64)
-    return _axis_exit(detection.pixels_uv(), d, np.asarray(apex_uv, dtype=np.float64))
+    return view.axis_exit(frame[0], np.asarray(apex_uv, dtype=np.float64))
 
 
 def _axis_exit(uv: np.ndarray, d: np.ndarray, apex_uv: np.ndarray) -> np.ndarray:
     """Intersection of the line `apex_uv + lambda d` with the blob's lower boundary."""
-    pts = _boundary_along(uv, d)
-    dp = np.array([-d[1], d[0]])
-    off = (pts - apex_uv) @ dp
+    return _exit_on_boundary(_boundary_along(uv, d), d, apex_uv)
+
+
+def _exit_on_boundary(pts: np.ndarray, d: np.ndarray, apex_uv: np.ndarray) -> np.ndarray:
+    """`_axis_exit` on the boundary points `pts` (`_boundary_along`), in plain floats.
+
+    Where the boundary polyline crosses the axis line (or touches it at a vertex) the crossing
+    farthest along `d` wins (the first of equals); without a crossing, the vertex nearest the
+    line. The result is put back onto the axis line exactly.
+    """
+    a0, a1 = float(apex_uv[0]), float(apex_uv[1])
+    d0, d1 = float(d[0]), float(d[1])
+    xy = pts.tolist()
+    off = [(x - a0) * -d1 + (y - a1) * d0 for x, y in xy]
     best = None
-    if pts.shape[0] == 1 or np.all(off > 0) or np.all(off < 0):
-        best = pts[int(np.argmin(np.abs(off)))]
+    if len(xy) == 1 or all(o > 0 for o in off) or all(o < 0 for o in off):
+        best = xy[min(range(len(off)), key=lambda j: abs(off[j]))]
     else:
-        for j in range(pts.shape[0] - 1):
+        best_along = 0.0
+        for j in range(len(xy) - 1):
             o0, o1 = off[j], off[j + 1]
             if o0 == 0.0 or o0 * o1 < 0.0:
-                p = pts[j] + (pts[j + 1] - pts[j]) * (o0 / (o0 - o1))
-                if best is None or p @ d > best @ d:
-                    best = p
-        if off[-1] == 0.0 and (best is None or pts[-1] @ d > best @ d):
-            best = pts[-1]
+                (x0, y0), (x1, y1) = xy[j], xy[j + 1]
+                f = o0 / (o0 - o1)
+                p = (x0 + (x1 - x0) * f, y0 + (y1 - y0) * f)
+                along = p[0] * d0 + p[1] * d1
+                if best is None or along > best_along:
+                    best, best_along = p, along
+        if off[-1] == 0.0 and (best is None or xy[-1][0] * d0 + xy[-1][1] * d1 > best_along):
+            best = xy[-1]
     assert best is not None
     # Back onto the axis line exactly (the interpolation is along the boundary).
-    return apex_uv + float((best - apex_uv) @ d) * d
+    lam = (best[0] - a0) * d0 + (best[1] - a1) * d1
+    return np.array([a0 + lam * d0, a1 + lam * d1])
 
 
 def _horizontal_unit(v: np.ndarray) -> np.ndarray | None:
@@ -367,17 +577,25 @@ def estimate_from_ground_plane(
     T_w_c = _check_transform(T_w_c, "T_w_c")
     if detection.touches_border:
         return None
-    t_w_c = T_w_c[:3, 3]
-    d_w = _ray_w(camera, T_w_c, bottom_pixel(detection, camera, T_w_c))
-    if t_w_c[2] <= 0.0 or d_w[2] >= -1e-9:
-        logger.debug("ground plane: ray does not reach the ground (d_z = %.3g)", d_w[2])
+    return _ground_plane(_View(detection, camera, T_w_c), cone)
+
+
+def _ground_plane(view: _View, cone: ConeModel) -> np.ndarray | None:
+    """`estimate_from_ground_plane` after validation, for a detection clear of the border."""
+    bottom = view.bottom()
+    tx, ty, tz = view.t
+    dx, dy, dz = view.ray(float(bottom[0]), float(bottom[1]))
+    if tz <= 0.0 or dz >= -1e-9:
+        logger.debug("ground plane: ray does not reach the ground (d_z = %.3g)", dz)
         return None
-    g_w = t_w_c + (-t_w_c[2] / d_w[2]) * d_w
-    g_w[2] = 0.0
-    b = _horizontal_unit(g_w - t_w_c)
-    if b is None:
-        return g_w
-    return g_w + base_axis_distance(cone) * b
+    lam = -tz / dz
+    gx, gy = tx + lam * dx, ty + lam * dy
+    hx, hy = gx - tx, gy - ty
+    norm = math.sqrt(hx * hx + hy * hy)
+    if not norm > 1e-9:
+        return np.array([gx, gy, 0.0])
+    s = base_axis_distance(cone)
+    return np.array([gx + s * (hx / norm), gy + s * (hy / norm), 0.0])
 
 
 MIN_TRIANGLE_FRACTION = 0.10
@@ -390,21 +608,41 @@ bottom pixel (along the image vertical) moves it by more than this fraction of i
 
 
 def _solve_known_height(
-    c_w: np.ndarray,
-    a_w: np.ndarray,
-    g_w: np.ndarray,
+    c_w: tuple[float, float, float],
+    a_w: tuple[float, float, float],
+    g_w: tuple[float, float, float],
     height_m: float,
     s: float,
-) -> tuple[np.ndarray, float, float, float] | None:
-    """`(p_w, alpha, gamma, residual)` of the 3x2 least-squares triangle, or None."""
-    b = _horizontal_unit(g_w)
-    if b is None or float(np.dot(a_w, g_w)) > math.cos(1e-4):
+) -> tuple[tuple[float, float, float], float, float, float] | None:
+    """`(p_w, alpha, gamma, residual)` of the 3x2 least-squares triangle, or None.
+
+    `[a, -g] (alpha, gamma)^T = (0, 0, H) + s b` solved by a QR factorisation (Gram-Schmidt
+    on the two columns, as well conditioned as the problem: the rays are at least 1e-4 rad
+    apart), in plain floats.
+    """
+    ax, ay, az = a_w
+    gx, gy, gz = g_w
+    norm_b = math.sqrt(gx * gx + gy * gy)
+    if not norm_b > 1e-9 or ax * gx + ay * gy + az * gz > math.cos(1e-4):
         return None
-    A = np.column_stack((a_w, -g_w))
-    rhs = np.array([0.0, 0.0, height_m]) + s * b
-    (alpha, gamma), *_ = np.linalg.lstsq(A, rhs, rcond=None)
-    residual = float(np.linalg.norm(A @ np.array([alpha, gamma]) - rhs))
-    return c_w + gamma * g_w + s * b, float(alpha), float(gamma), residual
+    bx, by = gx / norm_b, gy / norm_b
+    rx, ry, rz = s * bx, s * by, height_m
+    # Q R of A = [a, -g]: q1 = a / r11, q2 = (-g - r12 q1) / r22.
+    r11 = math.sqrt(ax * ax + ay * ay + az * az)
+    q1x, q1y, q1z = ax / r11, ay / r11, az / r11
+    r12 = -(q1x * gx + q1y * gy + q1z * gz)
+    wx, wy, wz = -gx - r12 * q1x, -gy - r12 * q1y, -gz - r12 * q1z
+    r22 = math.sqrt(wx * wx + wy * wy + wz * wz)
+    q2x, q2y, q2z = wx / r22, wy / r22, wz / r22
+    gamma = (q2x * rx + q2y * ry + q2z * rz) / r22
+    alpha = (q1x * rx + q1y * ry + q1z * rz - r12 * gamma) / r11
+    ex = alpha * ax - gamma * gx - rx
+    ey = alpha * ay - gamma * gy - ry
+    ez = alpha * az - gamma * gz - rz
+    residual = math.sqrt(ex * ex + ey * ey + ez * ez)
+    cx, cy, cz = c_w
+    p_w = (cx + gamma * gx + s * bx, cy + gamma * gy + s * by, cz + gamma * gz)
+    return p_w, alpha, gamma, residual
 
 
 def estimate_from_known_height(
@@ -445,7 +683,12 @@ def estimate_from_known_height(
     T_w_c = _check_transform(T_w_c, "T_w_c")
     if detection.touches_border:
         return None
-    frame = _image_frame(detection, camera, T_w_c)
+    return _known_height(_View(detection, camera, T_w_c), cone)
+
+
+def _known_height(view: _View, cone: ConeModel) -> np.ndarray | None:
+    """`estimate_from_known_height` after validation, for a detection clear of the border."""
+    frame = view.frame()
     if frame is None:
         logger.debug("known height: camera looks straight down at the cone")
         return None
@@ -456,37 +699,39 @@ def estimate_from_known_height(
             "known height: apex over the base plate (elevation %.1f deg)", math.degrees(elevation)
         )
         return None
-    apex_uv = apex_pixel(detection, d, fraction)
+    apex_uv = view.apex(d, fraction)
     if apex_uv is None:
         logger.debug("known height: no apex fit")
         return None
-    bottom_uv = _axis_exit(detection.pixels_uv(), d, apex_uv)
-    c_w = T_w_c[:3, 3]
+    bottom_uv = view.axis_exit(d, apex_uv)
+    c_w = view.t
     s = base_axis_distance(cone)
+    H = cone.height_m
+    au, av = float(apex_uv[0]), float(apex_uv[1])
+    bu, bv = float(bottom_uv[0]), float(bottom_uv[1])
+    d0, d1 = float(d[0]), float(d[1])
+    a_w, g_w = view.ray(au, av), view.ray(bu, bv)
 
-    def solve(apex: np.ndarray, bottom: np.ndarray):
-        return _solve_known_height(
-            c_w, _ray_w(camera, T_w_c, apex), _ray_w(camera, T_w_c, bottom), cone.height_m, s
-        )
-
-    solution = solve(apex_uv, bottom_uv)
+    solution = _solve_known_height(c_w, a_w, g_w, H, s)
     if solution is None:
         logger.debug("known height: degenerate rays")
         return None
     p_w, alpha, gamma, residual = solution
-    if alpha <= 0.0 or gamma <= 0.0 or residual > 0.25 * cone.height_m:
+    if alpha <= 0.0 or gamma <= 0.0 or residual > 0.25 * H:
         logger.debug(
             "known height: inconsistent (alpha %.3g, gamma %.3g, res %.3g)", alpha, gamma, residual
         )
         return None
-    range_m = float(np.linalg.norm(p_w - c_w))
-    for da, db in ((d, 0.0 * d), (0.0 * d, d)):
-        moved = solve(apex_uv + da, bottom_uv + db)
-        shift = np.inf if moved is None else float(np.linalg.norm(moved[0] - p_w))
+    range_m = math.dist(p_w, c_w)
+    for moved in (
+        _solve_known_height(c_w, view.ray(au + d0, av + d1), g_w, H, s),
+        _solve_known_height(c_w, a_w, view.ray(bu + d0, bv + d1), H, s),
+    ):
+        shift = math.inf if moved is None else math.dist(moved[0], p_w)
         if shift > MAX_RANGE_ERROR_PER_PX * range_m:
             logger.debug("known height: 1 px moves the estimate %.3g m at %.3g m", shift, range_m)
             return None
-    return p_w
+    return np.array(p_w)
 
 
 def estimate_from_depth(
@@ -534,69 +779,126 @@ def estimate_from_depth(
     _check_detection(detection, camera)
     _check_depth(depth, camera)
     T_w_c = _check_transform(T_w_c, "T_w_c")
-    x0, y0, w, h = detection.bbox
-    z_c = depth[y0 : y0 + h, x0 : x0 + w][detection.mask].astype(np.float64)
-    if not np.isfinite(z_c).all():
-        raise ValueError(
-            f"depth must be finite under the detection's mask; got {int((~np.isfinite(z_c)).sum())}"
-            f" non-finite of {z_c.size} pixels"
-        )
+    z_c = _depth_under_mask(detection, depth)
     if detection.touches_border:
         return None
-    uv = detection.pixels_uv()
+    return _from_depth(_View(detection, camera, T_w_c), z_c, cone, far_m)
+
+
+def _median(a: np.ndarray) -> float:
+    """`np.median` of a non-empty 1-D float64 array without NaN (same value, less overhead)."""
+    n = a.size
+    k = n // 2
+    if n % 2:
+        return float(np.partition(a, k)[k])
+    part = np.partition(a, (k - 1, k))
+    return (float(part[k - 1]) + float(part[k])) / 2.0
+
+
+def _percentile(a: np.ndarray, q: float) -> float:
+    """`np.percentile(a, q)` (linear method) of a non-empty 1-D float64 array without NaN."""
+    n = a.size
+    index = (n - 1) * (q / 100.0)
+    lo = min(math.floor(index), n - 1)
+    hi = min(lo + 1, n - 1)
+    part = np.partition(a, (lo, hi)) if hi != lo else np.partition(a, lo)
+    below, above = float(part[lo]), float(part[hi])
+    gamma = index - lo
+    diff = above - below
+    # numpy's _lerp: from the nearer end.
+    return above - diff * (1.0 - gamma) if gamma >= 0.5 else below + diff * gamma
+
+
+def _from_depth(view: _View, z_c: np.ndarray, cone: ConeModel, far_m: float) -> np.ndarray | None:
+    """`estimate_from_depth` after validation, for a detection clear of the border; `z_c` the
+    depth under the mask (`_depth_under_mask`)."""
+    uv = view.uv()
+    u, v = uv[:, 0], uv[:, 1]
     valid = (z_c > 0.0) & (z_c < far_m)
-    if valid.sum() < _MIN_DEPTH_POINTS:
+    n_valid = int(np.count_nonzero(valid))
+    if n_valid < _MIN_DEPTH_POINTS:
         return None
-    uv, z_c = uv[valid], z_c[valid]
-    keep = np.abs(z_c - np.median(z_c)) < 2.0
-    uv, z_c = uv[keep], z_c[keep]
-    if z_c.size < _MIN_DEPTH_POINTS:
+    z_v = z_c if n_valid == z_c.size else z_c[valid]
+    # Far outliers: one selection for both masks.
+    keep = valid
+    keep[valid] = np.abs(z_v - _median(z_v)) < 2.0
+    n_keep = int(np.count_nonzero(keep))
+    if n_keep < _MIN_DEPTH_POINTS:
         return None
-    p_c = camera.backproject(uv, z_c)
-    p_w = p_c @ T_w_c[:3, :3].T + T_w_c[:3, 3]
-    z_base = float(np.percentile(p_w[:, 2], 2.0))
-    height = p_w[:, 2] - z_base
+    if n_keep < z_c.size:
+        u, v, z_c = u[keep], v[keep], z_c[keep]
+    # p_c = backproject(uv, z_c); p_w = R p_c + t, per coordinate.
+    x_c = (u - view.cx) * z_c / view.fx
+    y_c = (v - view.cy) * z_c / view.fy
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = view.R
+    tx, ty, tz = view.t
+    z_w = x_c * r20 + y_c * r21 + z_c * r22 + tz
+    z_base = _percentile(z_w, 2.0)
+    height = z_w - z_base
     t, H, r0 = cone.base_thickness_m, cone.height_m, cone.body_radius_m
     body = (height > t + 0.02) & (height < H - 0.03)
-    if body.sum() < _MIN_DEPTH_POINTS:
-        logger.debug("depth: too few body points (%d)", int(body.sum()))
+    n_body = int(np.count_nonzero(body))
+    if n_body < _MIN_DEPTH_POINTS:
+        logger.debug("depth: too few body points (%d)", n_body)
         return None
-    q = p_w[body, :2]
+    x_c, y_c, z_cb = x_c[body], y_c[body], z_c[body]
+    qx = x_c * r00 + y_c * r01 + z_cb * r02 + tx
+    qy = x_c * r10 + y_c * r11 + z_cb * r12 + ty
     r = r0 * (H - height[body]) / (H - t)
-    view = q - T_w_c[:2, 3]
-    view_norm = np.linalg.norm(view, axis=1, keepdims=True)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        b = np.where(view_norm > 1e-6, view / view_norm, 0.0)
-    c0 = np.median(q + r[:, None] * b, axis=0)
-    c = _fit_axis(q, r, c0)
-    if c is None or np.linalg.norm(c - c0) > 2.0 * r0:
+    vx, vy = qx - tx, qy - ty
+    view_norm = np.sqrt(vx * vx + vy * vy)
+    # b = view / |view|, 0 where |view| <= 1e-6 (dividing by inf there gives 0 exactly).
+    inv = np.where(view_norm > 1e-6, view_norm, np.inf)
+    c0 = (_median(qx + r * (vx / inv)), _median(qy + r * (vy / inv)))
+    c = _fit_axis(qx, qy, r, c0)
+    if c is None or math.hypot(c[0] - c0[0], c[1] - c0[1]) > 2.0 * r0:
         c = c0
     return np.array([c[0], c[1], z_base])
 
 
-def _fit_axis(q: np.ndarray, r: np.ndarray, c0: np.ndarray) -> np.ndarray | None:
+def _fit_axis(
+    qx: np.ndarray, qy: np.ndarray, r: np.ndarray, c0: tuple[float, float]
+) -> tuple[float, float] | None:
     """Gauss-Newton for the centre `c` of circles of known radii `r_i` through points `q_i`.
 
-    Residual `e_i = |q_i - c| - r_i`, Jacobian row `-(q_i - c)^T / |q_i - c|`.
+    Residual `e_i = |q_i - c| - r_i`, Jacobian row `-(q_i - c)^T / |q_i - c|`; each step solves
+    the 2x2 normal equations (the rows are unit vectors, so `J^T J` is well conditioned
+    whenever the points do not all lie in one direction from `c`).
     """
-    c = c0.copy()
-    use = np.ones(q.shape[0], dtype=bool)
+    cx, cy = c0
+    ux, uy, ur = qx, qy, r
+    buf = np.empty((3, qx.size))  # rows: the unit vectors (q_i - c) / |q_i - c| and e_i
     for it in range(12):
-        diff = q[use] - c
-        dist = np.linalg.norm(diff, axis=1)
-        if (dist < 1e-9).any() or use.sum() < 3:
+        m = ux.size
+        if m < 3:
             return None
-        e = dist - r[use]
-        J = -diff / dist[:, None]
-        step, *_ = np.linalg.lstsq(J, -e, rcond=None)
-        c = c + step
+        ex, ey, e = buf[0, :m], buf[1, :m], buf[2, :m]
+        np.subtract(ux, cx, out=ex)
+        np.subtract(uy, cy, out=ey)
+        dist = np.sqrt(ex * ex + ey * ey)
+        if float(np.minimum.reduce(dist)) < 1e-9:
+            return None
+        np.subtract(dist, ur, out=e)
+        ex /= dist
+        ey /= dist
+        # J = -(ex, ey): J^T J and -J^T e from one product of the stacked rows.
+        (sxx, sxy, gx), (_, syy, gy) = (buf[:2, :m] @ buf[:, :m].T).tolist()
+        det = sxx * syy - sxy * sxy
+        if not det > 0.0:
+            return None
+        step_x = (syy * gx - sxy * gy) / det
+        step_y = (sxx * gy - sxy * gx) / det
+        cx, cy = cx + step_x, cy + step_y
         if it == 3:
-            e_all = np.linalg.norm(q - c, axis=1) - r
-            mad = 1.4826 * np.median(np.abs(e_all - np.median(e_all)))
-            use = np.abs(e_all - np.median(e_all)) <= max(3.0 * mad, 0.005)
-        elif np.linalg.norm(step) < 1e-7:
+            ax, ay = qx - cx, qy - cy
+            e_all = np.sqrt(ax * ax + ay * ay) - r
+            dev = np.abs(e_all - _median(e_all))
+            mad = 1.4826 * _median(dev)
+            use = dev <= max(3.0 * mad, 0.005)
+            ux, uy, ur = qx[use], qy[use], r[use]
+        elif math.hypot(step_x, step_y) < 1e-7:
             break
-    return c
+    return cx, cy
 
 
 def naive_estimate(p_c: np.ndarray, T_w_b: np.ndarray) -> np.ndarray:
@@ -657,21 +959,37 @@ def localize(
         On malformed transforms, a depth image of the wrong dtype or size, or non-finite depth
         under the detection's mask.
     """
+    # Validate once, in the order the methods would (detection, depth, T_w_c), then run the
+    # methods' unvalidated cores on one shared `_View`.
     T_w_b = _check_transform(T_w_b, "T_w_b")
     T_b_c = _check_transform(T_b_c, "T_b_c")
     T_w_c = T_w_b @ T_b_c
-    p_depth = (
-        None
-        if depth is None
-        else estimate_from_depth(detection, depth, camera, T_w_c, cone, far_m=far_m)
-    )
-    p_ground = estimate_from_ground_plane(detection, camera, T_w_c, cone)
-    p_height = estimate_from_known_height(detection, camera, T_w_c, cone)
+    _check_detection(detection, camera)
+    if depth is not None:
+        _check_depth(depth, camera)
+    T_w_c = _check_transform(T_w_c, "T_w_c")
+    z_c = None if depth is None else _depth_under_mask(detection, depth)
+    if detection.touches_border:
+        return ConeEstimates(depth_image=None, ground_plane=None, known_height=None, naive=None)
+    view = _View(detection, camera, T_w_c)
+    p_depth = None if z_c is None else _from_depth(view, z_c, cone, far_m)
+    p_ground = _ground_plane(view, cone)
+    p_height = _known_height(view, cone)
     best = next((p for p in (p_depth, p_ground, p_height) if p is not None), None)
     p_naive = None
     if best is not None:
-        p_c = T_w_c[:3, :3].T @ (best - T_w_c[:3, 3])
-        p_naive = naive_estimate(p_c, T_w_b)
+        # p_c = R_w_c^T (best - t_w_c); naive = t_w_b + p_c.
+        (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = view.R
+        tx, ty, tz = view.t
+        bx, by, bz = best[0] - tx, best[1] - ty, best[2] - tz
+        t_w_b = T_w_b[:3, 3].tolist()
+        p_naive = np.array(
+            [
+                t_w_b[0] + (r00 * bx + r10 * by + r20 * bz),
+                t_w_b[1] + (r01 * bx + r11 * by + r21 * bz),
+                t_w_b[2] + (r02 * bx + r12 * by + r22 * bz),
+            ]
+        )
     return ConeEstimates(
         depth_image=p_depth, ground_plane=p_ground, known_height=p_height, naive=p_naive
     )
