@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Mapping, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -75,6 +76,20 @@ def depth_for_display_mm(depth_m: np.ndarray) -> np.ndarray:
     bits &= np.uint32(~((1 << drop) - 1) & 0xFFFFFFFF)
     depth_mm[depth_mm > DEPTH_MM_MAX] = 0.0
     return np.rint(depth_mm).astype(np.uint16)
+
+
+def _encode(rgb: np.ndarray, depth_m: np.ndarray | None) -> tuple[bytes, bytes | None]:
+    """JPEG bytes of an RGB image and PNG bytes of its depth for display (or None)."""
+    bgr = cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)
+    ok, jpeg = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
+    if not ok:
+        raise RuntimeError("OpenCV could not JPEG-encode the camera image")
+    if depth_m is None:
+        return jpeg.tobytes(), None
+    ok, png = cv2.imencode(".png", depth_for_display_mm(depth_m))
+    if not ok:
+        raise RuntimeError("OpenCV could not PNG-encode the depth image")
+    return jpeg.tobytes(), png.tobytes()
 
 
 def rerun_uv(uv_opencv: np.ndarray) -> np.ndarray:
@@ -197,8 +212,8 @@ class _FrameBuffer:
     t_s: float
     t_w_b: np.ndarray
     quat_xyzw: np.ndarray
-    jpeg: bytes
-    depth_png: bytes | None
+    encoded: Future[tuple[bytes, bytes | None]]
+    """JPEG of the image and PNG of the depth (or None), from the encoder thread."""
     boxes_xywh: np.ndarray
     keypoints_uv: np.ndarray
     estimates_w: dict[str, np.ndarray]
@@ -235,6 +250,7 @@ class Recording:
         self.rec.save(str(self._tmp))
         self._open = True
         self._frames: list[_FrameBuffer] = []
+        self._encoder = ThreadPoolExecutor(max_workers=1, thread_name_prefix="vnav-encode")
 
     # ------------------------------------------------------------------ static content
     def log_setup(
@@ -381,15 +397,11 @@ class Recording:
         cone_coords : mapping of name -> ndarray, shape (3,)
             Cone 0's coordinates in several frames (e.g. ``world``, ``body``, ``camera``).
         """
-        bgr = cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)
-        ok, jpeg = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
-        if not ok:
-            raise RuntimeError("OpenCV could not JPEG-encode the camera image")
-        png = None
-        if depth_m is not None and frame % DEPTH_LOG_EVERY == 0:
-            ok, png = cv2.imencode(".png", depth_for_display_mm(depth_m))
-            if not ok:
-                raise RuntimeError("OpenCV could not PNG-encode the depth image")
+        # Encoding runs on a worker thread (OpenCV releases the GIL), overlapping with the
+        # next frame's rendering; _flush collects the bytes in order.
+        encoded = self._encoder.submit(
+            _encode, rgb, depth_m if frame % DEPTH_LOG_EVERY == 0 else None
+        )
         self._frames.append(
             _FrameBuffer(
                 frame=frame,
@@ -397,8 +409,7 @@ class Recording:
                 t_w_b=T_w_b[:3, 3].copy(),
                 # vnav and Rerun both order quaternions x, y, z, w: no reordering here.
                 quat_xyzw=quat.from_matrix(T_w_b[:3, :3]),
-                jpeg=jpeg.tobytes(),
-                depth_png=None if png is None else png.tobytes(),
+                encoded=encoded,
                 boxes_xywh=np.array([d.bbox for d in detections], dtype=np.float64).reshape(-1, 4),
                 keypoints_uv=np.array(
                     [uv for d in detections for uv in (d.apex_uv, d.base_uv)], dtype=np.float64
@@ -423,6 +434,7 @@ class Recording:
         frames, self._frames = self._frames, []
         if not frames:
             return
+        jpegs, pngs = zip(*(f.encoded.result() for f in frames), strict=True)
         rec = self.rec
 
         def send(entity: str, rows: list[_FrameBuffer], columns) -> None:
@@ -441,16 +453,16 @@ class Recording:
             "world/body/camera/image",
             frames,
             rr.EncodedImage.columns(
-                blob=[f.jpeg for f in frames],
+                blob=list(jpegs),
                 media_type=["image/jpeg"] * len(frames),
             ),
         )
-        with_depth = [f for f in frames if f.depth_png is not None]
+        with_depth = [(f, png) for f, png in zip(frames, pngs, strict=True) if png is not None]
         send(
             "world/body/camera/depth",
-            with_depth,
+            [f for f, _ in with_depth],
             rr.EncodedDepthImage.columns(
-                blob=[f.depth_png for f in with_depth],
+                blob=[png for _, png in with_depth],
                 media_type=["image/png"] * len(with_depth),
                 meter=[1000.0] * len(with_depth),
             ),
@@ -542,12 +554,16 @@ class Recording:
 
     def discard(self) -> None:
         """Stop recording and delete the partial file."""
-        self._close()
+        self._close(flush=False)
         self._tmp.unlink(missing_ok=True)
 
-    def _close(self) -> None:
+    def _close(self, *, flush: bool = True) -> None:
         if self._open:
-            self._flush()
+            try:
+                if flush:
+                    self._flush()
+            finally:
+                self._encoder.shutdown(wait=True, cancel_futures=True)
             self._open = False
             self.rec.disconnect()  # writes the footer; without it the file cannot be read
 

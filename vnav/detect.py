@@ -217,8 +217,14 @@ def _fit_line(v: np.ndarray, u: np.ndarray) -> tuple[float, float] | None:
     """Least-squares `u = a + b v`; None if fewer than 3 rows or no spread in v."""
     if v.size < 3 or np.ptp(v) < 2:
         return None
-    b, a = np.polyfit(v, u, 1)
-    return float(a), float(b)
+    # Closed-form simple regression on centred data (what np.polyfit(v, u, 1) solves, without
+    # its SVD): b = cov(v, u) / var(v), a = mean(u) - b mean(v).
+    v = v.astype(np.float64)
+    u = u.astype(np.float64)
+    v_mean, u_mean = float(v.mean()), float(u.mean())
+    dv = v - v_mean
+    b = float(dv @ (u - u_mean)) / float(dv @ dv)
+    return u_mean - b * v_mean, b
 
 
 def _apex_from_edges(crop: np.ndarray, x0: int, y0: int) -> np.ndarray | None:

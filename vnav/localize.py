@@ -110,45 +110,14 @@ class ConeEstimates:
 
 # ----------------------------------------------------------------------------- validation
 
-_ATOL_FAST = 1e-10
-"""`_check_transform`'s shortcut accepts a rotation block only this close to orthonormal (ten
-times tighter than `se3.check_transform`'s default, 1e-9), so everything it accepts the full
-check accepts too; anything else goes through the full check and its error messages."""
-
-
-def _clearly_rigid(T: np.ndarray) -> bool:
-    """True when `T` is a float64 (4, 4) array that `se3.check_transform` certainly accepts:
-    finite, bottom row exactly [0, 0, 0, 1], `max |R^T R - I| <= _ATOL_FAST` and `det R > 0`.
-    Plain float arithmetic: about 2 us where the general (batched) check takes about 40 us."""
-    if type(T) is not np.ndarray or T.dtype != np.float64 or T.shape != (4, 4):
-        return False
-    (a, b, c, tx), (d, e, f, ty), (g, h, i, tz), bottom = T.tolist()
-    if bottom != [0.0, 0.0, 0.0, 1.0]:
-        return False
-    if not math.isfinite(a + b + c + d + e + f + g + h + i + tx + ty + tz):
-        return False  # a NaN or inf (or an overflow): let the full check say which
-    err = max(
-        abs(a * a + d * d + g * g - 1.0),
-        abs(b * b + e * e + h * h - 1.0),
-        abs(c * c + f * f + i * i - 1.0),
-        abs(a * b + d * e + g * h),
-        abs(a * c + d * f + g * i),
-        abs(b * c + e * f + h * i),
-    )
-    det = a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
-    return err <= _ATOL_FAST and det > 0.0
-
 
 def _check_transform(T: np.ndarray, name: str) -> np.ndarray:
     """One 4x4 rigid transform, validated by `vnav.se3.check_transform` (its default tolerance,
     1e-9 on `R^T R - I`: MuJoCo's float64 poses are orthonormal to about 1e-15).
 
     A thin wrapper because `se3.check_transform` also accepts stacks `(..., 4, 4)`, and every
-    function here takes exactly one pose; a float64 (4, 4) pose that is orthonormal to 1e-10
-    skips the general check (`_clearly_rigid`), which accepts it anyway.
+    function here takes exactly one pose.
     """
-    if _clearly_rigid(T):
-        return T
     T = se3.check_transform(T, name)
     if T.shape != (4, 4):
         raise ValueError(f"{name} must be a single 4x4 transform, got shape {T.shape}")
@@ -1034,13 +1003,17 @@ def depth_to_world_points(
     z = depth[::stride, ::stride]
     if np.isnan(z).any():
         raise ValueError(f"depth must not contain NaN; got {int(np.isnan(z).sum())} NaN pixels")
-    rows, cols = np.nonzero((z > 0.0) & (z < far_m))
-    zv = z[rows, cols].astype(np.float64)
-    # Fold K^-1 and R_w_c into one 3x3: p_w = zv * (M @ [u, v, 1]) + t_w_c.
+    valid = (z > 0.0) & (z < far_m)
+    # Fold K^-1 and R_w_c into one 3x3: p_w = z * (M @ [u, v, 1]) + t_w_c. M @ [u, v, 1] is a
+    # column term plus a row term, so each coordinate is one broadcast over the contiguous
+    # grid, then gathered at the valid pixels (row-major order); no index arrays are built.
     M = T_w_c[:3, :3] @ np.linalg.inv(camera.K)
-    u = (cols * stride).astype(np.float64)
-    v = (rows * stride).astype(np.float64)
-    p_w = np.empty((zv.size, 3), dtype=np.float64)
+    u = np.arange(0, depth.shape[1], stride, dtype=np.float64)
+    v = np.arange(0, depth.shape[0], stride, dtype=np.float64)[:, None]
+    zv = z.astype(np.float64)
+    p_w = np.empty((int(np.count_nonzero(valid)), 3), dtype=np.float64)
     for i in range(3):
-        p_w[:, i] = zv * (M[i, 0] * u + M[i, 1] * v + M[i, 2]) + T_w_c[i, 3]
+        plane = zv * (M[i, 0] * u + (M[i, 1] * v + M[i, 2]))
+        plane += T_w_c[i, 3]
+        p_w[:, i] = plane[valid]
     return p_w
