@@ -52,6 +52,12 @@ class Frame:
     time_s: float
 
 
+def _tan_half_fovy(scene: mujoco.MjvScene) -> float:
+    """tan(fovy / 2) of the view last drawn into ``scene``, rounded to key the caches."""
+    cam = scene.camera[0]
+    return round((cam.frustum_top - cam.frustum_bottom) / 2.0 / cam.frustum_near, 12)
+
+
 class Renderer:
     """Renders a :class:`World`'s cameras off-screen at the configured resolution.
 
@@ -124,7 +130,8 @@ class Renderer:
         self._external_option.sitegroup[:] = 0
 
         self._shadows = quality == "high"
-        self._ray_cache: dict[tuple, np.ndarray] = {}
+        self._ray_cache: dict[float, np.ndarray] = {}
+        self._sky_cache: dict[tuple[float, float], np.ndarray] = {}
 
     # ---------------------------------------------------------------- lifecycle
     def close(self) -> None:
@@ -264,21 +271,30 @@ class Renderer:
         """
         model = self.world.model
         zfar = float(model.vis.map.zfar * model.stat.extent)
-        ray_per_depth = self._ray_per_depth(scene)
-        depth_m[depth_m * ray_per_depth > SKY_THRESHOLD_FRACTION * zfar] = zfar
+        # ray > f zfar  <=>  depth > f zfar / (ray per depth): one compare against a cached
+        # per-pixel threshold instead of a multiply and a compare per frame.
+        threshold_m = self._sky_threshold_m(scene, SKY_THRESHOLD_FRACTION * zfar)
+        np.putmask(depth_m, depth_m > threshold_m, np.float32(zfar))
+
+    def _sky_threshold_m(self, scene: mujoco.MjvScene, ray_limit_m: float) -> np.ndarray:
+        """(H, W) planar depth beyond which a pixel's ray is longer than ``ray_limit_m``."""
+        key = (_tan_half_fovy(scene), ray_limit_m)
+        cached = self._sky_cache.get(key)
+        if cached is None:
+            cached = (ray_limit_m / self._ray_per_depth(scene)).astype(np.float32)
+            self._sky_cache[key] = cached
+        return cached
 
     def _ray_per_depth(self, scene: mujoco.MjvScene) -> np.ndarray:  # cached per fovy
         """(H, W) ray length per unit planar depth, sqrt(1 + x^2 + y^2), for the view drawn."""
-        cam = scene.camera[0]
-        tan_half_fovy = (cam.frustum_top - cam.frustum_bottom) / 2.0 / cam.frustum_near
-        key = round(tan_half_fovy, 12)
-        cached = self._ray_cache.get(key)
+        tan_half_fovy = _tan_half_fovy(scene)
+        cached = self._ray_cache.get(tan_half_fovy)
         if cached is None:
             f_px = (self.height / 2.0) / tan_half_fovy
             u = (np.arange(self.width) - (self.width - 1) / 2.0) / f_px
             v = (np.arange(self.height) - (self.height - 1) / 2.0) / f_px
             cached = np.sqrt(1.0 + u[None, :] ** 2 + v[:, None] ** 2).astype(np.float32)
-            self._ray_cache[key] = cached
+            self._ray_cache[tan_half_fovy] = cached
         return cached
 
     def _segmentation(self, scene: mujoco.MjvScene) -> np.ndarray:
