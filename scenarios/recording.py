@@ -142,18 +142,6 @@ def blueprint(eye_w=None, look_target_w=None, view: str = "errors") -> rrb.Bluep
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Vertical(
-                rrb.Spatial3DView(
-                    name="world",
-                    origin="world",
-                    # The depth image would also be drawn back-projected in 3D; the world-frame
-                    # cloud computed by vnav (world/depth_cloud) is the one to look at here.
-                    contents=["+ $origin/**", "- /world/body/camera/depth"],
-                    eye_controls=eye,
-                ),
-                rrb.TextDocumentView(name="scenario", origin="description"),
-                row_shares=[4, 1],
-            ),
-            rrb.Vertical(
                 rrb.Tabs(
                     rrb.Spatial2DView(
                         name="camera",
@@ -194,7 +182,21 @@ def blueprint(eye_w=None, look_target_w=None, view: str = "errors") -> rrb.Bluep
                 ),
                 row_shares=[3, 2, 3],
             ),
-            column_shares=[3, 2],
+            rrb.Vertical(
+                rrb.Spatial3DView(
+                    name="world",
+                    origin="world",
+                    # The depth image would also be drawn back-projected in 3D; the world-frame
+                    # cloud computed by vnav (world/depth_cloud) is the one to look at here.
+                    contents=["+ $origin/**", "- /world/body/camera/depth"],
+                    eye_controls=eye,
+                ),
+                rrb.TextDocumentView(name="scenario", origin="description"),
+                row_shares=[4, 1],
+            ),
+            # Plots left, world right: the viewer's start-up notices (top right) then
+            # cover a corner of the large 3D view rather than the camera image.
+            column_shares=[2, 3],
         ),
         collapse_panels=True,
     )
