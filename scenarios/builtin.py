@@ -100,18 +100,45 @@ def yaw_sweep() -> Scenario:
 def transform_composer() -> Scenario:
     # Chapter 8's showcase: body translation and yaw swept; the cone's coordinates in world,
     # body and camera frames are logged side by side; the world ones do not move.
+    # Body translation, yaw and the camera's offset on the body all move, as the sliders of
+    # the lecture's showcase.
     keyframes = [
-        {"t": 0.0, "position_w": [0.0, 0.0, 5.0], "rpy_deg": [0.0, 0.0, 0.0]},
-        {"t": 2.0, "position_w": [2.0, 0.0, 5.0], "rpy_deg": [0.0, 0.0, 0.0]},
-        {"t": 4.0, "position_w": [2.0, 2.0, 5.0], "rpy_deg": [0.0, 0.0, -30.0]},
-        {"t": 6.0, "position_w": [0.0, 2.0, 4.0], "rpy_deg": [0.0, 0.0, -45.0]},
-        {"t": 8.0, "position_w": [0.0, 0.0, 5.0], "rpy_deg": [0.0, 0.0, 0.0]},
+        {
+            "t": 0.0,
+            "position_w": [0.0, 0.0, 5.0],
+            "rpy_deg": [0.0, 0.0, 0.0],
+            "camera_position_b": [0.2, 0.0, -0.05],
+        },
+        {
+            "t": 2.0,
+            "position_w": [2.0, 0.0, 5.0],
+            "rpy_deg": [0.0, 0.0, 0.0],
+            "camera_position_b": [0.5, 0.0, -0.05],
+        },
+        {
+            "t": 4.0,
+            "position_w": [2.0, 2.0, 5.0],
+            "rpy_deg": [0.0, 0.0, -30.0],
+            "camera_position_b": [0.5, 0.3, -0.05],
+        },
+        {
+            "t": 6.0,
+            "position_w": [0.0, 2.0, 4.0],
+            "rpy_deg": [0.0, 0.0, -45.0],
+            "camera_position_b": [0.2, 0.3, 0.1],
+        },
+        {
+            "t": 8.0,
+            "position_w": [0.0, 0.0, 5.0],
+            "rpy_deg": [0.0, 0.0, 0.0],
+            "camera_position_b": [0.2, 0.0, -0.05],
+        },
     ]
     return {
         "name": "transform-composer",
         "view": "coordinates",
-        "description": "Chapter 8: body translation and yaw swept; the cone in world, body "
-        "and camera frames side by side.",
+        "description": "Chapter 8: body translation, yaw and camera offset swept; the cone "
+        "in world, body and camera frames side by side.",
         "lesson": "T_w_c = T_w_b T_b_c: the composer of chapter 8, running on a simulated drone.",
         "camera_rate_hz": 10.0,
         "camera": {"pitch_down_deg": 45.0, "position_b": [0.2, 0.0, -0.05]},

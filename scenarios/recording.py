@@ -4,7 +4,8 @@ Entity tree (docs/CONVENTIONS.md for the frames)::
 
     world                          ViewCoordinates RIGHT_HAND_Z_UP (static)
     world/body                     Transform3D T_w_b, every camera frame
-    world/body/camera              Transform3D T_b_c + Pinhole (true intrinsics, RDF) (static)
+    world/body/camera              Transform3D T_b_c + Pinhole (true intrinsics, RDF) (static;
+                                   T_b_c every frame in a scenario that slides the camera)
     world/body/camera/image        JPEG-compressed RGB
     world/body/camera/depth        planar z-depth, PNG-encoded 16-bit millimetres, every 5th
     world/body/camera/detections   Boxes2D + Points2D (apex, base keypoints)
@@ -225,6 +226,7 @@ class _FrameBuffer:
     rpy_deg: np.ndarray
     gimbal_locked: bool
     cone_coords: dict[str, np.ndarray]
+    T_b_c: np.ndarray | None
 
 
 def _time_columns(rows: list[_FrameBuffer]) -> list[rr.TimeColumn]:
@@ -259,7 +261,7 @@ class Recording:
         self,
         *,
         camera: PinholeCamera,
-        T_b_c: np.ndarray,
+        T_b_c: np.ndarray | None,
         cones_w: np.ndarray,
         description_md: str,
         eye_w: np.ndarray | None = None,
@@ -269,7 +271,8 @@ class Recording:
         """Log what does not change over the run: axes, mount, intrinsics, truth, text."""
         rec = self.rec
         rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-        rec.log("world/body/camera", _pose_transform(T_b_c), static=True)
+        if T_b_c is not None:  # a fixed mount; a sliding one is logged by log_frame
+            rec.log("world/body/camera", _pose_transform(T_b_c), static=True)
         rec.log(
             "world/body/camera",
             rr.Pinhole(
@@ -367,6 +370,7 @@ class Recording:
         rpy_rad: np.ndarray,
         gimbal_locked: bool,
         cone_coords: Mapping[str, np.ndarray],
+        T_b_c: np.ndarray | None = None,
     ) -> None:
         """Queue one camera frame for the ``frame`` and ``sim_time`` timelines.
 
@@ -398,6 +402,8 @@ class Recording:
             Whether those angles are at the gimbal lock.
         cone_coords : mapping of name -> ndarray, shape (3,)
             Cone 0's coordinates in several frames (e.g. ``world``, ``body``, ``camera``).
+        T_b_c : ndarray, shape (4, 4), optional
+            The camera mount at this frame, when it moves (log_setup was given None).
         """
         # Encoding runs on a worker thread (OpenCV releases the GIL), overlapping with the
         # next frame's rendering; _flush collects the bytes in order.
@@ -426,6 +432,7 @@ class Recording:
                 rpy_deg=np.degrees(np.asarray(rpy_rad, dtype=np.float64)),
                 gimbal_locked=bool(gimbal_locked),
                 cone_coords={k: np.asarray(v, dtype=np.float64) for k, v in cone_coords.items()},
+                T_b_c=None if T_b_c is None else np.array(T_b_c, dtype=np.float64),
             )
         )
         if len(self._frames) >= FLUSH_EVERY_FRAMES:
@@ -437,6 +444,16 @@ class Recording:
         if not frames:
             return
         jpegs, pngs = zip(*(f.encoded.result() for f in frames), strict=True)
+        mounts = [f for f in frames if f.T_b_c is not None]
+        if mounts:
+            self.rec.send_columns(
+                "world/body/camera",
+                indexes=_time_columns(mounts),
+                columns=rr.Transform3D.columns(
+                    translation=np.array([f.T_b_c[:3, 3] for f in mounts]),
+                    quaternion=quat.from_matrix(np.array([f.T_b_c[:3, :3] for f in mounts])),
+                ),
+            )
         rec = self.rec
 
         def send(entity: str, rows: list[_FrameBuffer], columns) -> None:

@@ -167,6 +167,25 @@ def _view_from(spec: ScenarioSpec, cones_w: np.ndarray) -> dict[str, np.ndarray]
     return {"eye_w": eye_w, "look_target_w": target_w}
 
 
+def _camera_track(spec: ScenarioSpec) -> list[tuple[float, np.ndarray]]:
+    """(time, camera position on the body) of a flight that slides the camera, else []."""
+    flight = spec.flight
+    if not isinstance(flight, KinematicFlight) or not flight.moves_camera:
+        return []
+    default_b = spec.scene.camera.position_b
+    return [
+        (k.t_s, np.array(k.camera_position_b if k.camera_position_b is not None else default_b))
+        for k in flight.keyframes
+    ]
+
+
+def _interpolate(track: list[tuple[float, np.ndarray]], t_s: float) -> np.ndarray:
+    """Linear interpolation in a time-sorted track, held constant outside it."""
+    times = np.array([t for t, _ in track])
+    values = np.array([v for _, v in track])
+    return np.array([np.interp(t_s, times, values[:, i]) for i in range(values.shape[1])])
+
+
 def _noisy_pose(T_w_b: np.ndarray, spec: ScenarioSpec, rng: np.random.Generator) -> np.ndarray:
     noise = spec.noise
     if noise.position_std_m == 0.0 and noise.attitude_std_deg == 0.0:
@@ -240,13 +259,14 @@ def run_scenario(
     dt = float(world.model.opt.timestep)
     n_frames = math.floor(spec.end_s * spec.camera_rate_hz + 1e-9) + 1
     driver = _driver(world, spec)
+    camera_track = _camera_track(spec)
     recording = Recording(rrd_path, f"{spec.name}-seed{seed}") if rrd_path else None
     positions_w = []
     try:
         if recording:
             recording.log_setup(
                 camera=camera,
-                T_b_c=T_b_c,
+                T_b_c=None if camera_track else T_b_c,  # None: logged every frame instead
                 cones_w=cones_w,
                 description_md=describe(spec, seed),
                 **_view_from(spec, cones_w),
@@ -260,6 +280,9 @@ def run_scenario(
                 n_steps = round((target_s - world.time_s) / dt)
                 if n_steps > 0:
                     driver.step(n_steps)
+                if camera_track:
+                    world.set_camera_position_b(_interpolate(camera_track, world.time_s))
+                    T_b_c = world.T_b_c
                 t1 = time.perf_counter()
                 frame = renderer.render(depth=True)
                 t2 = time.perf_counter()
@@ -296,6 +319,7 @@ def run_scenario(
                         rpy_rad=record.rpy_rad,
                         gimbal_locked=record.gimbal_locked,
                         cone_coords=_cone0_coordinates(record, T_b_c, cones_w),
+                        T_b_c=T_b_c if camera_track else None,
                     )
                 t5 = time.perf_counter()
                 for key, seconds in zip(

@@ -17,6 +17,7 @@ A scenario file (TOML) holds, in user units (metres, degrees, seconds)::
     [flight]
     mode = "kinematic"        # keyframes: position linear, attitude slerp
     keyframes = [ { t = 0.0, position_w = [0, 0, 10], rpy_deg = [0, 0, 0] }, ... ]
+    # a keyframe may also slide the camera on the body: camera_position_b = [0.3, 0.0, 0.05]
     # mode = "controlled"     # waypoints flown by the geometric controller
     # waypoints = [ { t = 0.0, position_w = [0, 0, 10], yaw_deg = 0.0 }, ... ]
     # mode = "orbit"          # a smooth circle, heading at the centre (controller)
@@ -81,11 +82,16 @@ class ScenarioError(ValueError):
 
 @dataclass(frozen=True)
 class Keyframe:
-    """A prescribed body pose at a time: ``T_w_b`` from ``position_w`` and ``quat_xyzw``."""
+    """A prescribed body pose at a time: ``T_w_b`` from ``position_w`` and ``quat_xyzw``.
+
+    ``camera_position_b``, if given, slides the camera on the body to that offset (linearly
+    between keyframes), the lecture's chapter 8 composer; None keeps the [camera] position.
+    """
 
     t_s: float
     position_w: tuple[float, float, float]
     quat_xyzw: tuple[float, float, float, float]
+    camera_position_b: tuple[float, float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -103,6 +109,11 @@ class KinematicFlight:
 
     keyframes: tuple[Keyframe, ...]
     mode: str = "kinematic"
+
+    @property
+    def moves_camera(self) -> bool:
+        """True if any keyframe slides the camera on the body."""
+        return any(k.camera_position_b is not None for k in self.keyframes)
 
     @property
     def end_s(self) -> float:
@@ -264,11 +275,14 @@ def _times_increasing(times: list[float], where: str, key: str) -> None:
             )
 
 
-def keyframe_from_rpy_deg(t_s: float, position_w: Any, rpy_deg: Any) -> Keyframe:
+def keyframe_from_rpy_deg(
+    t_s: float, position_w: Any, rpy_deg: Any, camera_position_b: Any = None
+) -> Keyframe:
     """A keyframe from roll/pitch/yaw in degrees (R = Rz(yaw) Ry(pitch) Rx(roll))."""
     roll, pitch, yaw = np.radians(np.asarray(rpy_deg, dtype=float))
     quat_xyzw = quat.from_matrix(so3.from_rpy(roll, pitch, yaw))
-    return Keyframe(float(t_s), tuple(map(float, position_w)), tuple(map(float, quat_xyzw)))
+    camera = None if camera_position_b is None else tuple(map(float, camera_position_b))
+    return Keyframe(float(t_s), tuple(map(float, position_w)), tuple(map(float, quat_xyzw)), camera)
 
 
 def _flight(table: dict[str, Any], where: str) -> KinematicFlight | ControlledFlight:
@@ -282,15 +296,19 @@ def _flight(table: dict[str, Any], where: str) -> KinematicFlight | ControlledFl
         for i, entry in enumerate(raw):
             key = f"flight.keyframes[{i}]"
             entry = _table(entry, where, key)
-            _allowed(entry, {"t", "position_w", "rpy_deg"}, where, key)
+            _allowed(entry, {"t", "position_w", "rpy_deg", "camera_position_b"}, where, key)
             for needed in ("t", "position_w", "rpy_deg"):
                 if needed not in entry:
                     raise _err(where, f"{key}.{needed}", "missing")
+            camera_b = entry.get("camera_position_b")
             keyframes.append(
                 keyframe_from_rpy_deg(
                     _number(entry["t"], where, f"{key}.t", lo=0.0),
                     _vector(entry["position_w"], 3, where, f"{key}.position_w"),
                     _vector(entry["rpy_deg"], 3, where, f"{key}.rpy_deg"),
+                    None
+                    if camera_b is None
+                    else _vector(camera_b, 3, where, f"{key}.camera_position_b"),
                 )
             )
         _times_increasing([k.t_s for k in keyframes], where, "flight.keyframes")

@@ -292,6 +292,25 @@ class World:
         """(4, 4) the camera mount: optical frame in the body frame."""
         return self._T_b_c.copy()
 
+    def set_camera_position_b(self, position_b) -> None:
+        """Slide the onboard camera on the body to ``position_b`` (FLU, metres), keeping its
+        orientation: the lecture's chapter 8 composer moves the camera offset at run time.
+
+        Writes MuJoCo's ``cam_pos`` (a body-relative position, no recompile needed) and the
+        mount returned by :attr:`T_b_c`, then recomputes the kinematics.
+
+        Raises
+        ------
+        ValueError
+            If ``position_b`` is not 3 finite numbers.
+        """
+        p_b = np.asarray(position_b, dtype=np.float64)
+        if p_b.shape != (3,) or not np.all(np.isfinite(p_b)):
+            raise ValueError(f"position_b must be 3 finite numbers, got {position_b!r}")
+        self.model.cam_pos[self.camera_id] = p_b
+        self._T_b_c[:3, 3] = p_b
+        mujoco.mj_forward(self.model, self.data)
+
     @property
     def camera(self) -> PinholeCamera:
         """Intrinsics of the onboard camera, exactly as MuJoCo renders it."""

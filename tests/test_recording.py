@@ -145,6 +145,8 @@ def test_detections_logged_in_rerun_pixel_convention(recorded):
                 atol=FLOAT32_ATOL_M,
             )
             world.set_pose(result.frames[k].T_w_b)
+            if getattr(spec.flight, "moves_camera", False):  # slide the camera as the run did
+                world.set_camera_position_b(_camera_offset_b(spec, result.frames[k].t_s))
             detections = detect_cones(renderer.render(depth=False).rgb)
             expected = np.concatenate([[d.apex_uv, d.base_uv] for d in detections]) + 0.5
             assert np.allclose(keypoints[k], expected, atol=1e-4)
@@ -171,3 +173,27 @@ def test_recording_reads_back_with_mujoco_independent_of_sim(recorded):
     assert np.allclose(
         mount["Transform3D:translation"][0], model.cam_pos[world.camera_id], atol=1e-6
     )
+
+
+def _camera_offset_b(spec, t_s: float) -> list[float]:
+    """The keyframes' camera offset interpolated linearly at t_s (computed here, not by the
+    runner)."""
+    times = [k.t_s for k in spec.flight.keyframes]
+    offsets_b = np.array([k.camera_position_b for k in spec.flight.keyframes])
+    return [float(np.interp(t_s, times, offsets_b[:, i])) for i in range(3)]
+
+
+def test_sliding_camera_mount_logged_every_frame(builtin_runs):
+    """transform-composer slides the camera on the body: the mount logged at each frame is
+    the keyframes' offset interpolated at that time, with the configured orientation."""
+    run = builtin_runs["transform-composer"]
+    rows = [r for r in read_rows(run.rrd, "world/body/camera") if "frame" in r]
+    assert len(rows) == len(run.result.frames)
+    R_b_c = World.from_config(run.spec.scene).T_b_c[:3, :3]
+    for row, f in zip(rows, run.result.frames, strict=True):
+        expected_b = _camera_offset_b(run.spec, f.t_s)
+        assert np.allclose(row["Transform3D:translation"][0], expected_b, atol=1e-6)
+        q_xyzw = np.array(row["Transform3D:quaternion"][0])
+        assert np.allclose(quat.to_matrix(q_xyzw, normalize=True), R_b_c, atol=1e-6)
+    moved = np.ptp(np.array([r["Transform3D:translation"][0] for r in rows]), axis=0)
+    assert np.linalg.norm(moved) > 0.3

@@ -15,6 +15,7 @@ from scipy.spatial.transform import Rotation
 from sim import names
 from sim.config import CameraConfig, SceneConfig
 from sim.world import SimulationError, World
+from vnav import se3, so3
 
 R_GLC_TO_OPTICAL = np.diag([1.0, -1.0, -1.0])
 REPO = Path(__file__).resolve().parents[1]
@@ -187,3 +188,17 @@ def test_ground_truth_is_current_after_physics_steps() -> None:
 
 def _angle_between(R_a: np.ndarray, R_b: np.ndarray) -> float:
     return float(Rotation.from_matrix(R_a.T @ R_b).magnitude())
+
+
+def test_camera_slides_on_its_mount_and_mujoco_agrees():
+    """After set_camera_position_b, T_w_b @ T_b_c is MuJoCo's own camera pose (optical)."""
+    world = World.from_config(SceneConfig())
+    world.set_pose(se3.make(so3.from_rpy(0.2, -0.3, 1.1), [1.0, 2.0, 5.0]))
+    world.set_camera_position_b([0.3, -0.1, 0.2])
+    cam = world.camera_id
+    R_w_c = world.data.cam_xmat[cam].reshape(3, 3) @ np.diag([1.0, -1.0, -1.0])
+    T_w_c_mujoco = se3.make(R_w_c, world.data.cam_xpos[cam])
+    np.testing.assert_allclose(world.T_w_b() @ world.T_b_c, T_w_c_mujoco, atol=1e-9)
+    np.testing.assert_allclose(world.T_b_c[:3, 3], [0.3, -0.1, 0.2])
+    with pytest.raises(ValueError, match="position_b must be 3 finite numbers"):
+        world.set_camera_position_b([0.0, np.nan, 0.0])
