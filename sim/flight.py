@@ -43,11 +43,6 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     )
 
 
-def _vee(S: np.ndarray) -> np.ndarray:
-    """The vector of a skew-symmetric matrix (inverse of ``so3.skew``), shape (3,)."""
-    return np.array([S[2, 1], S[0, 2], S[1, 0]])
-
-
 # ------------------------------------------------------------------------------- reference
 @dataclass(frozen=True)
 class Reference:
@@ -318,7 +313,7 @@ class GeometricController:
         b2_d = b2_d / n2
         R_w_d = np.column_stack([_cross(b2_d, b3_d), b2_d, b3_d])
         thrust = float(F_d @ R_w_b[:, 2])
-        e_R = 0.5 * _vee(R_w_d.T @ R_w_b - R_w_b.T @ R_w_d)
+        e_R = 0.5 * so3.vee(R_w_d.T @ R_w_b - R_w_b.T @ R_w_d)
         e_Omega = omega_b  # Omega_d = 0
         moment = -self._k_R * e_R - self._k_Omega * e_Omega + _cross(omega_b, self.J @ omega_b)
         return ControlOutput(thrust_N=thrust, moment_b=moment, R_w_d=R_w_d, e_R=e_R)

@@ -111,3 +111,14 @@ def test_apply_nan_points_pass_through():
     for n in (1, 511, 512, 513, 131071, 131073):
         p = rng.normal(size=(n, 3))
         np.testing.assert_allclose(se3.apply(T, p), p @ T[:3, :3].T + T[:3, 3], atol=1e-14)
+
+
+def test_vee_inverts_skew_and_gives_the_cross_product_vector():
+    rng = np.random.default_rng(5)
+    v = rng.normal(size=(20, 3))
+    np.testing.assert_array_equal(so3.vee(so3.skew(v)), v)
+    u = rng.normal(size=3)
+    # skew(v) u = v x u (lecture chapter 5), checked against numpy's cross product.
+    np.testing.assert_allclose(so3.skew(v[0]) @ u, np.cross(v[0], u), atol=1e-15)
+    with pytest.raises(ValueError, match="shape"):
+        so3.vee(np.zeros((3, 2)))

@@ -35,6 +35,7 @@ __all__ = [
     "rot_z",
     "skew",
     "to_rpy",
+    "vee",
 ]
 
 # Below this angle (radians) exp and log use Taylor series of sin(t)/t and t/sin(t).
@@ -156,6 +157,30 @@ def skew(v: ArrayLike) -> FloatArray:
     K[..., 2, 0] = -y
     K[..., 2, 1] = x
     return K
+
+
+def vee(S: ArrayLike) -> FloatArray:
+    """The vector of a skew-symmetric matrix, the inverse of `skew`: ``vee(skew(v)) == v``.
+
+    Only the entries below the diagonal are read, as in Lee et al. (CDC 2010), whose attitude
+    error is ``e_R = vee(R_d^T R - R^T R_d) / 2``.
+
+    Parameters
+    ----------
+    S : array_like, shape (..., 3, 3)
+
+    Returns
+    -------
+    v : ndarray, shape (..., 3)
+        ``[S[2, 1], S[0, 2], S[1, 0]]``.
+
+    Raises
+    ------
+    ValueError
+        If the shape is not (..., 3, 3) or an entry is NaN or inf.
+    """
+    S = _v.matrix(S, "S")
+    return np.stack([S[..., 2, 1], S[..., 0, 2], S[..., 1, 0]], axis=-1)
 
 
 # --------------------------------------------------------------------------------------------
