@@ -289,18 +289,9 @@ def run_scenario(
                 detections = detect_cones(frame.rgb)
                 t3 = time.perf_counter()
                 record, estimates_w, errors_m, range_m, cloud_w = _evaluate_frame(
-                    k,
-                    world,
-                    driver,
-                    detections,
-                    frame.depth,
-                    camera,
-                    T_b_c,
-                    cones_w,
-                    far_m,
-                    spec,
-                    rng,
-                )
+                    k, world, driver, detections, frame.depth, camera, T_b_c, cones_w, far_m,
+                    spec, rng,
+                )  # fmt: skip
                 result.frames.append(record)
                 positions_w.append(record.T_w_b[:3, 3])
                 t4 = time.perf_counter()
@@ -343,14 +334,30 @@ def run_scenario(
 
 
 def _evaluate_frame(
-    k, world, driver, detections, depth_m, camera, T_b_c, cones_w, far_m, spec, rng
+    k: int,
+    world: World,
+    driver,
+    detections: list,
+    depth_m: np.ndarray | None,
+    camera: PinholeCamera,
+    T_b_c: np.ndarray,
+    cones_w: np.ndarray,
+    far_m: float,
+    spec: ScenarioSpec,
+    rng: np.random.Generator,
 ):
-    """Localise every detection, match to the truth, and build the frame's record."""
+    """Localise every detection, match to the truth, and build the frame's record.
+
+    Returns the record, this frame's estimates per method (K, 3), its mean error per method,
+    the mean range of the matched cones and the decimated world cloud of the depth image.
+    """
     T_w_b = world.T_w_b()
     T_w_b_est = _noisy_pose(T_w_b, spec, rng)
     T_w_c = T_w_b @ T_b_c
     R_w_b = T_w_b[:3, :3]
-    locked = bool(so3.gimbal_locked(R_w_b, atol=1e-6))
+    # One tolerance for the flag and for the angles (so3's default): a frame flagged locked
+    # is exactly one whose angles to_rpy computed with roll = 0.
+    locked = bool(so3.gimbal_locked(R_w_b))
     rpy = so3.to_rpy(R_w_b, warn=False)
     in_view = cones_fully_in_view(cones_w, camera, T_w_c)
 
