@@ -1,8 +1,9 @@
 """The JSON report of a run: error statistics per method, checks, timing.
 
 Statistics follow evo (``vnav.metrics.error_stats``): rmse, mean, median, std, min, max, count,
-all in metres. Statistics of an empty series are ``null``. Only ``timing_s`` depends on the
-machine; everything else is fixed by the scenario and the seed.
+all in metres, over all matched detections and per 5 m bin of range (``by_range``).
+Statistics of an empty series are ``null``. Only ``timing_s`` depends on the machine;
+everything else is fixed by the scenario and the seed.
 """
 
 from __future__ import annotations
@@ -27,13 +28,33 @@ def _finite_or_none(value: float) -> float | int | None:
     return None if not math.isfinite(value) else round(float(value), 9)
 
 
+RANGE_BINS_M = (0.0, 5.0, 10.0, 15.0, 20.0, 25.0, 30.0, math.inf)
+"""Edges of the range bins of the error-against-range statistics, metres."""
+
+
+def _stats(errors) -> dict[str, float | int | None]:
+    return {k: _finite_or_none(v) for k, v in metrics.error_stats(errors).items()}
+
+
 def build(run: RunResult, checks: list[CheckResult]) -> dict[str, Any]:
     """The report as a JSON-ready dict."""
     spec = run.spec
     methods = {}
     for method in METHODS:
-        stats = metrics.error_stats(run.errors(method))
-        methods[method] = {"position_error_m": {k: _finite_or_none(v) for k, v in stats.items()}}
+        errors, ranges = run.errors(method), run.ranges_for(method)
+        by_range = []
+        for lo in RANGE_BINS_M[:-1]:
+            hi = RANGE_BINS_M[RANGE_BINS_M.index(lo) + 1]
+            in_bin = (ranges >= lo) & (ranges < hi)
+            if in_bin.any():
+                # The last bin is open: its upper edge is null.
+                by_range.append(
+                    {
+                        "range_m": [lo, hi if math.isfinite(hi) else None],
+                        "position_error_m": _stats(errors[in_bin]),
+                    }
+                )
+        methods[method] = {"position_error_m": _stats(errors), "by_range": by_range}
     n_detections = sum(len(f.detections) for f in run.frames)
     n_matched = sum(d.cone_index is not None for f in run.frames for d in f.detections)
     return {

@@ -118,3 +118,29 @@ def test_gimbal_lock_flagged_while_quaternion_stays_smooth(runs):
 
 def test_check_kinds_documented_and_implemented():
     assert set(CHECK_KINDS) == set(checks._KINDS)
+
+
+@pytest.mark.parametrize("name", builtin.names())
+def test_error_against_range_bins_partition_the_detections(runs, name):
+    spec, result, _, rep = runs[name]
+    cones_w = np.array(spec.scene.cones_w)
+    for method in METHODS:
+        bins = rep["methods"][method]["by_range"]
+        assert (
+            sum(b["position_error_m"]["count"] for b in bins)
+            == (rep["methods"][method]["position_error_m"]["count"])
+        )
+        for b in bins:
+            lo, hi = b["range_m"]
+            hi = math.inf if hi is None else hi
+            # Recompute this bin from the frames: range from the camera to the true cone.
+            errors = [
+                np.linalg.norm(d.estimates_w[method] - cones_w[d.cone_index])
+                for f in result.frames
+                for d in f.detections
+                if d.cone_index is not None
+                and method in d.estimates_w
+                and lo <= np.linalg.norm(d.p_c_true) < hi
+            ]
+            assert len(errors) == b["position_error_m"]["count"]
+            assert max(errors) == pytest.approx(b["position_error_m"]["max"], abs=1e-8)
