@@ -201,8 +201,6 @@ def _driver(world: World, spec: ScenarioSpec):
     if isinstance(flight, KinematicFlight):
         T_w_b = [se3.make(quat.to_matrix(k.quat_xyzw), k.position_w) for k in flight.keyframes]
         times = [k.t_s for k in flight.keyframes]
-        if len(times) == 1:
-            times, T_w_b = [0.0, 1.0], [T_w_b[0], T_w_b[0]]
         return KeyframePlayer(world, KeyframeTrajectory(times, np.array(T_w_b)))
     if isinstance(flight, OrbitFlight):
         orbit = OrbitTrajectory(
@@ -215,9 +213,7 @@ def _driver(world: World, spec: ScenarioSpec):
         )
         return Autopilot(world, orbit)
     assert isinstance(flight, ControlledFlight)
-    wps = flight.waypoints
-    if len(wps) == 1:
-        wps = (wps[0], wps[0].__class__(wps[0].t_s + 1.0, wps[0].position_w, wps[0].yaw_rad))
+    wps = flight.waypoints  # one waypoint is a hover there
     trajectory = MinimumJerkTrajectory(
         [w.t_s for w in wps], [w.position_w for w in wps], [w.yaw_rad for w in wps]
     )

@@ -227,3 +227,27 @@ def test_lecture_command_prints_every_example_agreeing(capsys):
     rows = [line for line in out.splitlines() if line.rstrip().endswith(("yes", "NO"))]
     assert len(rows) == len(lecture.EXAMPLES)
     assert all(line.rstrip().endswith("yes") for line in rows)
+
+
+@pytest.mark.parametrize(
+    "flight",
+    [
+        'mode = "controlled"\nwaypoints = [{ t = 0.0, position_w = [0.0, 0.0, 4.0] }]',
+        'mode = "kinematic"\nkeyframes = [{ t = 0.0, position_w = [0.0, 0.0, 4.0], '
+        "rpy_deg = [0.0, 0.0, 0.0] }]",
+    ],
+)
+def test_one_waypoint_or_keyframe_holds_the_pose(tmp_path, flight):
+    """A single waypoint hovers there (controller), a single keyframe holds still; the default
+    checks (accuracy bounds, detection rate) pass on the cone ahead."""
+    scenario = tmp_path / "one.toml"
+    scenario.write_text(
+        'name = "one"\nduration_s = 2.0\ncamera_rate_hz = 5.0\n[camera]\npitch_down_deg = 45.0\n'
+        f"[[cones]]\nposition_w = [5.0, 0.0, 0.0]\n[flight]\n{flight}\n"
+    )
+    assert main(["run", str(scenario), "--out", str(tmp_path), "--quiet"]) == 0
+    rep = json.loads((tmp_path / "one.json").read_text())
+    assert rep["detections"] == rep["frames"] == 11
+    body = [r for r in read_rows(tmp_path / "one.rrd", "world/body") if "frame" in r]
+    positions_w = np.array([r["Transform3D:translation"][0] for r in body])
+    assert np.max(np.linalg.norm(positions_w - [0.0, 0.0, 4.0], axis=1)) < 0.02
