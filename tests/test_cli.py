@@ -251,3 +251,42 @@ def test_one_waypoint_or_keyframe_holds_the_pose(tmp_path, flight):
     body = [r for r in read_rows(tmp_path / "one.rrd", "world/body") if "frame" in r]
     positions_w = np.array([r["Transform3D:translation"][0] for r in body])
     assert np.max(np.linalg.norm(positions_w - [0.0, 0.0, 4.0], axis=1)) < 0.02
+
+
+def test_progress_bar_only_on_a_terminal(tmp_path):
+    """On a terminal (a pseudo-terminal here) stderr shows a progress bar; piped, nothing."""
+    import pty
+
+    env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
+    args = [sys.executable, "-m", "scenarios", "run", "frame-problem", "--duration", "0.5"]
+    controller, terminal = pty.openpty()
+    try:
+        proc = subprocess.run(
+            [*args, "--out", str(tmp_path / "tty")],
+            env=env,
+            timeout=120,
+            stdout=subprocess.PIPE,
+            stderr=terminal,
+        )
+        os.close(terminal)
+        shown = b""
+        while True:
+            try:
+                chunk = os.read(controller, 4096)
+            except OSError:  # the terminal side is closed and drained
+                break
+            if not chunk:
+                break
+            shown += chunk
+    finally:
+        os.close(controller)
+    assert proc.returncode == 0
+    assert b"frame-problem" in shown and b"6/6" in shown and b"#" in shown
+    piped = subprocess.run(
+        [*args, "--out", str(tmp_path / "pipe")],
+        env=env,
+        timeout=120,
+        capture_output=True,
+        text=True,
+    )
+    assert piped.returncode == 0 and piped.stderr == ""
