@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 import textwrap
@@ -130,7 +131,7 @@ def test_bad_usage_exit_2_one_line(tmp_path, capsys, args, message):
     assert main([*args, "--out", str(out)] if args[0] == "run" else args) == 2
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1
-    assert __import__("re").search(message, err)
+    assert re.search(message, err)
     assert not out.exists() or not any(out.iterdir())
 
 
@@ -171,7 +172,7 @@ def test_bad_scenario_file_exit_2(tmp_path, capsys, content, message):
     assert main(["run", str(bad), "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1
-    assert __import__("re").search(message, err), err
+    assert re.search(message, err), err
     assert not out.exists() or not any(out.iterdir())
 
 
