@@ -1,6 +1,7 @@
 """The `vnav-demo` command line.
 
 - `vnav-demo list`: the built-in scenarios, one line each.
+- `vnav-demo show NAME`: a built-in scenario as a TOML file, to start your own from.
 - `vnav-demo run NAME|FILE.toml [...] [--all] [--out DIR] [--seed N] [--duration S] [--quiet]`:
   runs scenarios headless, writes `DIR/<name>.rrd` and `DIR/<name>.json`, prints a summary.
 - `vnav-demo lecture`: the lecture's worked examples next to vnav's results.
@@ -47,6 +48,21 @@ def _list(args: argparse.Namespace) -> int:
     return 0
 
 
+def _show(args: argparse.Namespace) -> int:
+    from scenarios import builtin, toml_out
+
+    if args.name not in builtin.REGISTRY:
+        print(
+            f"{PROG}: error: unknown scenario {args.name!r}; valid names: "
+            f"{', '.join(builtin.names())}",
+            file=sys.stderr,
+        )
+        return 2
+    print(f"# {PROG} show {args.name}: save as FILE.toml, edit, run with `{PROG} run FILE.toml`")
+    print(toml_out.dumps(builtin.REGISTRY[args.name]()), end="")
+    return 0
+
+
 def _run(args: argparse.Namespace) -> int:
     from scenarios import run_command
 
@@ -73,6 +89,14 @@ def build_parser() -> argparse.ArgumentParser:
         description="List the built-in scenarios with a one-line description.",
     )
     p.set_defaults(func=_list)
+
+    p = sub.add_parser(
+        "show",
+        help="print a built-in scenario as a TOML file to start your own from",
+        description="Print the built-in scenario NAME in the scenario-file format (TOML).",
+    )
+    p.add_argument("name", metavar="NAME", help="a built-in scenario (see `vnav-demo list`)")
+    p.set_defaults(func=_show)
 
     p = sub.add_parser(
         "run",

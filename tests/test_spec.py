@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 import math
+import tomllib
 
 import numpy as np
 import pytest
 
-from scenarios.spec import OrbitFlight, ScenarioError, from_dict
+from scenarios import builtin
+from scenarios.cli import main
+from scenarios.spec import OrbitFlight, ScenarioError, from_dict, load_toml
 from vnav import quat, so3
 
 
@@ -96,3 +99,20 @@ def test_orbit_mode_start_pose_and_duration():
 def test_bad_flights_name_the_key(flight, message):
     with pytest.raises(ScenarioError, match=message):
         from_dict(_base(**flight), where="f.toml")
+
+
+@pytest.mark.parametrize("name", builtin.names())
+def test_show_prints_a_file_that_parses_to_the_same_scenario(tmp_path, capsys, name):
+    """`vnav-demo show NAME` output, parsed by tomllib (the independent reader) and by
+    load_toml, gives the built-in's own dict and spec back."""
+    assert main(["show", name]) == 0
+    text = capsys.readouterr().out
+    assert tomllib.loads(text) == builtin.REGISTRY[name]()
+    path = tmp_path / f"{name}.toml"
+    path.write_text(text)
+    assert load_toml(path) == builtin.load(name)
+
+
+def test_show_unknown_name_exit_2(capsys):
+    assert main(["show", "nope"]) == 2
+    assert "unknown scenario 'nope'; valid names: frame-problem" in capsys.readouterr().err
