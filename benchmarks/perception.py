@@ -46,7 +46,8 @@ def _frame() -> dict:
 
 def run(args: argparse.Namespace) -> dict:
     from vnav.detect import detect_cones
-    from vnav.localize import depth_to_world_points, localize
+    from vnav.camera import depth_to_world_points
+    from vnav.localize import localize
 
     repeat = getattr(args, "repeat", 200)
     f = _frame()
@@ -55,7 +56,7 @@ def run(args: argparse.Namespace) -> dict:
     if len(detections) != 1:
         raise RuntimeError(f"expected one cone in the benchmark frame, found {len(detections)}")
     det = detections[0]
-    cam, T_w_b, T_b_c, T_w_c = world.camera, world.T_w_b(), world.T_b_c, world.T_w_c()
+    cam, T_w_b, T_b_c, T_w_c = world.camera, world.T_w_b, world.T_b_c, world.T_w_c
 
     calls: dict[str, Callable[[], object]] = {
         "detect_cones": lambda: detect_cones(rgb),

@@ -39,7 +39,8 @@ from vnav import metrics, quat, se3, so3
 from vnav.camera import PinholeCamera
 from vnav.cone import TRAFFIC_CONE, ConeModel
 from vnav.detect import detect_cones
-from vnav.localize import depth_to_world_points, localize
+from vnav.camera import depth_to_world_points
+from vnav.localize import localize
 
 logger = logging.getLogger(__name__)
 
@@ -250,7 +251,7 @@ def run_scenario(
     result = RunResult(spec=spec, seed=seed, timing_s=timing)
     world = World.from_config(spec.scene)
     camera, T_b_c = world.camera, world.T_b_c
-    cones_w = world.cones_w()
+    cones_w = world.cones_w
     far_m = spec.scene.zfar_m
     dt = float(world.model.opt.timestep)
     n_frames = math.floor(spec.end_s * spec.camera_rate_hz + 1e-9) + 1
@@ -347,7 +348,7 @@ def _evaluate_frame(
     Returns the record, this frame's estimates per method (K, 3), its mean error per method,
     the mean range of the matched cones and the decimated world cloud of the depth image.
     """
-    T_w_b = world.T_w_b()
+    T_w_b = world.T_w_b
     T_w_b_est = _noisy_pose(T_w_b, spec, rng)
     T_w_c = T_w_b @ T_b_c
     R_w_b = T_w_b[:3, :3]
@@ -418,7 +419,7 @@ def _evaluate_frame(
         frame=k,
         t_s=world.time_s,
         T_w_b=T_w_b,
-        quat_xyzw=world.quat_xyzw(),
+        quat_xyzw=world.quat_xyzw,
         rpy_rad=rpy,
         gimbal_locked=locked,
         cones_in_view=in_view,

@@ -11,9 +11,39 @@ import math
 from dataclasses import dataclass, field, fields
 from typing import Any
 
-RENDER_QUALITIES: tuple[str, ...] = ("fast", "high")
-"""``fast``: no shadow map, no multisampling (about 7 ms per 640x480 frame on a CPU);
+import numpy as np
+
+from vnav import frames, se3
+
+
+@dataclass(frozen=True)
+class RenderQuality:
+    """MuJoCo's rendering settings behind one quality name.
+
+    Attributes
+    ----------
+    shadowsize : int
+        Side of the shadow map in texels (0: no shadows).
+    offsamples : int
+        Multisamples of the off-screen buffer (0: no anti-aliasing).
+    """
+
+    shadowsize: int
+    offsamples: int
+
+    @property
+    def shadows(self) -> bool:
+        """Whether shadows are drawn."""
+        return self.shadowsize > 0
+
+
+RENDER_QUALITY: dict[str, RenderQuality] = {
+    "fast": RenderQuality(shadowsize=0, offsamples=0),
+    "high": RenderQuality(shadowsize=4096, offsamples=4),
+}
+"""``fast``: no shadow map, no multisampling (about 7 ms per 640x480 image on a CPU);
 ``high``: 4096 shadow map and 4x multisampling, for pictures."""
+RENDER_QUALITIES: tuple[str, ...] = tuple(RENDER_QUALITY)
 
 MAX_IMAGE_SIZE_PX = 8192
 SKY_MARGIN = 5.0
@@ -98,6 +128,12 @@ class CameraConfig:
         set_(self, "width", _size(self.width, "CameraConfig.width"))
         set_(self, "height", _size(self.height, "CameraConfig.height"))
 
+    @property
+    def T_b_c(self) -> np.ndarray:
+        """(4, 4) the camera's optical frame in the body frame (``vnav.frames.mount_rotation``)."""
+        R_b_c = frames.mount_rotation(math.radians(self.pitch_down_deg))
+        return se3.make(R_b_c, np.asarray(self.position_b, dtype=np.float64))
+
     @classmethod
     def from_dict(cls, values: dict[str, Any]) -> CameraConfig:
         """Build from a mapping, rejecting unknown keys with a ValueError."""
@@ -146,45 +182,18 @@ class SceneConfig:
             raise ValueError(
                 f"SceneConfig.camera must be a CameraConfig, got {type(self.camera).__name__}"
             )
-        try:
-            cones = tuple(self.cones_w)
-        except TypeError as exc:
-            raise ValueError(
-                f"SceneConfig.cones_w must be a sequence of (x, y, z), got {self.cones_w!r}"
-            ) from exc
-        checked = []
-        for i, cone in enumerate(cones):
-            p_w = _vector(cone, 3, f"SceneConfig.cones_w[{i}]")
-            if p_w[2] < 0.0:
-                raise ValueError(
-                    f"SceneConfig.cones_w[{i}] = {p_w} is under the ground (z < 0); cones stand "
-                    "on the ground, z = 0"
-                )
-            if p_w[2] != 0.0:
-                raise ValueError(
-                    f"SceneConfig.cones_w[{i}] = {p_w} floats above the ground; cones stand on "
-                    "the ground, z = 0"
-                )
-            checked.append(p_w)
-        set_(self, "cones_w", tuple(checked))
+        set_(self, "cones_w", _cones_on_ground(self.cones_w))
         set_(
             self,
             "start_position_w",
             _vector(self.start_position_w, 3, "SceneConfig.start_position_w"),
         )
-        q = _vector(self.start_quat_xyzw, 4, "SceneConfig.start_quat_xyzw")
-        norm = math.sqrt(sum(v * v for v in q))
-        if abs(norm - 1.0) > 1e-6:
-            raise ValueError(
-                f"SceneConfig.start_quat_xyzw must be a unit quaternion [x, y, z, w], got "
-                f"{q} with norm {norm}"
-            )
-        set_(self, "start_quat_xyzw", q)
+        set_(self, "start_quat_xyzw", _unit_quaternion(self.start_quat_xyzw))
         dt = _finite(self.timestep_s, "SceneConfig.timestep_s")
         if not 0.0 < dt <= 0.1:
             raise ValueError(f"SceneConfig.timestep_s must be in (0, 0.1] seconds, got {dt}")
         set_(self, "timestep_s", dt)
-        if self.render_quality not in RENDER_QUALITIES:
+        if self.render_quality not in RENDER_QUALITY:
             raise ValueError(
                 f"SceneConfig.render_quality must be one of {RENDER_QUALITIES}, got "
                 f"{self.render_quality!r}"
@@ -193,18 +202,7 @@ class SceneConfig:
         if ground <= 0.0:
             raise ValueError(f"SceneConfig.ground_size_m must be positive, got {ground}")
         set_(self, "ground_size_m", ground)
-        znear = _finite(self.znear_m, "SceneConfig.znear_m")
-        zfar = _finite(self.zfar_m, "SceneConfig.zfar_m")
-        if not 0.0 < znear < zfar:
-            raise ValueError(
-                f"SceneConfig.znear_m and zfar_m must satisfy 0 < znear_m < zfar_m, got "
-                f"znear_m={znear}, zfar_m={zfar}"
-            )
-        if zfar < SKY_MARGIN * ground:
-            raise ValueError(
-                f"SceneConfig.zfar_m ({zfar}) must be at least {SKY_MARGIN} x ground_size_m "
-                f"({ground}) so that the whole ground lies inside the sky dome"
-            )
+        znear, zfar = _clip_planes(self.znear_m, self.zfar_m, ground)
         set_(self, "znear_m", znear)
         set_(self, "zfar_m", zfar)
 
@@ -222,3 +220,52 @@ class SceneConfig:
         if "cones_w" in values:
             values["cones_w"] = tuple(tuple(c) for c in values["cones_w"])
         return cls(**values)
+
+
+def _cones_on_ground(cones_w: Any) -> tuple[tuple[float, float, float], ...]:
+    """Validated cone base centres: a sequence of (x, y, 0)."""
+    try:
+        cones = tuple(cones_w)
+    except TypeError as exc:
+        raise ValueError(
+            f"SceneConfig.cones_w must be a sequence of (x, y, z), got {cones_w!r}"
+        ) from exc
+    checked = []
+    for i, cone in enumerate(cones):
+        p_w = _vector(cone, 3, f"SceneConfig.cones_w[{i}]")
+        if p_w[2] != 0.0:
+            where = "is under the ground (z < 0)" if p_w[2] < 0.0 else "floats above the ground"
+            raise ValueError(
+                f"SceneConfig.cones_w[{i}] = {p_w} {where}; cones stand on the ground, z = 0"
+            )
+        checked.append(p_w)
+    return tuple(checked)
+
+
+def _unit_quaternion(value: Any) -> tuple[float, ...]:
+    """A validated unit quaternion [x, y, z, w] (norm within 1e-6 of 1)."""
+    q = _vector(value, 4, "SceneConfig.start_quat_xyzw")
+    norm = math.sqrt(sum(v * v for v in q))
+    if abs(norm - 1.0) > 1e-6:
+        raise ValueError(
+            f"SceneConfig.start_quat_xyzw must be a unit quaternion [x, y, z, w], got "
+            f"{q} with norm {norm}"
+        )
+    return q
+
+
+def _clip_planes(znear_m: Any, zfar_m: Any, ground_size_m: float) -> tuple[float, float]:
+    """Validated clipping distances: ``0 < znear < zfar`` and the ground inside the sky dome."""
+    znear = _finite(znear_m, "SceneConfig.znear_m")
+    zfar = _finite(zfar_m, "SceneConfig.zfar_m")
+    if not 0.0 < znear < zfar:
+        raise ValueError(
+            f"SceneConfig.znear_m and zfar_m must satisfy 0 < znear_m < zfar_m, got "
+            f"znear_m={znear}, zfar_m={zfar}"
+        )
+    if zfar < SKY_MARGIN * ground_size_m:
+        raise ValueError(
+            f"SceneConfig.zfar_m ({zfar}) must be at least {SKY_MARGIN} x ground_size_m "
+            f"({ground_size_m}) so that the whole ground lies inside the sky dome"
+        )
+    return znear, zfar

@@ -515,7 +515,7 @@ class Autopilot:
         for _ in range(int(n)):
             ref = self.trajectory.sample(w.time_s)
             out = self.controller.compute(
-                w.position_w(), w.velocity_w(), w.R_w_b(), w.angular_velocity_b(), ref
+                w.position_w, w.velocity_w, w.R_w_b, w.angular_velocity_b, ref
             )
             w.set_rotor_thrusts(self.mixer.thrusts(out.thrust_N, out.moment_b))
             w.step(1)
@@ -599,8 +599,3 @@ class KeyframePlayer:
         t = self.world.time_s + int(n) * dt
         self.world.set_time(t)
         self.world.set_pose(self.keyframes.pose(t))
-
-
-def attitude_error_rad(R_a: np.ndarray, R_b: np.ndarray) -> float:
-    """Angle of the rotation between two attitudes, radians (``|log(R_a^T R_b)|``)."""
-    return float(np.linalg.norm(so3.log(R_a.T @ R_b)))

@@ -13,13 +13,16 @@ camera does not image its own housing. External views (``camera="chase"`` or a
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from sim import names
+from sim.config import RENDER_QUALITY
 from sim.gl import create_gl_context, mujoco
 from sim.world import World
+from vnav.camera import PinholeCamera
 
 logger = logging.getLogger(__name__)
 
@@ -30,8 +33,8 @@ SKY_THRESHOLD_FRACTION = 0.65
 
 
 @dataclass(frozen=True)
-class Frame:
-    """One rendered image.
+class RenderedImage:
+    """What one call of :meth:`Renderer.render` returns: colour, and depth and ids if asked.
 
     Attributes
     ----------
@@ -99,17 +102,16 @@ class Renderer:
                 f"got {self.height}"
             )
         quality = quality if quality is not None else world.config.render_quality
-        if quality not in ("fast", "high"):
-            raise ValueError(f"quality must be 'fast' or 'high', got {quality!r}")
+        if quality not in RENDER_QUALITY:
+            raise ValueError(f"quality must be one of {list(RENDER_QUALITY)}, got {quality!r}")
         self.quality = quality
+        settings = RENDER_QUALITY[quality]
 
         self._gl = create_gl_context(self.width, self.height)
         # The context reads shadow map size and multisampling from the model when it is made.
         saved = (model.vis.quality.shadowsize, model.vis.quality.offsamples)
-        if quality == "fast":
-            model.vis.quality.shadowsize, model.vis.quality.offsamples = 0, 0
-        else:
-            model.vis.quality.shadowsize, model.vis.quality.offsamples = 4096, 4
+        model.vis.quality.shadowsize = settings.shadowsize
+        model.vis.quality.offsamples = settings.offsamples
         try:
             self._con = mujoco.MjrContext(model, mujoco.mjtFontScale.mjFONTSCALE_150.value)
         finally:
@@ -129,7 +131,7 @@ class Renderer:
         self._external_option.geomgroup[names.DRONE_GEOM_GROUP] = 1
         self._external_option.sitegroup[:] = 0
 
-        self._shadows = quality == "high"
+        self._shadows = settings.shadows
         self._ray_cache: dict[float, np.ndarray] = {}
         self._sky_cache: dict[tuple[float, float], np.ndarray] = {}
 
@@ -197,7 +199,7 @@ class Renderer:
         segmentation: bool = False,
         camera: str | int | mujoco.MjvCamera | None = None,
         show_drone: bool | None = None,
-    ) -> Frame:
+    ) -> RenderedImage:
         """Render the current state.
 
         Parameters
@@ -214,7 +216,7 @@ class Renderer:
 
         Returns
         -------
-        Frame
+        RenderedImage
         """
         if self._con is None:
             raise RuntimeError("render() called after close()")
@@ -242,7 +244,7 @@ class Renderer:
         seg = None
         if segmentation:
             seg = self._segmentation(scene)
-        return Frame(rgb=rgb, depth=depth_m, segmentation=seg, time_s=float(data.time))
+        return RenderedImage(rgb=rgb, depth=depth_m, segmentation=seg, time_s=float(data.time))
 
     def _linearize(self, raw: np.ndarray) -> np.ndarray:
         """Reversed-Z depth buffer -> planar z-depth in metres (as mujoco.Renderer does)."""
@@ -290,10 +292,9 @@ class Renderer:
         tan_half_fovy = _tan_half_fovy(scene)
         cached = self._ray_cache.get(tan_half_fovy)
         if cached is None:
-            f_px = (self.height / 2.0) / tan_half_fovy
-            u = (np.arange(self.width) - (self.width - 1) / 2.0) / f_px
-            v = (np.arange(self.height) - (self.height - 1) / 2.0) / f_px
-            cached = np.sqrt(1.0 + u[None, :] ** 2 + v[:, None] ** 2).astype(np.float32)
+            fovy_deg = math.degrees(2.0 * math.atan(tan_half_fovy))
+            camera = PinholeCamera.from_fovy(fovy_deg, self.width, self.height)
+            cached = camera.ray_length_per_depth().astype(np.float32)
             self._ray_cache[tan_half_fovy] = cached
         return cached
 

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from sim import names
-from sim.config import SceneConfig
+from sim.config import RENDER_QUALITY, SceneConfig
 from sim.gl import mujoco
 from vnav import frames, quat, se3
 from vnav.camera import PinholeCamera
@@ -45,8 +45,9 @@ MAX_DISTANCE_M = 1.0e5
 GROUND_GRID_SPACING_M = 10.0
 """Rendering grid of the ground plane (see build_spec)."""
 
-CHASE_OFFSET_B = (-3.0, 0.0, 1.5)
-"""Where the chase camera sits relative to the drone (world-aligned axes, metres)."""
+CHASE_OFFSET_W = (-3.0, 0.0, 1.5)
+"""Where the chase camera sits relative to the drone, metres, along the world's axes: MuJoCo's
+``track`` camera mode keeps this offset in world coordinates as the drone turns."""
 
 
 _INSTABILITY_WARNINGS = (
@@ -127,7 +128,9 @@ def build_spec(cfg: SceneConfig, cone: ConeModel = TRAFFIC_CONE) -> mujoco.MjSpe
     spec.visual.map.zfar = cfg.zfar_m / extent_m
     # Shadow map ("high" quality) covering +-30 m: tighter clips show acne on the ground.
     spec.visual.map.shadowclip = 3.0
-    apply_quality(spec, cfg.render_quality)
+    quality = RENDER_QUALITY[cfg.render_quality]
+    spec.visual.quality.shadowsize = quality.shadowsize
+    spec.visual.quality.offsamples = quality.offsamples
 
     # The plane is drawn as a grid of quads this many metres wide: 1 m quads over a 400 m
     # plane cost ~8 ms per 640x480 frame on a CPU renderer; 10 m quads cost ~1 ms.
@@ -140,8 +143,7 @@ def build_spec(cfg: SceneConfig, cone: ConeModel = TRAFFIC_CONE) -> mujoco.MjSpe
     drone.quat = list(quat.xyzw_to_wxyz(np.asarray(cfg.start_quat_xyzw, dtype=np.float64)))
 
     # Onboard camera: optical R_b_c from the mount, turned into MuJoCo's camera convention.
-    R_b_c = mount_rotation(cam_cfg.pitch_down_deg)
-    R_b_glc = R_b_c @ frames.R_GLC_RDF
+    R_b_glc = cam_cfg.T_b_c[:3, :3] @ frames.R_GLC_RDF
     drone.add_camera(
         name=names.ONBOARD_CAMERA,
         pos=list(cam_cfg.position_b),
@@ -150,7 +152,7 @@ def build_spec(cfg: SceneConfig, cone: ConeModel = TRAFFIC_CONE) -> mujoco.MjSpe
     )
 
     # Chase camera: follows the drone's position with a world-aligned offset, looks at it.
-    offset = np.asarray(CHASE_OFFSET_B, dtype=np.float64)
+    offset = np.asarray(CHASE_OFFSET_W, dtype=np.float64)
     z_glc = offset / np.linalg.norm(offset)  # looks along -z_glc = -offset: at the drone
     x_glc = np.cross([0.0, 0.0, 1.0], z_glc)
     x_glc /= np.linalg.norm(x_glc)
@@ -165,18 +167,6 @@ def build_spec(cfg: SceneConfig, cone: ConeModel = TRAFFIC_CONE) -> mujoco.MjSpe
 
     add_cones(spec, cfg.cones_w, cone)
     return spec
-
-
-def apply_quality(spec: mujoco.MjSpec, quality: str) -> None:
-    """Set the render quality fields of a spec: ``fast`` or ``high``."""
-    if quality == "fast":
-        spec.visual.quality.shadowsize = 0
-        spec.visual.quality.offsamples = 0
-    elif quality == "high":
-        spec.visual.quality.shadowsize = 4096
-        spec.visual.quality.offsamples = 4
-    else:
-        raise ValueError(f"quality must be 'fast' or 'high', got {quality!r}")
 
 
 def add_cones(
@@ -214,11 +204,6 @@ def add_cones(
             material=names.CONE_MATERIAL,
             mass=CONE_SHELL_MASS_KG,
         )
-
-
-def mount_rotation(pitch_down_deg: float) -> np.ndarray:
-    """``R_b_c`` of a camera pitched down by ``pitch_down_deg`` (see vnav.frames)."""
-    return frames.mount_rotation(math.radians(pitch_down_deg))
 
 
 class World:
@@ -275,8 +260,7 @@ class World:
         ).reshape(n_cones, 2)
         """(N, 2) geom ids of each cone: [base plate, body]."""
         cam_cfg = self.config.camera
-        R_b_c = mount_rotation(cam_cfg.pitch_down_deg)
-        self._T_b_c = se3.make(R_b_c, np.asarray(cam_cfg.position_b, dtype=np.float64))
+        self._T_b_c = cam_cfg.T_b_c
         self._camera = PinholeCamera.from_fovy(
             float(m.cam_fovy[self.camera_id]), cam_cfg.width, cam_cfg.height
         )
@@ -316,36 +300,44 @@ class World:
         """Intrinsics of the onboard camera, exactly as MuJoCo renders it."""
         return self._camera
 
+    @property
     def T_w_b(self) -> np.ndarray:
         """(4, 4) the body pose in the world (from MuJoCo's body frame after kinematics)."""
         R_w_b = self.data.xmat[self.body_id].reshape(3, 3)
         return se3.make(R_w_b.copy(), self.data.xpos[self.body_id].copy())
 
+    @property
     def T_w_c(self) -> np.ndarray:
         """(4, 4) the onboard camera's pose in the world, optical convention (RDF)."""
-        return self.T_w_b() @ self._T_b_c
+        return self.T_w_b @ self._T_b_c
 
+    @property
     def cones_w(self) -> np.ndarray:
         """(N, 3) the cones' true base centres in the world, metres."""
         return np.array(self.config.cones_w, dtype=np.float64).reshape(-1, 3)
 
+    @property
     def position_w(self) -> np.ndarray:
         """(3,) body origin (centre of mass) in the world, metres."""
         return self.data.qpos[self._qpos_adr : self._qpos_adr + 3].copy()
 
+    @property
     def quat_xyzw(self) -> np.ndarray:
         """(4,) body attitude ``R_w_b`` as [x, y, z, w]."""
         q_wxyz = self.data.qpos[self._qpos_adr + 3 : self._qpos_adr + 7]
         return quat.wxyz_to_xyzw(q_wxyz / np.linalg.norm(q_wxyz))
 
+    @property
     def R_w_b(self) -> np.ndarray:
         """(3, 3) body attitude (MuJoCo's body frame, kept current by step/set_pose)."""
         return self.data.xmat[self.body_id].reshape(3, 3).copy()
 
+    @property
     def velocity_w(self) -> np.ndarray:
         """(3,) linear velocity of the body origin in the world, m/s (MuJoCo free joint)."""
         return self.data.qvel[self._qvel_adr : self._qvel_adr + 3].copy()
 
+    @property
     def angular_velocity_b(self) -> np.ndarray:
         """(3,) angular velocity in the body frame, rad/s (MuJoCo free joint)."""
         return self.data.qvel[self._qvel_adr + 3 : self._qvel_adr + 6].copy()
@@ -398,7 +390,7 @@ class World:
     def step(self, n: int = 1) -> None:
         """Advance the physics by ``n`` time steps.
 
-        Afterwards every derived quantity (``T_w_b()``, camera poses, what is rendered) is that
+        Afterwards every derived quantity (``T_w_b``, camera poses, what is rendered) is that
         of the new state at :attr:`time_s`.
 
         Raises
@@ -425,7 +417,7 @@ class World:
             qp2 = float(d.qpos @ d.qpos)
             if not (qv2 <= _FAST_QVEL2 and qp2 <= _FAST_QPOS2):  # also catches NaN
                 self._check_state()
-        # mj_step leaves xpos/xmat/cam_xpos (what T_w_b() reports and the renderer draws) at the
+        # mj_step leaves xpos/xmat/cam_xpos (what T_w_b reports and the renderer draws) at the
         # state before its integration; recompute them for the current qpos and time.
         mujoco.mj_forward(m, d)
 

@@ -23,18 +23,17 @@ from vnav import se3, so3
 from vnav.camera import PinholeCamera
 from vnav.cone import TRAFFIC_CONE
 from vnav.detect import ConeDetection, detect_cones
-from vnav.localize import (
+from vnav.camera import depth_to_world_points
+from vnav.estimators import (
     MAX_RANGE_ERROR_PER_PX,
     MIN_TRIANGLE_FRACTION,
-    ConeEstimates,
-    apex_pixel,
-    depth_to_world_points,
     estimate_from_depth,
     estimate_from_ground_plane,
     estimate_from_known_height,
-    localize,
-    triangle_fraction,
 )
+from vnav.localize import localize
+from vnav.methods import METHOD_NAMES
+from vnav.silhouette import apex_pixel, triangle_fraction
 from vnav.metrics import error_stats, horizontal_error
 
 logger = logging.getLogger(__name__)
@@ -71,7 +70,7 @@ def sample_poses(
     and the cone's projection is at least 12 px tall.
     """
     camera, T_b_c = world.camera, world.T_b_c
-    p0_w = world.cones_w()[0]
+    p0_w = world.cones_w[0]
     poses: list[tuple[np.ndarray, float]] = []
     while len(poses) < n:
         rpy = np.radians([rng.uniform(-30, 30), rng.uniform(-30, 30), rng.uniform(-180, 180)])
@@ -115,7 +114,7 @@ def _render_set(
     for pitch_deg in pitches_deg:
         world = World.from_config(SceneConfig(camera=CameraConfig(pitch_down_deg=pitch_deg)))
         far_m = 0.99 * world.model.vis.map.zfar * world.model.stat.extent
-        p0_w = world.cones_w()[0]
+        p0_w = world.cones_w[0]
         with Renderer(world) as renderer:
             for T_w_b, range_m in sample_poses(world, rng, per_pitch, heights_m, ranges_m):
                 world.set_pose(T_w_b)
@@ -126,7 +125,7 @@ def _render_set(
                     estimates = localize(
                         detections[0],
                         world.camera,
-                        world.T_w_b(),
+                        world.T_w_b,
                         world.T_b_c,
                         frame.depth,
                         far_m=far_m,
@@ -136,7 +135,7 @@ def _render_set(
                         "pitch_deg": pitch_deg,
                         "range_m": range_m,
                         "p0_w": p0_w,
-                        "t_w_c": (world.T_w_b() @ world.T_b_c)[:3, 3],
+                        "t_w_c": (world.T_w_b @ world.T_b_c)[:3, 3],
                         "n_detections": len(detections),
                         "estimates": estimates,
                     }
@@ -199,7 +198,7 @@ def test_error_statistics_per_method(grid: dict, record_property) -> None:
             f"{'method':13s} {'n':>4s} {'none':>4s} {'mean':>7s} {'median':>7s} "
             f"{'rmse':>7s} {'max':>7s}  horizontal error, m; median / range"
         )
-        for method in ConeEstimates.METHODS:
+        for method in METHOD_NAMES:
             e, r = _errors(grid[name], method)
             stats = error_stats(e[np.isfinite(e)])
             record_property(f"{name}_{method}_horizontal_error_m", stats)
@@ -256,8 +255,8 @@ def _render_one(cone_xy: tuple[float, float], height_m: float, pitch_deg: float,
 
 
 def _relative_error(world: World, p_w: np.ndarray) -> float:
-    p0_w = world.cones_w()[0]
-    return float(horizontal_error(p0_w, p_w)[0] / np.linalg.norm(p0_w - world.T_w_c()[:3, 3]))
+    p0_w = world.cones_w[0]
+    return float(horizontal_error(p0_w, p_w)[0] / np.linalg.norm(p0_w - world.T_w_c[:3, 3]))
 
 
 def test_known_height_straight_ahead_low_camera() -> None:
@@ -268,7 +267,7 @@ def test_known_height_straight_ahead_low_camera() -> None:
     errors = []
     for x in (8.0, 12.0, 16.0, 20.0, 24.0):
         world, _, (detection,) = _render_one((x, 0.0), 3.0, 12.0)
-        p_w = localize(detection, world.camera, world.T_w_b(), world.T_b_c).known_height
+        p_w = localize(detection, world.camera, world.T_w_b, world.T_b_c).known_height
         assert p_w is not None, f"no estimate at {x} m"
         errors.append(_relative_error(world, p_w))
     assert np.median(errors) <= 0.05, f"relative errors {np.round(errors, 3)}"
@@ -290,10 +289,10 @@ def test_known_height_refuses_steep_views(
     """Both sides of the steep-view criterion `triangle_fraction(e) >= MIN_TRIANGLE_FRACTION`,
     seen from 10 m above; the other methods keep working."""
     world, frame, (detection,) = _render_one((cone_x_m, 0.0), 10.0, pitch_deg)
-    T_w_c = world.T_w_c()
-    elevation = np.arcsin(T_w_c[2, 3] / np.linalg.norm(world.cones_w()[0] - T_w_c[:3, 3]))
+    T_w_c = world.T_w_c
+    elevation = np.arcsin(T_w_c[2, 3] / np.linalg.norm(world.cones_w[0] - T_w_c[:3, 3]))
     assert (triangle_fraction(elevation) >= MIN_TRIANGLE_FRACTION) == expect_estimate
-    estimates = localize(detection, world.camera, world.T_w_b(), world.T_b_c, frame.depth)
+    estimates = localize(detection, world.camera, world.T_w_b, world.T_b_c, frame.depth)
     if expect_estimate:
         assert estimates.known_height is not None
         assert _relative_error(world, estimates.known_height) <= 0.05
@@ -317,7 +316,7 @@ def test_known_height_refuses_tiny_cones(cone_x_m: float, expect_estimate: bool)
     estimate by under 10% of range (kept); at 36 m (7 px) by about 16% (> MAX_RANGE_ERROR_PER_PX
     = 10%: no estimate rather than a wrong one)."""
     world, _, (detection,) = _render_one((cone_x_m, 0.0), 3.0, 5.0, yaw=0.02)
-    p_w = estimate_from_known_height(detection, world.camera, world.T_w_c())
+    p_w = estimate_from_known_height(detection, world.camera, world.T_w_c)
     assert (p_w is not None) == expect_estimate
     if p_w is not None:
         assert _relative_error(world, p_w) <= 2.0 * MAX_RANGE_ERROR_PER_PX
@@ -327,9 +326,9 @@ def test_cone_cut_off_by_border_gives_no_estimate() -> None:
     """Half the cone outside the image: every method (and the naive one) gives None."""
     world, frame, (detection,) = _render_one((6.0, 0.0), 3.0, 30.0, yaw=-0.73)
     assert detection.touches_border
-    estimates = localize(detection, world.camera, world.T_w_b(), world.T_b_c, frame.depth)
+    estimates = localize(detection, world.camera, world.T_w_b, world.T_b_c, frame.depth)
     assert all(p is None for p in estimates.as_dict().values()), estimates
-    T_w_c = world.T_w_c()
+    T_w_c = world.T_w_c
     assert estimate_from_depth(detection, frame.depth, world.camera, T_w_c) is None
     assert estimate_from_ground_plane(detection, world.camera, T_w_c) is None
     assert estimate_from_known_height(detection, world.camera, T_w_c) is None
@@ -373,10 +372,10 @@ def test_chain_is_exact() -> None:
     """Project the true base centre and back-project with its true depth: the truth to 1e-9 m."""
     world = World.from_config(SceneConfig())
     rng = np.random.default_rng(1)
-    p0_w = world.cones_w()[0]
+    p0_w = world.cones_w[0]
     for T_w_b, _ in sample_poses(world, rng, 50):
         world.set_pose(T_w_b)
-        T_w_c = world.T_w_b() @ world.T_b_c
+        T_w_c = world.T_w_b @ world.T_b_c
         p_c = se3.apply(se3.invert(T_w_c), p0_w)
         uv = world.camera.project(p_c)
         p_w = se3.apply(T_w_c, world.camera.backproject(uv, p_c[2]))
@@ -397,7 +396,7 @@ def one_view() -> dict:
 
 def test_depth_cloud_lies_on_true_surfaces(one_view: dict) -> None:
     world, frame, far_m = one_view["world"], one_view["frame"], one_view["far_m"]
-    T_w_c = world.T_w_c()
+    T_w_c = world.T_w_c
     cloud_w = depth_to_world_points(frame.depth, world.camera, T_w_c, far_m=far_m)
     sky = frame.depth >= far_m
     assert cloud_w.shape == (int((~sky).sum()), 3)
@@ -406,7 +405,7 @@ def test_depth_cloud_lies_on_true_surfaces(one_view: dict) -> None:
     ground_z = cloud_w[~cone, 2]
     assert np.abs(ground_z).max() < 0.02
     # Cone pixels lie on the cone's analytic surface.
-    p_k = cloud_w[cone] - world.cones_w()[0]
+    p_k = cloud_w[cone] - world.cones_w[0]
     assert np.median(surface_residual_m(p_k)) < 0.003
     # The strided cloud is the subset of pixels.
     sub = depth_to_world_points(frame.depth, world.camera, T_w_c, stride=4, far_m=far_m)
@@ -416,15 +415,15 @@ def test_depth_cloud_lies_on_true_surfaces(one_view: dict) -> None:
 def test_no_valid_depth_gives_no_depth_estimate(one_view: dict) -> None:
     world, detection = one_view["world"], one_view["detection"]
     far = np.full_like(one_view["frame"].depth, 1e3)
-    assert estimate_from_depth(detection, far, world.camera, world.T_w_c(), far_m=500.0) is None
-    estimates = localize(detection, world.camera, world.T_w_b(), world.T_b_c, far, far_m=500.0)
+    assert estimate_from_depth(detection, far, world.camera, world.T_w_c, far_m=500.0) is None
+    estimates = localize(detection, world.camera, world.T_w_b, world.T_b_c, far, far_m=500.0)
     assert estimates.depth_image is None
     assert estimates.ground_plane is not None and estimates.naive is not None
 
 
 def test_ray_not_reaching_ground_gives_no_ground_estimate(one_view: dict) -> None:
     world, detection = one_view["world"], one_view["detection"]
-    T_w_c = world.T_w_c()
+    T_w_c = world.T_w_c
     # Turn the camera upside down about its optical axis's horizontal: rays now point up.
     T_up = T_w_c.copy()
     T_up[:3, :3] = so3.rot_x(np.pi) @ T_w_c[:3, :3]
@@ -437,7 +436,7 @@ def test_ray_not_reaching_ground_gives_no_ground_estimate(one_view: dict) -> Non
 
 def test_bad_input_raises(one_view: dict) -> None:
     world, frame, detection = one_view["world"], one_view["frame"], one_view["detection"]
-    cam, T_w_b, T_b_c = world.camera, world.T_w_b(), world.T_b_c
+    cam, T_w_b, T_b_c = world.camera, world.T_w_b, world.T_b_c
     with pytest.raises(ValueError, match=r"depth must have the camera's image size"):
         localize(detection, cam, T_w_b, T_b_c, frame.depth[:-1])
     with pytest.raises(ValueError, match="depth must have dtype float32 or float64"):
@@ -448,7 +447,7 @@ def test_bad_input_raises(one_view: dict) -> None:
     with pytest.raises(ValueError, match="depth must be finite under the detection's mask"):
         localize(detection, cam, T_w_b, T_b_c, nan_depth)
     with pytest.raises(ValueError, match="depth must not contain NaN"):
-        depth_to_world_points(nan_depth, cam, world.T_w_c())
+        depth_to_world_points(nan_depth, cam, world.T_w_c)
     with pytest.raises(ValueError, match=r"T_w_b must have shape \(\.\.\., 4, 4\)"):
         localize(detection, cam, T_w_b[:3], T_b_c)
     with pytest.raises(ValueError, match="T_w_b must be a single 4x4 transform"):
@@ -458,7 +457,7 @@ def test_bad_input_raises(one_view: dict) -> None:
     with pytest.raises(ValueError, match=r"T_b_c\[:3, :3\] is not a rotation matrix"):
         localize(detection, cam, T_w_b, bad)
     with pytest.raises(ValueError, match="stride must be a positive int"):
-        depth_to_world_points(frame.depth, cam, world.T_w_c(), stride=0)
+        depth_to_world_points(frame.depth, cam, world.T_w_c, stride=0)
     small = PinholeCamera.from_fovy(60.0, 320, 240)
     with pytest.raises(ValueError, match="does not fit the camera's image"):
         localize(detection, small, T_w_b, T_b_c)

@@ -61,7 +61,7 @@ def test_camera_mount_and_pinhole_match_mujoco(recorded):
     cam = world.camera_id
     R_w_c = world.data.cam_xmat[cam].reshape(3, 3) @ np.diag([1.0, -1.0, -1.0])
     T_w_c = se3.make(R_w_c, world.data.cam_xpos[cam])
-    T_b_c_mujoco = se3.invert(world.T_w_b()) @ T_w_c
+    T_b_c_mujoco = se3.invert(world.T_w_b) @ T_w_c
 
     q_xyzw = np.array(mount["Transform3D:quaternion"][0])
     assert np.allclose(mount["Transform3D:translation"][0], T_b_c_mujoco[:3, 3], atol=1e-6)

@@ -41,8 +41,8 @@ def test_hover_at_10_m_holds_position_and_attitude() -> None:
     pos_err, att_err = [], []
     while world.time_s < 15.0 - 1e-9:
         pilot.step()
-        pos_err.append(np.linalg.norm(world.T_w_b()[:3, 3] - [0.0, 0.0, 10.0]))
-        att_err.append(_angle_deg(np.eye(3), world.T_w_b()[:3, :3]))
+        pos_err.append(np.linalg.norm(world.T_w_b[:3, 3] - [0.0, 0.0, 10.0]))
+        att_err.append(_angle_deg(np.eye(3), world.T_w_b[:3, :3]))
     assert len(pos_err) == 1000
     assert max(pos_err) < 0.02
     assert max(att_err) < 0.5
@@ -57,12 +57,12 @@ def test_yaw_step_of_90_deg_settles_within_3_s() -> None:
     errors = []
     while world.time_s < 6.0 - 1e-9:
         pilot.step()
-        errors.append((world.time_s - 1.0, _angle_deg(R_target, world.T_w_b()[:3, :3])))
+        errors.append((world.time_s - 1.0, _angle_deg(R_target, world.T_w_b[:3, :3])))
     t_rel, err = np.array(errors).T
     assert err[0] > 85.0
     assert np.all(err[t_rel >= 3.0] < 2.0), f"error after 3 s: {err[t_rel >= 3.0].max():.2f} deg"
     # Thrust stays balanced while yawing: altitude barely moves.
-    assert abs(world.T_w_b()[2, 3] - 10.0) < 0.02
+    assert abs(world.T_w_b[2, 3] - 10.0) < 0.02
 
 
 TRACKING_BOUND_M = 0.10
@@ -79,10 +79,10 @@ def test_waypoint_tracking_stays_within_bound() -> None:
     while world.time_s < 20.0 - 1e-9:
         pilot.step()
         ref = trajectory.sample(world.time_s)
-        errors.append(np.linalg.norm(world.T_w_b()[:3, 3] - ref.p_w))
+        errors.append(np.linalg.norm(world.T_w_b[:3, 3] - ref.p_w))
     assert max(errors) < TRACKING_BOUND_M, f"max tracking error {max(errors):.3f} m"
     assert errors[-1] < 0.01
-    assert _angle_deg(np.eye(3), world.T_w_b()[:3, :3]) < 1.0  # final yaw 0, level
+    assert _angle_deg(np.eye(3), world.T_w_b[:3, :3]) < 1.0  # final yaw 0, level
 
 
 def test_minimum_jerk_reference_passes_waypoints_at_rest() -> None:
@@ -116,7 +116,7 @@ def test_mixer_reproduces_wrench_and_respects_limits() -> None:
         mujoco.mj_forward(world.model, world.data)
         f_w = world.data.qfrc_actuator[:3]
         tau_b = world.data.qfrc_actuator[3:6]
-        R_w_b = world.T_w_b()[:3, :3]
+        R_w_b = world.T_w_b[:3, :3]
         np.testing.assert_allclose(R_w_b.T @ f_w, [0, 0, thrust], atol=1e-9)
         np.testing.assert_allclose(tau_b, moment, atol=1e-9)
     # An impossible yaw demand is scaled down; thrust, roll and pitch are kept.
@@ -137,12 +137,12 @@ def test_keyframes_are_exact_including_90_deg_pitch() -> None:
     player = KeyframePlayer(world, KeyframeTrajectory([0.0, 1.0], [T0, T1]))
     player.step(50)
     assert world.time_s == pytest.approx(0.5)
-    T_mid = world.T_w_b()
+    T_mid = world.T_w_b
     np.testing.assert_allclose(T_mid[:3, 3], [1.0, 2.0, 6.0], atol=1e-12)
     R_half = Rotation.from_euler("y", 45.0, degrees=True).as_matrix()
     np.testing.assert_allclose(T_mid[:3, :3], R_half, atol=1e-12)
     player.step(60)
-    np.testing.assert_allclose(world.T_w_b(), T1, atol=1e-12)
+    np.testing.assert_allclose(world.T_w_b, T1, atol=1e-12)
     np.testing.assert_allclose(world.data.qvel, 0.0)
 
 
@@ -181,5 +181,5 @@ def test_orbit_flown_by_the_controller_stays_on_the_circle():
     worst_radius_m = 0.0
     for _ in range(int(17.5 / 0.01)):
         pilot.step(1)
-        worst_radius_m = max(worst_radius_m, abs(np.linalg.norm(world.position_w()[:2]) - 6.0))
+        worst_radius_m = max(worst_radius_m, abs(np.linalg.norm(world.position_w[:2]) - 6.0))
     assert worst_radius_m < 0.1  # ground truth: MuJoCo's body position

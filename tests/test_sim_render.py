@@ -39,7 +39,7 @@ def _back_project_w(world: World, depth: np.ndarray, mask: np.ndarray) -> np.nda
     cam = world.camera
     z = depth[mask].astype(np.float64)
     p_c = np.column_stack([(u[mask] - cam.cx) * z / cam.fx, (v[mask] - cam.cy) * z / cam.fy, z])
-    T_w_c = world.T_w_b() @ world.T_b_c
+    T_w_c = world.T_w_b @ world.T_b_c
     return p_c @ T_w_c[:3, :3].T + T_w_c[:3, 3]
 
 
@@ -197,7 +197,7 @@ def test_onboard_camera_never_sees_its_drone_but_chase_view_does() -> None:
         chase = renderer.render(segmentation=True, camera=names.CHASE_CAMERA)
         free = renderer.render(
             segmentation=True,
-            camera=renderer.free_camera(world.T_w_b()[:3, 3], 3.0, 120.0, -30.0),
+            camera=renderer.free_camera(world.T_w_b[:3, 3], 3.0, 120.0, -30.0),
         )
     assert not np.isin(onboard.segmentation, drone_geoms).any()
     assert (onboard.segmentation == world.model.geom(names.GROUND_GEOM).id).mean() > 0.5

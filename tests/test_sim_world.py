@@ -49,9 +49,9 @@ def test_T_w_b_T_b_c_equals_mujoco_camera_pose(seed: int) -> None:
     for _ in range(20):
         T_w_b = _random_pose(rng)
         world.set_pose(T_w_b)
-        np.testing.assert_allclose(world.T_w_b(), T_w_b, atol=1e-12)
-        np.testing.assert_allclose(world.T_w_b() @ world.T_b_c, _mujoco_T_w_c(world), atol=1e-9)
-        np.testing.assert_allclose(world.T_w_c(), _mujoco_T_w_c(world), atol=1e-9)
+        np.testing.assert_allclose(world.T_w_b, T_w_b, atol=1e-12)
+        np.testing.assert_allclose(world.T_w_b @ world.T_b_c, _mujoco_T_w_c(world), atol=1e-9)
+        np.testing.assert_allclose(world.T_w_c, _mujoco_T_w_c(world), atol=1e-9)
 
 
 def test_mount_matches_the_convention_by_hand() -> None:
@@ -85,10 +85,10 @@ def test_start_pose_and_cones_come_from_config() -> None:
     world = World.from_config(
         SceneConfig(cones_w=cones, start_position_w=(1.0, 2.0, 3.0), start_quat_xyzw=q_xyzw)
     )
-    T = world.T_w_b()
+    T = world.T_w_b
     np.testing.assert_allclose(T[:3, 3], [1.0, 2.0, 3.0])
     np.testing.assert_allclose(T[:3, :3], Rotation.from_quat(q_xyzw).as_matrix(), atol=1e-12)
-    np.testing.assert_allclose(world.cones_w(), cones)
+    np.testing.assert_allclose(world.cones_w, cones)
     for i, p_w in enumerate(cones):
         np.testing.assert_allclose(world.data.xpos[world.model.body(names.cone_body(i)).id], p_w)
     assert world.time_s == 0.0
@@ -112,7 +112,7 @@ def test_hover_thrust_balances_gravity_open_loop() -> None:
     world = World.from_config()
     world.set_rotor_thrusts(np.full(4, 1.325 * 9.81 / 4))
     world.step(100)
-    np.testing.assert_allclose(world.position_w(), [0.0, 0.0, 10.0], atol=1e-9)
+    np.testing.assert_allclose(world.position_w, [0.0, 0.0, 10.0], atol=1e-9)
 
 
 def test_nan_state_stops_with_time_and_cause() -> None:
@@ -180,10 +180,10 @@ def test_ground_truth_is_current_after_physics_steps() -> None:
     assert world.time_s == pytest.approx(0.37)
     q_wxyz = world.data.qpos[3:7]
     R_qpos = Rotation.from_quat(q_wxyz[[1, 2, 3, 0]]).as_matrix()
-    np.testing.assert_allclose(world.T_w_b()[:3, 3], world.data.qpos[:3], atol=1e-12)
-    np.testing.assert_allclose(world.T_w_b()[:3, :3], R_qpos, atol=1e-12)
+    np.testing.assert_allclose(world.T_w_b[:3, 3], world.data.qpos[:3], atol=1e-12)
+    np.testing.assert_allclose(world.T_w_b[:3, :3], R_qpos, atol=1e-12)
     assert _angle_between(R_qpos, np.eye(3)) > 0.01
-    np.testing.assert_allclose(world.T_w_c(), _mujoco_T_w_c(world), atol=1e-9)
+    np.testing.assert_allclose(world.T_w_c, _mujoco_T_w_c(world), atol=1e-9)
 
 
 def _angle_between(R_a: np.ndarray, R_b: np.ndarray) -> float:
@@ -198,7 +198,7 @@ def test_camera_slides_on_its_mount_and_mujoco_agrees():
     cam = world.camera_id
     R_w_c = world.data.cam_xmat[cam].reshape(3, 3) @ np.diag([1.0, -1.0, -1.0])
     T_w_c_mujoco = se3.make(R_w_c, world.data.cam_xpos[cam])
-    np.testing.assert_allclose(world.T_w_b() @ world.T_b_c, T_w_c_mujoco, atol=1e-9)
+    np.testing.assert_allclose(world.T_w_b @ world.T_b_c, T_w_c_mujoco, atol=1e-9)
     np.testing.assert_allclose(world.T_b_c[:3, 3], [0.3, -0.1, 0.2])
     with pytest.raises(ValueError, match="position_b must be 3 finite numbers"):
         world.set_camera_position_b([0.0, np.nan, 0.0])

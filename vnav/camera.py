@@ -20,7 +20,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["PinholeCamera"]
+from vnav import se3
+
+__all__ = ["PinholeCamera", "check_depth_image", "depth_to_world_points"]
 
 
 def _as_points(name: str, p: np.ndarray, dim: int) -> np.ndarray:
@@ -94,7 +96,8 @@ class PinholeCamera:
 
         Square pixels with `fx = fy = (H / 2) / tan(fovy / 2)` and the principal point at the
         image centre, `cx = (W - 1) / 2`, `cy = (H - 1) / 2` in OpenCV pixel-centre coordinates
-        (docs/CONVENTIONS.md; measured in /work/shared/REFERENCE.md).
+        (docs/CONVENTIONS.md, "Pixels and the pinhole camera", where the measurement is
+        described).
 
         Parameters
         ----------
@@ -233,6 +236,20 @@ class PinholeCamera:
         p_c = self.backproject(uv, 1.0)
         return p_c / np.linalg.norm(p_c, axis=1, keepdims=True)
 
+    def ray_length_per_depth(self) -> np.ndarray:
+        """Length of the viewing ray per unit of planar depth at every pixel centre.
+
+        ``sqrt(1 + x^2 + y^2)`` with ``(x, y, 1) = K^-1 [u, v, 1]``: a pixel at planar depth
+        ``z`` sees a point ``z * ray_length_per_depth()[v, u]`` metres from the camera.
+
+        Returns
+        -------
+        scale : ndarray, shape (height, width), float64
+        """
+        x = (np.arange(self.width, dtype=np.float64) - self.cx) / self.fx
+        y = (np.arange(self.height, dtype=np.float64) - self.cy) / self.fy
+        return np.sqrt(1.0 + x[None, :] ** 2 + y[:, None] ** 2)
+
     def in_image(self, uv: np.ndarray, margin_px: float = 0.0) -> np.ndarray:
         """Whether pixels lie inside the image, shrunk by `margin_px` on every side.
 
@@ -259,3 +276,78 @@ class PinholeCamera:
                 & (uv[:, 1] >= lo)
                 & (uv[:, 1] < self.height - 0.5 - margin_px)
             )
+
+
+def check_depth_image(depth: np.ndarray, camera: PinholeCamera, name: str = "depth") -> np.ndarray:
+    """Validate a planar depth image for ``camera``; return it unchanged.
+
+    Raises
+    ------
+    ValueError
+        If ``depth`` is not a float32 or float64 numpy array of the camera's image size.
+    """
+    if not isinstance(depth, np.ndarray):
+        raise ValueError(f"{name} must be a numpy array, got {type(depth).__name__}")
+    if depth.dtype not in (np.float32, np.float64):
+        raise ValueError(f"{name} must have dtype float32 or float64 (metres), got {depth.dtype}")
+    if depth.shape != (camera.height, camera.width):
+        raise ValueError(
+            f"{name} must have the camera's image size (H, W) = ({camera.height}, "
+            f"{camera.width}), got shape {depth.shape}"
+        )
+    return depth
+
+
+def depth_to_world_points(
+    depth: np.ndarray,
+    camera: PinholeCamera,
+    T_w_c: np.ndarray,
+    stride: int = 1,
+    far_m: float = np.inf,
+) -> np.ndarray:
+    """The depth image as a world-frame point cloud, ``p_w = T_w_c @ backproject(uv, z)``.
+
+    Parameters
+    ----------
+    depth : ndarray, shape (H, W), float32 or float64
+        Planar z-depth, metres.
+    camera : PinholeCamera
+        Its size must match ``depth``.
+    T_w_c : ndarray, shape (4, 4)
+    stride : int
+        Use every ``stride``-th row and column.
+    far_m : float
+        Pixels with depth >= far_m (the renderer's far plane: background), <= 0 or +inf are
+        dropped.
+
+    Returns
+    -------
+    p_w : ndarray, shape (M, 3), float64
+        One point per valid pixel, row-major pixel order.
+
+    Raises
+    ------
+    ValueError
+        On a wrong dtype or size, NaN depth, ``stride`` < 1, or a malformed ``T_w_c``.
+    """
+    check_depth_image(depth, camera)
+    T_w_c = se3.check_pose(T_w_c, "T_w_c")
+    if isinstance(stride, bool) or not isinstance(stride, int | np.integer) or stride < 1:
+        raise ValueError(f"stride must be a positive int, got {stride!r}")
+    z = depth[::stride, ::stride]
+    if np.isnan(z).any():
+        raise ValueError(f"depth must not contain NaN; got {int(np.isnan(z).sum())} NaN pixels")
+    valid = (z > 0.0) & (z < far_m)
+    # Fold K^-1 and R_w_c into one 3x3: p_w = z * (M @ [u, v, 1]) + t_w_c. M @ [u, v, 1] is a
+    # column term plus a row term, so each coordinate is one broadcast over the contiguous
+    # grid, then gathered at the valid pixels (row-major order); no index arrays are built.
+    M = T_w_c[:3, :3] @ np.linalg.inv(camera.K)
+    u = np.arange(0, depth.shape[1], stride, dtype=np.float64)
+    v = np.arange(0, depth.shape[0], stride, dtype=np.float64)[:, None]
+    zv = z.astype(np.float64)
+    p_w = np.empty((int(np.count_nonzero(valid)), 3), dtype=np.float64)
+    for i in range(3):
+        plane = zv * (M[i, 0] * u + (M[i, 1] * v + M[i, 2]))
+        plane += T_w_c[i, 3]
+        p_w[:, i] = plane[valid]
+    return p_w

@@ -1,4 +1,5 @@
-"""The traffic cone's physical description, shared by the simulator and the perception code.
+"""The traffic cone: its shape, shared by the simulator and the perception code, and how much
+of it a camera sees.
 
 The simulator builds its cone mesh from these numbers and the detector and localiser assume
 them, so they live here, in the library both depend on (scenarios -> sim -> vnav).
@@ -6,7 +7,13 @@ them, so they live here, in the library both depend on (scenarios -> sim -> vnav
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+
+import numpy as np
+
+from vnav import se3
+from vnav.camera import PinholeCamera
 
 
 @dataclass(frozen=True)
@@ -55,6 +62,85 @@ class ConeModel:
                 f"ConeModel.color_rgb must be 3 values in [0, 1], got {self.color_rgb}"
             )
 
+    def extreme_points(self, p_base_w: np.ndarray) -> np.ndarray:
+        """The apex and the base plate's eight corners of a cone standing at ``p_base_w``.
+
+        Parameters
+        ----------
+        p_base_w : array_like, shape (3,)
+            The base centre, in any frame whose z axis is up (usually the world).
+
+        Returns
+        -------
+        points : ndarray, shape (9, 3)
+            The apex first, then the corners, in the same frame.
+        """
+        h = self.base_width_m / 2.0
+        corners = np.array(
+            [
+                [sx * h, sy * h, z]
+                for sx in (-1, 1)
+                for sy in (-1, 1)
+                for z in (0.0, self.base_thickness_m)
+            ]
+        )
+        p_base_w = np.asarray(p_base_w, dtype=np.float64)
+        return np.vstack([p_base_w + np.array([0.0, 0.0, self.height_m]), p_base_w + corners])
+
+    @property
+    def base_axis_distance_m(self) -> float:
+        """Mean distance from the base centre to the base plate's near edge along the bearing.
+
+        The plate is a square of half-width ``a`` at an unknown yaw ``psi`` (folded into
+        [0, pi/4]) relative to the horizontal bearing from the camera; the vertical plane
+        through the camera and the cone's axis (whose image is the cone's image axis) leaves
+        the plate's footprint ``a / cos(psi)`` from the centre. Its mean over ``psi`` uniform
+        in [0, pi/4] is ``a (4 / pi) ln(1 + sqrt 2) = 1.122 a`` (between ``a`` and
+        ``a sqrt 2``, so the error is at most 0.29 a = 5.5 cm and its standard deviation
+        0.12 a = 2.3 cm for the standard cone).
+        """
+        return 0.5 * self.base_width_m * 4.0 / math.pi * math.log(1.0 + math.sqrt(2.0))
+
 
 TRAFFIC_CONE = ConeModel()
 """A 0.70 m road cone on a 0.38 m square base, the size of a common 28-inch cone."""
+
+
+def cones_fully_in_view(
+    cones_w: np.ndarray,
+    camera: PinholeCamera,
+    T_w_c: np.ndarray,
+    min_height_px: float,
+    cone: ConeModel = TRAFFIC_CONE,
+) -> list[int]:
+    """Indices of the cones whose apex and base corners all project inside the image.
+
+    Parameters
+    ----------
+    cones_w : ndarray, shape (N, 3)
+        Base centres in the world, metres.
+    camera : PinholeCamera
+    T_w_c : ndarray, shape (4, 4)
+        The camera (optical frame) in the world.
+    min_height_px : float
+        A cone counts only if its image spans at least this many pixels vertically.
+    cone : ConeModel
+
+    Returns
+    -------
+    list of int
+        In the order of ``cones_w``.
+    """
+    cones_w = np.asarray(cones_w, dtype=np.float64).reshape(-1, 3)
+    if len(cones_w) == 0:
+        return []
+    T_c_w = se3.invert(T_w_c)
+    points_w = np.concatenate([cone.extreme_points(p_w) for p_w in cones_w])  # one call for all
+    uv = camera.project(se3.apply(T_c_w, points_w)).reshape(len(cones_w), -1, 2)
+    return [
+        i
+        for i, uv_i in enumerate(uv)
+        if np.isfinite(uv_i).all()
+        and camera.in_image(uv_i).all()
+        and np.ptp(uv_i[:, 1]) >= min_height_px
+    ]

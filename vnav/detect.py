@@ -29,7 +29,15 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-__all__ = ["DEFAULT_THRESHOLDS", "ConeDetection", "HsvThresholds", "detect_cones"]
+from vnav.camera import PinholeCamera
+
+__all__ = [
+    "DEFAULT_THRESHOLDS",
+    "ConeDetection",
+    "HsvThresholds",
+    "check_detection",
+    "detect_cones",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -130,6 +138,24 @@ class ConeDetection:
         x, y, w, h = self.bbox
         out[y : y + h, x : x + w] = self.mask
         return out
+
+
+def check_detection(detection: ConeDetection, camera: PinholeCamera) -> None:
+    """Validate a detection against the camera whose image it was found in.
+
+    Raises
+    ------
+    ValueError
+        If ``detection`` is not a ConeDetection or its bbox does not fit the camera's image.
+    """
+    if not isinstance(detection, ConeDetection):
+        raise ValueError(f"detection must be a ConeDetection, got {type(detection).__name__}")
+    x, y, w, h = detection.bbox
+    if x < 0 or y < 0 or x + w > camera.width or y + h > camera.height:
+        raise ValueError(
+            f"detection bbox {detection.bbox} does not fit the camera's image "
+            f"{camera.width}x{camera.height}"
+        )
 
 
 def check_rgb(rgb: np.ndarray, name: str = "rgb") -> np.ndarray:

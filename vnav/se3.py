@@ -18,7 +18,7 @@ from vnav import _validate as _v
 from vnav import so3
 from vnav._validate import FloatArray
 
-__all__ = ["apply", "check_transform", "invert", "make"]
+__all__ = ["apply", "check_pose", "check_transform", "invert", "make"]
 
 _BOTTOM = np.array([0.0, 0.0, 0.0, 1.0])
 # `apply` adds the translation to blocks of this many points at once: broadcasting a (3,)
@@ -187,3 +187,20 @@ def apply(T: ArrayLike, p: ArrayLike) -> FloatArray:
         np.add(rows, t_rows, out=rows)
         chunk[n_block:] += t
     return out.reshape(p.shape)
+
+
+def check_pose(T: ArrayLike, name: str = "T") -> FloatArray:
+    """Validate exactly one 4x4 rigid transform (``check_transform``'s default tolerance).
+
+    ``check_transform`` also accepts stacks ``(..., 4, 4)``; functions that take one pose
+    validate it with this.
+
+    Raises
+    ------
+    ValueError
+        As ``check_transform``, or if ``T`` is a stack rather than a single 4x4 transform.
+    """
+    T = check_transform(T, name)
+    if T.shape != (4, 4):
+        raise ValueError(f"{name} must be a single 4x4 transform, got shape {T.shape}")
+    return T
