@@ -45,8 +45,8 @@ def _frame() -> dict:
 
 
 def run(args: argparse.Namespace) -> dict:
-    from vnav.detect import detect_cones
     from vnav.camera import depth_to_world_points
+    from vnav.detect import detect_cones
     from vnav.localize import localize
 
     repeat = getattr(args, "repeat", 200)

@@ -36,10 +36,9 @@ from sim.flight import (
 from sim.render import Renderer
 from sim.world import World
 from vnav import metrics, quat, se3, so3
-from vnav.camera import PinholeCamera
+from vnav.camera import PinholeCamera, depth_to_world_points
 from vnav.cone import TRAFFIC_CONE, ConeModel
 from vnav.detect import detect_cones
-from vnav.camera import depth_to_world_points
 from vnav.localize import localize
 
 logger = logging.getLogger(__name__)

@@ -20,10 +20,9 @@ from sim.config import CameraConfig, SceneConfig
 from sim.render import Renderer
 from sim.world import World
 from vnav import se3, so3
-from vnav.camera import PinholeCamera
+from vnav.camera import PinholeCamera, depth_to_world_points
 from vnav.cone import TRAFFIC_CONE
 from vnav.detect import ConeDetection, detect_cones
-from vnav.camera import depth_to_world_points
 from vnav.estimators import (
     MAX_RANGE_ERROR_PER_PX,
     MIN_TRIANGLE_FRACTION,
@@ -33,8 +32,8 @@ from vnav.estimators import (
 )
 from vnav.localize import localize
 from vnav.methods import METHOD_NAMES
-from vnav.silhouette import apex_pixel, triangle_fraction
 from vnav.metrics import error_stats, horizontal_error
+from vnav.silhouette import apex_pixel, triangle_fraction
 
 logger = logging.getLogger(__name__)
 
