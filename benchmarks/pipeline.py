@@ -15,11 +15,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from scenarios import builtin, checks, report
-from scenarios.runner import run_scenario
+from scenarios import builtin, pipeline
+from scenarios.runner import STAGES
 
-STAGES = ("physics", "render", "detect", "localize", "log")
-"""Per-frame stages; ``setup`` (world, GL context, file header and close) is once per run."""
 TARGETS = {"overhead_ratio": 0.5, "rrd_bytes_per_frame": 60_000, "all_wall_s": 120.0}
 
 
@@ -34,13 +32,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _run_one(name: str, out: Path) -> dict:
     spec = builtin.load(name)
-    rrd = out / f"{name}.rrd"
     start = time.perf_counter()
-    result = run_scenario(spec, seed=1, rrd_path=rrd)
-    rep = report.build(result, [checks.evaluate(c, result) for c in spec.checks])
-    report.write(out / f"{name}.json", rep)
+    outcome = pipeline.run(spec, seed=1, out_dir=out)
     wall_s = time.perf_counter() - start
-    frames = len(result.frames)
+    result, rrd = outcome.result, outcome.rrd_path
+    frames = len(result.ticks)
     ms = {k: 1e3 * result.timing_s[k] / frames for k in STAGES}
     return {
         "frames": frames,
@@ -51,7 +47,7 @@ def _run_one(name: str, out: Path) -> dict:
         "setup_s": result.timing_s["setup"],
         "rrd_bytes": rrd.stat().st_size,
         "rrd_bytes_per_frame": rrd.stat().st_size / frames,
-        "passed": rep["passed"],
+        "passed": outcome.passed,
     }
 
 

@@ -8,6 +8,7 @@ everything else is fixed by the scenario and the seed.
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import os
@@ -15,11 +16,12 @@ from pathlib import Path
 from typing import Any
 
 from scenarios.checks import CheckResult
-from scenarios.runner import RunResult
-from scenarios.spec import METHODS
+from scenarios.records import RunResult
 from vnav import metrics
+from vnav.methods import METHOD_NAMES
 
-REPORT_VERSION = 1
+REPORT_VERSION = 2
+"""2: ``camera_ticks`` (was ``frames``): the word frame means a coordinate frame only."""
 
 
 def _finite_or_none(value: float) -> float | int | None:
@@ -39,34 +41,22 @@ def _stats(errors) -> dict[str, float | int | None]:
 def build(run: RunResult, checks: list[CheckResult]) -> dict[str, Any]:
     """The report as a JSON-ready dict."""
     spec = run.spec
-    methods = {}
-    for method in METHODS:
-        errors, ranges = run.errors(method), run.ranges_for(method)
-        by_range = []
-        for lo in RANGE_BINS_M[:-1]:
-            hi = RANGE_BINS_M[RANGE_BINS_M.index(lo) + 1]
-            in_bin = (ranges >= lo) & (ranges < hi)
-            if in_bin.any():
-                # The last bin is open: its upper edge is null.
-                by_range.append(
-                    {
-                        "range_m": [lo, hi if math.isfinite(hi) else None],
-                        "position_error_m": _stats(errors[in_bin]),
-                    }
-                )
-        methods[method] = {"position_error_m": _stats(errors), "by_range": by_range}
-    n_detections = sum(len(f.detections) for f in run.frames)
-    n_matched = sum(d.cone_index is not None for f in run.frames for d in f.detections)
+    methods = {
+        m: {"position_error_m": _stats(run.errors(m)), "by_range": _by_range(run, m)}
+        for m in METHOD_NAMES
+    }
+    n_detections = sum(len(t.detections) for t in run.ticks)
+    n_matched = sum(d.cone_index is not None for t in run.ticks for d in t.detections)
     return {
         "report_version": REPORT_VERSION,
         "scenario": spec.name,
         "description": spec.description,
         "seed": run.seed,
         "passed": all(c.passed for c in checks),
-        "frames": len(run.frames),
+        "camera_ticks": len(run.ticks),
         "detections": n_detections,
         "matched_detections": n_matched,
-        "simulated_s": round(run.frames[-1].t_s, 9) if run.frames else 0.0,
+        "simulated_s": round(run.ticks[-1].t_s, 9) if run.ticks else 0.0,
         "camera_rate_hz": spec.camera_rate_hz,
         "flight_mode": spec.flight.mode,
         "cones_w": [list(c) for c in spec.scene.cones_w],
@@ -77,6 +67,23 @@ def build(run: RunResult, checks: list[CheckResult]) -> dict[str, Any]:
         ],
         "timing_s": {k: round(v, 4) for k, v in run.timing_s.items()},
     }
+
+
+def _by_range(run: RunResult, method: str) -> list[dict[str, Any]]:
+    """``method``'s error statistics per bin of range (``RANGE_BINS_M``), non-empty bins only."""
+    errors, ranges = run.errors(method), run.ranges_for(method)
+    out = []
+    for lo, hi in itertools.pairwise(RANGE_BINS_M):
+        in_bin = (ranges >= lo) & (ranges < hi)
+        if in_bin.any():
+            # The last bin is open: its upper edge is null.
+            out.append(
+                {
+                    "range_m": [lo, hi if math.isfinite(hi) else None],
+                    "position_error_m": _stats(errors[in_bin]),
+                }
+            )
+    return out
 
 
 def write_atomic(path: Path, text: str) -> None:

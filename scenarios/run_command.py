@@ -15,10 +15,10 @@ import tempfile
 import time
 from pathlib import Path
 
-from scenarios import builtin, checks, report
-from scenarios.runner import RunResult, run_scenario
-from scenarios.spec import METHODS, ScenarioError, ScenarioSpec, load_toml
+from scenarios import builtin, pipeline
+from scenarios.spec import ScenarioError, ScenarioSpec, load_toml
 from sim.world import SimulationError
+from vnav.methods import METHOD_NAMES
 
 logger = logging.getLogger(__name__)
 
@@ -97,12 +97,13 @@ def summary(rep: dict, wall_s: float, rrd: Path, json_path: Path) -> str:
     """The table printed after each scenario."""
     status = "PASSED" if rep["passed"] else "FAILED"
     lines = [
-        f"{rep['scenario']}: {status}  ({rep['frames']} frames, {rep['detections']} detections, "
+        f"{rep['scenario']}: {status}  ({rep['camera_ticks']} camera ticks, "
+        f"{rep['detections']} detections, "
         f"{rep['matched_detections']} matched, {wall_s:.1f} s)",
         f"  {'method':<13} {'count':>5} {'mean':>8} {'median':>8} {'rmse':>8} {'max':>8}  "
         "position error (m)",
     ]
-    for method in METHODS:
+    for method in METHOD_NAMES:
         s = rep["methods"][method]["position_error_m"]
         lines.append(
             f"  {method:<13} {s['count']:>5} {_fmt(s['mean']):>8} "
@@ -117,25 +118,21 @@ def summary(rep: dict, wall_s: float, rrd: Path, json_path: Path) -> str:
 
 def run_one(spec: ScenarioSpec, args: argparse.Namespace, out_dir: Path) -> bool:
     """Run one scenario, write its files, print its summary; return whether it passed."""
-    rrd = out_dir / f"{spec.name}.rrd"
-    json_path = out_dir / f"{spec.name}.json"
     start = time.perf_counter()
     try:
-        result: RunResult = run_scenario(
+        outcome = pipeline.run(
             spec,
             seed=args.seed,
-            rrd_path=rrd,
+            out_dir=out_dir,
             progress=Progress(spec.name, enabled=not args.quiet),
         )
     except SimulationError as exc:
         print(f"{spec.name}: FAILED: the simulation diverged: {exc}", file=sys.stderr)
         return False
-    judged = [checks.evaluate(c, result) for c in (spec.checks or checks.default_checks())]
-    rep = report.build(result, judged)
-    report.write(json_path, rep)
     if not args.quiet:
-        print(summary(rep, time.perf_counter() - start, rrd, json_path), flush=True)
-    return bool(rep["passed"])
+        wall_s = time.perf_counter() - start
+        print(summary(outcome.report, wall_s, outcome.rrd_path, outcome.json_path), flush=True)
+    return outcome.passed
 
 
 def run(args: argparse.Namespace) -> int:

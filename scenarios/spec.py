@@ -51,29 +51,13 @@ from typing import Any
 
 import numpy as np
 
+from scenarios.checks import KINDS, Check
 from sim.config import CameraConfig, SceneConfig
 from vnav import quat, so3
-
-METHODS: tuple[str, ...] = ("depth_image", "ground_plane", "known_height", "naive")
-"""Localisation methods, in report order. ``naive`` is the lecture's chapter 0 mistake."""
+from vnav.methods import METHOD_NAMES
 
 VIEW_NAMES: tuple[str, ...] = ("errors", "coordinates", "attitude")
 """Values of the optional ``view`` key: which tab the recording shows first."""
-
-CHECK_KINDS: dict[str, str] = {
-    "max_error": "largest position error of `method` over all matched detections <= limit_m",
-    "median_error": "median position error of `method` <= limit_m",
-    "error_bound": "error / accuracy bound of `method` <= limit: worst for depth_image, median "
-    "otherwise, over cones fully in view, >= 12 px tall, 2-25 m away",
-    "detection_rate": "detections / frames with a cone fully in view >= limit",
-    "world_estimate_spread": "largest distance of `method`'s estimates from their mean <= limit_m",
-    "camera_coords_span": "the cone's camera-frame coordinates move by >= limit_m",
-    "naive_worse": "median naive error >= limit x the median error of `method`",
-    "gimbal_lock_seen": "at least one frame flags gimbal lock in its roll/pitch/yaw",
-    "tracking_error": "largest distance of the body from its reference (controlled) <= limit_m",
-    "matched_cones": "number of distinct true cones matched at least once >= limit",
-}
-"""Check kinds a scenario may declare, with what each asserts."""
 
 
 class ScenarioError(ValueError):
@@ -126,6 +110,7 @@ class ControlledFlight:
 
     waypoints: tuple[Waypoint, ...]
     mode: str = "controlled"
+    moves_camera = False
 
     @property
     def end_s(self) -> float:
@@ -144,6 +129,7 @@ class OrbitFlight:
     start_angle_rad: float = math.pi
     ramp_s: float = 3.0
     mode: str = "orbit"
+    moves_camera = False
 
     @property
     def end_s(self) -> float:
@@ -165,28 +151,6 @@ class Noise:
 
     position_std_m: float = 0.0
     attitude_std_deg: float = 0.0
-
-
-@dataclass(frozen=True)
-class Check:
-    """One pass/fail criterion evaluated on a finished run (see :data:`CHECK_KINDS`)."""
-
-    kind: str
-    limit: float
-    method: str = "depth_image"
-    name: str = ""
-
-    @property
-    def label(self) -> str:
-        if self.name:
-            return self.name
-        uses_method = self.kind not in (
-            "detection_rate",
-            "gimbal_lock_seen",
-            "tracking_error",
-            "matched_cones",
-        )
-        return f"{self.method} {self.kind}" if uses_method else self.kind
 
 
 @dataclass(frozen=True)
@@ -380,13 +344,13 @@ def _checks(raw: Any, where: str) -> tuple[Check, ...]:
         entry = _table(entry, where, key)
         _allowed(entry, {"kind", "method", "limit", "limit_m", "name"}, where, key)
         kind = entry.get("kind")
-        if kind not in CHECK_KINDS:
-            raise _err(
-                where, f"{key}.kind", f"unknown check {kind!r}; valid: {sorted(CHECK_KINDS)}"
-            )
+        if kind not in KINDS:
+            raise _err(where, f"{key}.kind", f"unknown check {kind!r}; valid: {sorted(KINDS)}")
         method = entry.get("method", "depth_image")
-        if method not in METHODS:
-            raise _err(where, f"{key}.method", f"unknown method {method!r}; valid: {list(METHODS)}")
+        if method not in METHOD_NAMES:
+            raise _err(
+                where, f"{key}.method", f"unknown method {method!r}; valid: {list(METHOD_NAMES)}"
+            )
         if ("limit" in entry) == ("limit_m" in entry):
             raise _err(where, key, "give exactly one of limit or limit_m")
         limit_key = "limit" if "limit" in entry else "limit_m"

@@ -37,18 +37,12 @@ class BuiltinRun:
 @pytest.fixture(scope="session")
 def builtin_runs(tmp_path_factory):
     """Every built-in scenario, run once per session with its recording and report written."""
-    from scenarios import builtin, checks, report
-    from scenarios.runner import run_scenario
+    from scenarios import builtin, pipeline
 
     out = tmp_path_factory.mktemp("builtin-runs")
     runs = {}
     for name in builtin.names():
         spec = dataclasses.replace(builtin.load(name), camera_rate_hz=BUILTIN_TEST_RATE_HZ)
-        rrd = out / f"{name}.rrd"
-        result = run_scenario(spec, seed=3, rrd_path=rrd)
-        judged = [checks.evaluate(c, result) for c in spec.checks]
-        rep = report.build(result, judged)
-        json_path = out / f"{name}.json"
-        report.write(json_path, rep)
-        runs[name] = BuiltinRun(spec, result, judged, rep, rrd, json_path)
+        o = pipeline.run(spec, seed=3, out_dir=out)
+        runs[name] = BuiltinRun(spec, o.result, o.judged, o.report, o.rrd_path, o.json_path)
     return runs

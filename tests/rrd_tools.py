@@ -13,7 +13,7 @@ def read_rows(path: Path, entity: str) -> list[dict]:
     """Every row logged to ``entity`` as a dict {column name: value}, in file order.
 
     Columns are named like ``Transform3D:translation`` (each value a list of instances);
-    timeline columns ``frame`` and ``sim_time`` become ints (``sim_time`` in nanoseconds).
+    timeline columns ``tick`` and ``sim_time`` become ints (``sim_time`` in nanoseconds).
     Static rows have no timeline columns.
     """
     entity = "/" + entity.lstrip("/")

@@ -14,9 +14,8 @@ import pytest
 from rrd_tools import read_rows
 
 import scenarios.runner
-from scenarios import builtin
+from scenarios import builtin, pipeline
 from scenarios.cli import main
-from scenarios.runner import run_scenario
 
 PITCH_90_TOML = textwrap.dedent("""\
     name = "pitch-ninety"
@@ -58,10 +57,10 @@ def test_toml_scenario_with_pitch_90_keyframe(tmp_path, capsys):
     out = tmp_path / "out"
     assert main(["run", str(scenario), "--out", str(out), "--quiet"]) == 0
     rep = json.loads((out / "pitch-ninety.json").read_text())
-    assert rep["passed"] and rep["frames"] == 16 and rep["detections"] == 16
+    assert rep["passed"] and rep["camera_ticks"] == 16 and rep["detections"] == 16
 
     # At t >= 2 s the body's x axis points straight down: the camera looks along world -z.
-    body = [r for r in read_rows(out / "pitch-ninety.rrd", "world/body") if "frame" in r]
+    body = [r for r in read_rows(out / "pitch-ninety.rrd", "world/body") if "tick" in r]
     _x_w, y_w, _z_w, w = body[-1]["Transform3D:quaternion"][0]
     assert abs(y_w) == pytest.approx(np.sqrt(0.5), abs=1e-6) and abs(w) == pytest.approx(
         np.sqrt(0.5), abs=1e-6
@@ -215,7 +214,7 @@ def test_interrupted_run_leaves_no_partial_file_and_keeps_the_old_one(tmp_path, 
 
     monkeypatch.setattr(scenarios.runner, "detect_cones", detect_then_fail)
     with pytest.raises(KeyboardInterrupt):
-        run_scenario(spec, rrd_path=rrd)
+        pipeline.run(spec, out_dir=tmp_path)
     assert rrd.read_bytes() == b"an earlier recording"
     assert [p.name for p in tmp_path.iterdir()] == [rrd.name]
 
@@ -248,8 +247,8 @@ def test_one_waypoint_or_keyframe_holds_the_pose(tmp_path, flight):
     )
     assert main(["run", str(scenario), "--out", str(tmp_path), "--quiet"]) == 0
     rep = json.loads((tmp_path / "one.json").read_text())
-    assert rep["detections"] == rep["frames"] == 11
-    body = [r for r in read_rows(tmp_path / "one.rrd", "world/body") if "frame" in r]
+    assert rep["detections"] == rep["camera_ticks"] == 11
+    body = [r for r in read_rows(tmp_path / "one.rrd", "world/body") if "tick" in r]
     positions_w = np.array([r["Transform3D:translation"][0] for r in body])
     assert np.max(np.linalg.norm(positions_w - [0.0, 0.0, 4.0], axis=1)) < 0.02
 

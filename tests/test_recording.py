@@ -36,9 +36,9 @@ def test_no_partial_file_left_beside_the_recordings(builtin_runs):
 
 def test_body_transform_every_frame_on_both_timelines(recorded):
     _, result, rrd, _ = recorded
-    rows = [r for r in read_rows(rrd, "world/body") if "frame" in r]
-    assert [r["frame"] for r in rows] == [f.frame for f in result.frames]
-    for row, f in zip(rows, result.frames, strict=True):
+    rows = [r for r in read_rows(rrd, "world/body") if "tick" in r]
+    assert [r["tick"] for r in rows] == [f.tick for f in result.ticks]
+    for row, f in zip(rows, result.ticks, strict=True):
         assert row["sim_time"] == pytest.approx(f.t_s * 1e9, abs=1e3)
         t_w_b = np.array(row["Transform3D:translation"][0])
         q_xyzw = np.array(row["Transform3D:quaternion"][0])
@@ -106,15 +106,15 @@ def test_truth_points_and_estimates_agree_with_report(recorded):
 
 def test_error_series_logged_per_frame(recorded):
     _, result, rrd, _ = recorded
-    rows = [r for r in read_rows(rrd, "metrics/error/depth_image") if "frame" in r]
+    rows = [r for r in read_rows(rrd, "metrics/error/depth_image") if "tick" in r]
     expected = {
-        f.frame: np.mean(
+        f.tick: np.mean(
             [d.errors_m["depth_image"] for d in f.detections if "depth_image" in d.errors_m]
         )
-        for f in result.frames
+        for f in result.ticks
         if any("depth_image" in d.errors_m for d in f.detections)
     }
-    assert {r["frame"]: r["Scalars:scalars"][0] for r in rows} == pytest.approx(expected)
+    assert {r["tick"]: r["Scalars:scalars"][0] for r in rows} == pytest.approx(expected)
 
 
 def test_detections_logged_in_rerun_pixel_convention(recorded):
@@ -122,16 +122,16 @@ def test_detections_logged_in_rerun_pixel_convention(recorded):
     and boxes are the detector's OpenCV pixels moved by +0.5 (Rerun's pixel centres)."""
     spec, result, rrd, _ = recorded
     keypoints = {
-        r["frame"]: np.array(r["Points2D:positions"])
+        r["tick"]: np.array(r["Points2D:positions"])
         for r in read_rows(rrd, "world/body/camera/detections/keypoints")
-        if "frame" in r and r.get("Points2D:positions")
+        if "tick" in r and r.get("Points2D:positions")
     }
     boxes = {
-        r["frame"]: r
+        r["tick"]: r
         for r in read_rows(rrd, "world/body/camera/detections")
-        if "frame" in r and r.get("Boxes2D:centers")
+        if "tick" in r and r.get("Boxes2D:centers")
     }
-    poses = {r["frame"]: r for r in read_rows(rrd, "world/body") if "frame" in r}
+    poses = {r["tick"]: r for r in read_rows(rrd, "world/body") if "tick" in r}
     frames = sorted(keypoints)[:: max(1, len(keypoints) // 3)][:3]
     assert frames, "no detections logged"
     world = World.from_config(spec.scene)
@@ -141,12 +141,12 @@ def test_detections_logged_in_rerun_pixel_convention(recorded):
             # up to rounding, so use the run's own float64 pose for frame k.
             assert np.allclose(
                 poses[k]["Transform3D:translation"][0],
-                result.frames[k].T_w_b[:3, 3],
+                result.ticks[k].T_w_b[:3, 3],
                 atol=FLOAT32_ATOL_M,
             )
-            world.set_pose(result.frames[k].T_w_b)
+            world.set_pose(result.ticks[k].T_w_b)
             if getattr(spec.flight, "moves_camera", False):  # slide the camera as the run did
-                world.set_camera_position_b(_camera_offset_b(spec, result.frames[k].t_s))
+                world.set_camera_position_b(_camera_offset_b(spec, result.ticks[k].t_s))
             detections = detect_cones(renderer.render(depth=False).rgb)
             expected = np.concatenate([[d.apex_uv, d.base_uv] for d in detections]) + 0.5
             assert np.allclose(keypoints[k], expected, atol=1e-4)
@@ -187,10 +187,10 @@ def test_sliding_camera_mount_logged_every_frame(builtin_runs):
     """transform-composer slides the camera on the body: the mount logged at each frame is
     the keyframes' offset interpolated at that time, with the configured orientation."""
     run = builtin_runs["transform-composer"]
-    rows = [r for r in read_rows(run.rrd, "world/body/camera") if "frame" in r]
-    assert len(rows) == len(run.result.frames)
+    rows = [r for r in read_rows(run.rrd, "world/body/camera") if "tick" in r]
+    assert len(rows) == len(run.result.ticks)
     R_b_c = World.from_config(run.spec.scene).T_b_c[:3, :3]
-    for row, f in zip(rows, run.result.frames, strict=True):
+    for row, f in zip(rows, run.result.ticks, strict=True):
         expected_b = _camera_offset_b(run.spec, f.t_s)
         assert np.allclose(row["Transform3D:translation"][0], expected_b, atol=1e-6)
         q_xyzw = np.array(row["Transform3D:quaternion"][0])

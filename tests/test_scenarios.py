@@ -15,8 +15,9 @@ import pytest
 from conftest import BUILTIN_TEST_RATE_HZ as TEST_RATE_HZ
 
 from scenarios import builtin, checks
-from scenarios.spec import CHECK_KINDS, METHODS
+from scenarios.spec import from_dict
 from vnav import quat, se3, so3
+from vnav.methods import METHOD_NAMES
 
 
 @pytest.fixture(scope="module")
@@ -31,14 +32,14 @@ def test_builtin_scenario_passes_its_checks(runs, name):
     failed = [c.as_dict() for c in judged if not c.passed]
     assert not failed, f"{name} failed checks: {failed}"
     assert rep["passed"] is True
-    assert rep["frames"] == math.floor(spec.end_s * TEST_RATE_HZ + 1e-9) + 1
+    assert rep["camera_ticks"] == math.floor(spec.end_s * TEST_RATE_HZ + 1e-9) + 1
     assert rep["matched_detections"] > 0
 
 
 @pytest.mark.parametrize("name", builtin.names())
 def test_registry_no_nan_anywhere(runs, name):
     _, result, _, rep = runs[name]
-    for f in result.frames:
+    for f in result.ticks:
         assert np.isfinite(f.T_w_b).all() and np.isfinite(f.quat_xyzw).all()
         assert np.isfinite(f.rpy_rad).all()
         for d in f.detections:
@@ -55,9 +56,9 @@ def test_report_errors_are_distances_to_the_true_cone(runs, name):
     """Recompute every error from the estimates and the scene's cone list (the truth)."""
     spec, result, _, rep = runs[name]
     cones_w = np.array(spec.scene.cones_w)
-    for method in METHODS:
+    for method in METHOD_NAMES:
         errors = []
-        for f in result.frames:
+        for f in result.ticks:
             for d in f.detections:
                 if d.cone_index is not None and method in d.estimates_w:
                     errors.append(np.linalg.norm(d.estimates_w[method] - cones_w[d.cone_index]))
@@ -75,7 +76,7 @@ def test_frame_problem_naive_is_far_off_and_camera_coords_match_the_lecture(runs
     naive = rep["methods"]["naive"]["position_error_m"]
     assert naive["median"] > 5.0 and depth["max"] < 0.1
     # After the 90 deg clockwise yaw the body's x axis points along world -y (the quiz).
-    last = result.frames[-1]
+    last = result.ticks[-1]
     assert np.allclose(last.T_w_b[:3, 0], [0.0, -1.0, 0.0], atol=1e-9)
     # The cone at [2, 1, 0] is then 1 m behind the body and 2 m to its left (FLU):
     p_b = se3.apply(se3.invert(last.T_w_b), np.array(spec.scene.cones_w[0]))
@@ -85,12 +86,12 @@ def test_frame_problem_naive_is_far_off_and_camera_coords_match_the_lecture(runs
 def test_yaw_sweep_camera_coordinates_move_world_estimates_do_not(runs):
     _, result, _, _ = runs["yaw-sweep"]
     p_c = np.array(
-        [d.p_c_true for f in result.frames for d in f.detections if d.p_c_true is not None]
+        [d.p_c_true for f in result.ticks for d in f.detections if d.p_c_true is not None]
     )
     p_w = np.array(
         [
             d.estimates_w["depth_image"]
-            for f in result.frames
+            for f in result.ticks
             for d in f.detections
             if "depth_image" in d.estimates_w
         ]
@@ -101,14 +102,14 @@ def test_yaw_sweep_camera_coordinates_move_world_estimates_do_not(runs):
 
 def test_gimbal_lock_flagged_while_quaternion_stays_smooth(runs):
     _, result, _, _ = runs["gimbal-lock"]
-    locked = [f for f in result.frames if f.gimbal_locked]
+    locked = [f for f in result.ticks if f.gimbal_locked]
     assert locked, "no frame at pitch -90 deg flagged"
     for f in locked:
         assert f.rpy_rad[1] == pytest.approx(-math.pi / 2, abs=1e-6)
         # The angles returned at the lock still reproduce the attitude (lecture chapter 4).
         assert np.allclose(so3.from_rpy(*f.rpy_rad), f.T_w_b[:3, :3], atol=1e-6)
     # Successive frames' quaternions differ by small rotations: no jump through the lock.
-    q = np.array([f.quat_xyzw for f in result.frames])
+    q = np.array([f.quat_xyzw for f in result.ticks])
     steps = [
         np.linalg.norm(so3.log(quat.to_matrix(a).T @ quat.to_matrix(b)))
         for a, b in itertools.pairwise(q)
@@ -116,15 +117,19 @@ def test_gimbal_lock_flagged_while_quaternion_stays_smooth(runs):
     assert max(steps) < math.radians(10.0)
 
 
-def test_check_kinds_documented_and_implemented():
-    assert set(CHECK_KINDS) == set(checks._KINDS)
+@pytest.mark.parametrize("kind", sorted(checks.KINDS))
+def test_every_registered_check_kind_is_accepted_by_the_parser_and_documented(kind):
+    scenario = builtin.REGISTRY["frame-problem"]()
+    scenario["checks"] = [{"kind": kind, "limit": 1.0}]
+    (check,) = from_dict(scenario).checks
+    assert check.kind == kind and checks.KINDS[kind].doc
 
 
 @pytest.mark.parametrize("name", builtin.names())
 def test_error_against_range_bins_partition_the_detections(runs, name):
     spec, result, _, rep = runs[name]
     cones_w = np.array(spec.scene.cones_w)
-    for method in METHODS:
+    for method in METHOD_NAMES:
         bins = rep["methods"][method]["by_range"]
         assert (
             sum(b["position_error_m"]["count"] for b in bins)
@@ -136,7 +141,7 @@ def test_error_against_range_bins_partition_the_detections(runs, name):
             # Recompute this bin from the frames: range from the camera to the true cone.
             errors = [
                 np.linalg.norm(d.estimates_w[method] - cones_w[d.cone_index])
-                for f in result.frames
+                for f in result.ticks
                 for d in f.detections
                 if d.cone_index is not None
                 and method in d.estimates_w

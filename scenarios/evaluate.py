@@ -1,0 +1,151 @@
+"""Evaluate one camera tick: localise every detection and compare it with the truth.
+
+This is where a tick's estimates meet the ground truth; it needs the truth as numbers, not
+the simulator that produced them (``scenarios.runner`` reads them out of MuJoCo)::
+
+    estimate p_w per method   <- vnav.localize.localize(det, camera, T_w_b_est, T_b_c, depth)
+    match                     <- each detection's best estimate to the nearest true cone,
+                                 on the ground plane (vnav.metrics.match_nearest)
+    compare  error = |p_w - truth|, range, contract domain (vnav.methods.CONTRACT_DOMAIN)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from scenarios.records import DetectionRecord, TickRecord
+from vnav import metrics, se3, so3
+from vnav.camera import PinholeCamera
+from vnav.cone import cones_fully_in_view
+from vnav.detect import ConeDetection
+from vnav.localize import ConeEstimates, localize
+from vnav.methods import CONTRACT_DOMAIN
+
+__all__ = ["MATCH_GATE_M", "TickTruth", "evaluate_tick"]
+
+MATCH_GATE_M = 3.0
+"""An estimate farther than this from every true cone is reported unmatched."""
+
+
+@dataclass(frozen=True)
+class TickTruth:
+    """The ground truth at one camera tick, in vnav's conventions.
+
+    Attributes
+    ----------
+    tick : int
+    t_s : float
+        Simulated time, seconds.
+    T_w_b : ndarray, shape (4, 4)
+        True body pose in the world.
+    T_b_c : ndarray, shape (4, 4)
+        The camera mount.
+    quat_xyzw : ndarray, shape (4,)
+        The body attitude, scalar last (as the simulator reports it).
+    cones_w : ndarray, shape (N, 3)
+        True base centres of the cones, metres.
+    reference_error_m : float or None
+        Distance of the body from the flight's reference position, if it has one.
+    """
+
+    tick: int
+    t_s: float
+    T_w_b: np.ndarray
+    T_b_c: np.ndarray
+    quat_xyzw: np.ndarray
+    cones_w: np.ndarray
+    reference_error_m: float | None = None
+
+
+def evaluate_tick(
+    truth: TickTruth,
+    detections: list[ConeDetection],
+    depth_m: np.ndarray | None,
+    camera: PinholeCamera,
+    T_w_b_est: np.ndarray,
+    far_m: float,
+) -> TickRecord:
+    """Localise every detection with the estimator's pose and compare with the truth.
+
+    Parameters
+    ----------
+    truth : TickTruth
+    detections : list of ConeDetection
+        From ``vnav.detect.detect_cones`` on this tick's image.
+    depth_m : ndarray, shape (H, W), or None
+        This tick's planar depth image, metres.
+    camera : PinholeCamera
+    T_w_b_est : ndarray, shape (4, 4)
+        The body pose the estimator is given (the truth plus any pose noise).
+    far_m : float
+        Depth at or beyond which a pixel has no return.
+
+    Returns
+    -------
+    TickRecord
+    """
+    T_w_c = truth.T_w_b @ truth.T_b_c
+    R_w_b = truth.T_w_b[:3, :3]
+    # One tolerance for the flag and for the angles (so3's default): a tick flagged locked is
+    # exactly one whose angles to_rpy computed with roll = 0.
+    locked = bool(so3.gimbal_locked(R_w_b))
+    rpy_rad = so3.to_rpy(R_w_b, warn=False)
+    in_view = cones_fully_in_view(truth.cones_w, camera, T_w_c, CONTRACT_DOMAIN.min_height_px)
+    estimates = [
+        localize(d, camera, T_w_b_est, truth.T_b_c, depth=depth_m, far_m=far_m) for d in detections
+    ]
+    cone_of = _match(estimates, truth.cones_w)
+    T_c_w = se3.invert(T_w_c)
+    records = [
+        _compare(d, e, cone_of.get(i), truth.cones_w, T_c_w, in_view)
+        for i, (d, e) in enumerate(zip(detections, estimates, strict=True))
+    ]
+    return TickRecord(
+        tick=truth.tick,
+        t_s=truth.t_s,
+        T_w_b=truth.T_w_b,
+        T_w_b_est=T_w_b_est,
+        T_b_c=truth.T_b_c,
+        quat_xyzw=truth.quat_xyzw,
+        rpy_rad=rpy_rad,
+        gimbal_locked=locked,
+        cones_in_view=in_view,
+        detections=records,
+        reference_error_m=truth.reference_error_m,
+    )
+
+
+def _match(estimates: list[ConeEstimates], cones_w: np.ndarray) -> dict[int, int]:
+    """Detection index -> true cone index, matched on the ground plane by the best estimate."""
+    anchors = [e.best for e in estimates]
+    usable = [i for i, a in enumerate(anchors) if a is not None]
+    if not usable:
+        return {}
+    pairs = metrics.match_nearest(
+        cones_w[:, :2], np.array([anchors[i][:2] for i in usable]), max_distance=MATCH_GATE_M
+    )
+    return {usable[j]: i for i, j in pairs}
+
+
+def _compare(
+    detection: ConeDetection,
+    estimates: ConeEstimates,
+    cone_index: int | None,
+    cones_w: np.ndarray,
+    T_c_w: np.ndarray,
+    in_view: list[int],
+) -> DetectionRecord:
+    """One detection's record: its estimates and, if matched, their errors and the range."""
+    estimates_w = {m: p for m, p in estimates.items() if p is not None}
+    if cone_index is None:
+        return DetectionRecord(detection, estimates_w)
+    p_true_w = cones_w[cone_index]
+    p_c_true = se3.apply(T_c_w, p_true_w)
+    range_m = float(np.linalg.norm(p_c_true))
+    errors_m = {m: float(metrics.position_error(p_true_w, p)[0]) for m, p in estimates_w.items()}
+    in_contract = cone_index in in_view and CONTRACT_DOMAIN.contains_range(range_m)
+    return DetectionRecord(
+        detection, estimates_w, cone_index, errors_m, range_m, p_c_true, in_contract
+    )

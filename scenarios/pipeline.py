@@ -1,0 +1,95 @@
+"""Run a scenario, judge it and, if asked, write its recording and report: the one entry point.
+
+The command line (``vnav-demo run``), the benchmarks and the tests all call :func:`run`, so a
+scenario is run, judged and written the same way everywhere::
+
+    run     scenarios.runner.run_scenario   (MuJoCo; the recording observes every tick)
+    judge   scenarios.checks.judge          (the spec's checks, else the default ones)
+    report  scenarios.report.build / write  (JSON)
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from scenarios import checks, report
+from scenarios.recording import Recording
+from scenarios.records import RunResult
+from scenarios.runner import run_scenario
+from scenarios.spec import ScenarioSpec
+
+__all__ = ["Outcome", "output_paths", "run"]
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """A judged run.
+
+    Attributes
+    ----------
+    result : RunResult
+        Every camera tick's record.
+    judged : list of CheckResult
+        Every check's outcome.
+    report : dict
+        The JSON report (``scenarios.report.build``).
+    rrd_path, json_path : Path or None
+        The files written, or None when nothing was written.
+    """
+
+    result: RunResult
+    judged: list[checks.CheckResult]
+    report: dict[str, Any]
+    rrd_path: Path | None = None
+    json_path: Path | None = None
+
+    @property
+    def passed(self) -> bool:
+        """Whether every check passed."""
+        return bool(self.report["passed"])
+
+
+def output_paths(spec: ScenarioSpec, out_dir: Path) -> tuple[Path, Path]:
+    """Where ``run`` writes the recording and the report of ``spec``: ``<name>.rrd``, ``.json``."""
+    return out_dir / f"{spec.name}.rrd", out_dir / f"{spec.name}.json"
+
+
+def run(
+    spec: ScenarioSpec,
+    *,
+    seed: int = 1,
+    out_dir: Path | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> Outcome:
+    """Run ``spec``, judge it with its checks (or ``checks.default_checks()``), report it.
+
+    Parameters
+    ----------
+    spec : ScenarioSpec
+    seed : int
+        Seeds the run (see ``scenarios.runner.run_scenario``).
+    out_dir : Path, optional
+        If given, the recording and the report are written there (``output_paths``), each
+        whole or not at all.
+    progress : callable(done, total), optional
+        Called after every camera tick.
+
+    Raises
+    ------
+    sim.world.SimulationError
+        If the flight diverges; nothing is written then.
+    """
+    rrd_path = json_path = None
+    recording = None
+    if out_dir is not None:
+        rrd_path, json_path = output_paths(spec, Path(out_dir))
+        recording = Recording(rrd_path)
+    result = run_scenario(spec, seed=seed, observer=recording, progress=progress)
+    judged = [checks.judge(c, result) for c in (spec.checks or checks.default_checks())]
+    rep = report.build(result, judged)
+    if json_path is not None:
+        report.write(json_path, rep)
+    return Outcome(result, judged, rep, rrd_path, json_path)

@@ -1,0 +1,188 @@
+"""What a run saw and computed, camera tick by camera tick: typed records, no simulator.
+
+A scenario's run is a list of :class:`TickRecord`, one per camera tick, each holding what the
+camera saw (the detections), what each method estimated and the ground truth it is compared
+with. The runner (``scenarios.runner``) makes them, the checks (``scenarios.checks``) and the
+report (``scenarios.report``) read them, and the recording (``scenarios.recording``) draws
+them. This module imports neither MuJoCo nor Rerun, so judging or reporting a run needs
+neither.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from vnav import se3
+from vnav.detect import ConeDetection
+
+if TYPE_CHECKING:
+    from scenarios.spec import ScenarioSpec
+
+__all__ = ["DetectionRecord", "RunResult", "TickRecord"]
+
+
+@dataclass(frozen=True)
+class DetectionRecord:
+    """One detection of one camera tick, with its estimates and their errors.
+
+    Attributes
+    ----------
+    detection : ConeDetection
+        What the detector found in the image.
+    estimates_w : dict of str to ndarray, shape (3,)
+        Base centre in the world per method that gave an estimate, metres.
+    cone_index : int or None
+        The true cone it was matched to, or None.
+    errors_m : dict of str to float
+        Distance of each estimate from the matched cone, metres (empty when unmatched).
+    range_m : float or None
+        Distance from the camera to the matched cone, metres.
+    p_c_true : ndarray, shape (3,), or None
+        The matched cone's true base centre in the camera (optical) frame.
+    in_contract : bool
+        The matched cone is in the accuracy contract's domain (``vnav.methods.CONTRACT_DOMAIN``):
+        fully in view, tall enough, at a range within the bounds.
+    """
+
+    detection: ConeDetection
+    estimates_w: dict[str, np.ndarray]
+    cone_index: int | None = None
+    errors_m: dict[str, float] = field(default_factory=dict)
+    range_m: float | None = None
+    p_c_true: np.ndarray | None = None
+    in_contract: bool = False
+
+
+@dataclass(frozen=True)
+class TickRecord:
+    """What one camera tick saw and computed, next to the truth.
+
+    Attributes
+    ----------
+    tick : int
+        Index of the camera tick, from 0.
+    t_s : float
+        Simulated time, seconds.
+    T_w_b : ndarray, shape (4, 4)
+        True body pose in the world.
+    T_w_b_est : ndarray, shape (4, 4)
+        The body pose the estimator was given (the truth plus the scenario's pose noise).
+    T_b_c : ndarray, shape (4, 4)
+        The camera mount at this tick (optical frame in the body).
+    quat_xyzw : ndarray, shape (4,)
+        True attitude ``R_w_b`` as a quaternion, scalar last.
+    rpy_rad : ndarray, shape (3,)
+        Roll, pitch, yaw of ``R_w_b`` (``vnav.so3.to_rpy``), radians.
+    gimbal_locked : bool
+        Whether those angles are at the gimbal lock.
+    cones_in_view : list of int
+        True cones fully in view and tall enough to count for the detection rate.
+    detections : list of DetectionRecord
+    reference_error_m : float or None
+        Distance of the body from the flight's reference position (controlled flights).
+    """
+
+    tick: int
+    t_s: float
+    T_w_b: np.ndarray
+    T_w_b_est: np.ndarray
+    T_b_c: np.ndarray
+    quat_xyzw: np.ndarray
+    rpy_rad: np.ndarray
+    gimbal_locked: bool
+    cones_in_view: list[int]
+    detections: list[DetectionRecord]
+    reference_error_m: float | None = None
+
+    def estimates_w(self, method: str) -> np.ndarray:
+        """Every estimate of ``method`` at this tick, one row per detection giving one, (K, 3)."""
+        points = [d.estimates_w[method] for d in self.detections if method in d.estimates_w]
+        return np.array(points, dtype=np.float64).reshape(-1, 3)
+
+    def mean_error_m(self, method: str) -> float | None:
+        """Mean error of ``method`` over the matched detections, metres, or None."""
+        errors = [d.errors_m[method] for d in self.detections if method in d.errors_m]
+        return float(np.mean(errors)) if errors else None
+
+    def mean_range_m(self) -> float | None:
+        """Mean range of the matched cones, metres, or None."""
+        ranges = [d.range_m for d in self.detections if d.range_m is not None]
+        return float(np.mean(ranges)) if ranges else None
+
+    def coordinates_of(self, p_w: np.ndarray) -> dict[str, np.ndarray]:
+        """A world point in the world, body and camera frames (the lecture's chapter 8).
+
+        ``p_b = T_b_w p_w`` and ``p_c = T_c_b p_b``.
+
+        Returns
+        -------
+        dict with keys ``world``, ``body``, ``camera``, each ndarray, shape (3,)
+        """
+        p_b = se3.apply(se3.invert(self.T_w_b), p_w)
+        p_c = se3.apply(se3.invert(self.T_b_c), p_b)
+        return {"world": np.asarray(p_w, dtype=np.float64), "body": p_b, "camera": p_c}
+
+    def estimate_of_cone(self, cone_index: int, method: str) -> np.ndarray | None:
+        """``method``'s estimate of the detection matched to cone ``cone_index``, or None."""
+        return next(
+            (
+                d.estimates_w[method]
+                for d in self.detections
+                if d.cone_index == cone_index and method in d.estimates_w
+            ),
+            None,
+        )
+
+
+@dataclass
+class RunResult:
+    """Everything a finished run produced, before it is judged and written.
+
+    Attributes
+    ----------
+    spec : ScenarioSpec
+    seed : int
+    ticks : list of TickRecord
+    timing_s : dict of str to float
+        Seconds spent per stage (``physics``, ``render``, ``detect``, ``localize``, ``log``,
+        ``setup``); the only figures that depend on the machine.
+    """
+
+    spec: ScenarioSpec
+    seed: int
+    ticks: list[TickRecord] = field(default_factory=list)
+    timing_s: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def cones_w(self) -> np.ndarray:
+        """(N, 3) the true cones' base centres in the world, metres."""
+        return np.array(self.spec.scene.cones_w, dtype=np.float64).reshape(-1, 3)
+
+    @property
+    def trajectory_w(self) -> np.ndarray:
+        """(T, 3) the body origin in the world at every tick, metres."""
+        return np.array([t.T_w_b[:3, 3] for t in self.ticks], dtype=np.float64).reshape(-1, 3)
+
+    def _scored(self, method: str, contract_only: bool) -> list[DetectionRecord]:
+        return [
+            d
+            for t in self.ticks
+            for d in t.detections
+            if method in d.errors_m and (d.in_contract or not contract_only)
+        ]
+
+    def errors(self, method: str, *, contract_only: bool = False) -> np.ndarray:
+        """Errors of ``method`` over matched detections, metres, shape (K,).
+
+        ``contract_only`` keeps only detections in the accuracy contract's domain.
+        """
+        return np.array(
+            [d.errors_m[method] for d in self._scored(method, contract_only)], dtype=np.float64
+        )
+
+    def ranges_for(self, method: str, *, contract_only: bool = False) -> np.ndarray:
+        """Ranges of the detections behind :meth:`errors`, same order, metres."""
+        return np.array([d.range_m for d in self._scored(method, contract_only)], dtype=np.float64)
