@@ -59,7 +59,7 @@ def _show(args: argparse.Namespace) -> int:
         )
         return 2
     print(f"# {PROG} show {args.name}: save as FILE.toml, edit, run with `{PROG} run FILE.toml`")
-    print(toml_out.dumps(builtin.REGISTRY[args.name]()), end="")
+    print(toml_out.dumps(builtin.REGISTRY[args.name](), comments=True), end="")
     return 0
 
 

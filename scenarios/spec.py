@@ -51,13 +51,11 @@ from typing import Any
 
 import numpy as np
 
+from scenarios import schema
 from scenarios.checks import KINDS, Check
 from sim.config import CameraConfig, SceneConfig
 from vnav import quat, so3
 from vnav.methods import METHOD_NAMES
-
-VIEW_NAMES: tuple[str, ...] = ("errors", "coordinates", "attitude")
-"""Values of the optional ``view`` key: which tab the recording shows first."""
 
 
 class ScenarioError(ValueError):
@@ -176,56 +174,23 @@ class ScenarioSpec:
 
 
 # --------------------------------------------------------------------------------------------
-# Parsing. Each helper takes the key path so that a message can say where the problem is.
+# Parsing: ``scenarios.schema`` reads and checks each table; here values become typed specs.
+
+
+def _read(table: Any, keys: tuple[schema.Key, ...], where: str, path: str) -> dict[str, Any]:
+    try:
+        return schema.read(table, keys, path)
+    except schema.SchemaError as exc:
+        raise ScenarioError(f"{where}: {exc}") from None
 
 
 def _err(where: str, key: str, message: str) -> ScenarioError:
     return ScenarioError(f"{where}: {key}: {message}")
 
 
-def _table(value: Any, where: str, key: str) -> dict[str, Any]:
-    if not isinstance(value, dict):
-        raise _err(where, key, f"must be a table, got {type(value).__name__}")
-    return value
-
-
-def _allowed(table: dict[str, Any], allowed: set[str], where: str, key: str) -> None:
-    unknown = sorted(set(table) - allowed)
-    if unknown:
-        prefix = f"{key}." if key else ""
-        raise _err(where, prefix + unknown[0], f"unknown key; expected one of {sorted(allowed)}")
-
-
-def _number(
-    value: Any,
-    where: str,
-    key: str,
-    *,
-    lo: float | None = None,
-    hi: float | None = None,
-    lo_open: bool = False,
-) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise _err(where, key, f"must be a number, got {value!r}")
-    x = float(value)
-    if not math.isfinite(x):
-        raise _err(where, key, f"must be finite, got {value!r}")
-    if lo is not None and (x <= lo if lo_open else x < lo):
-        raise _err(where, key, f"must be {'>' if lo_open else '>='} {lo}, got {value!r}")
-    if hi is not None and x > hi:
-        raise _err(where, key, f"must be <= {hi}, got {value!r}")
-    return x
-
-
-def _vector(value: Any, n: int, where: str, key: str) -> tuple[float, ...]:
-    if not isinstance(value, list) or len(value) != n:
-        raise _err(where, key, f"must be a list of {n} numbers, got {value!r}")
-    return tuple(_number(v, where, f"{key}[{i}]") for i, v in enumerate(value))
-
-
-def _string(value: Any, where: str, key: str) -> str:
-    if not isinstance(value, str) or not value.strip():
-        raise _err(where, key, f"must be a non-empty string, got {value!r}")
+def _entries(value: Any, where: str, path: str) -> list[Any]:
+    if not isinstance(value, list) or not value:
+        raise _err(where, path, "must be a non-empty list of tables")
     return value
 
 
@@ -249,90 +214,40 @@ def keyframe_from_rpy_deg(
     return Keyframe(float(t_s), tuple(map(float, position_w)), tuple(map(float, quat_xyzw)), camera)
 
 
-def _flight(table: dict[str, Any], where: str) -> KinematicFlight | ControlledFlight:
-    mode = table.get("mode")
+def _flight(table: Any, where: str) -> KinematicFlight | ControlledFlight | OrbitFlight:
+    mode = table.get("mode") if isinstance(table, dict) else None
+    if mode not in schema.FLIGHT_MODES:
+        modes = list(schema.FLIGHT_MODES)
+        quoted = ", ".join(f'"{m}"' for m in modes[:-1]) + f' or "{modes[-1]}"'
+        raise _err(where, "flight.mode", f"must be {quoted}, got {mode!r}")
+    body = {k: v for k, v in table.items() if k != "mode"}
+    values = _read(body, schema.FLIGHT_MODES[mode], where, "flight")
     if mode == "kinematic":
-        _allowed(table, {"mode", "keyframes"}, where, "flight")
-        raw = table.get("keyframes")
-        if not isinstance(raw, list) or not raw:
-            raise _err(where, "flight.keyframes", "must be a non-empty list of tables")
+        raw = _entries(values["keyframes"], where, "flight.keyframes")
         keyframes = []
         for i, entry in enumerate(raw):
-            key = f"flight.keyframes[{i}]"
-            entry = _table(entry, where, key)
-            _allowed(entry, {"t", "position_w", "rpy_deg", "camera_position_b"}, where, key)
-            for needed in ("t", "position_w", "rpy_deg"):
-                if needed not in entry:
-                    raise _err(where, f"{key}.{needed}", "missing")
-            camera_b = entry.get("camera_position_b")
+            k = _read(entry, schema.KEYFRAME, where, f"flight.keyframes[{i}]")
             keyframes.append(
-                keyframe_from_rpy_deg(
-                    _number(entry["t"], where, f"{key}.t", lo=0.0),
-                    _vector(entry["position_w"], 3, where, f"{key}.position_w"),
-                    _vector(entry["rpy_deg"], 3, where, f"{key}.rpy_deg"),
-                    None
-                    if camera_b is None
-                    else _vector(camera_b, 3, where, f"{key}.camera_position_b"),
-                )
+                keyframe_from_rpy_deg(k["t"], k["position_w"], k["rpy_deg"], k["camera_position_b"])
             )
         _times_increasing([k.t_s for k in keyframes], where, "flight.keyframes")
         return KinematicFlight(tuple(keyframes))
     if mode == "controlled":
-        _allowed(table, {"mode", "waypoints"}, where, "flight")
-        raw = table.get("waypoints")
-        if not isinstance(raw, list) or not raw:
-            raise _err(where, "flight.waypoints", "must be a non-empty list of tables")
+        raw = _entries(values["waypoints"], where, "flight.waypoints")
         waypoints = []
         for i, entry in enumerate(raw):
-            key = f"flight.waypoints[{i}]"
-            entry = _table(entry, where, key)
-            _allowed(entry, {"t", "position_w", "yaw_deg"}, where, key)
-            for needed in ("t", "position_w"):
-                if needed not in entry:
-                    raise _err(where, f"{key}.{needed}", "missing")
-            waypoints.append(
-                Waypoint(
-                    _number(entry["t"], where, f"{key}.t", lo=0.0),
-                    _vector(entry["position_w"], 3, where, f"{key}.position_w"),
-                    math.radians(_number(entry.get("yaw_deg", 0.0), where, f"{key}.yaw_deg")),
-                )
-            )
+            w = _read(entry, schema.WAYPOINT, where, f"flight.waypoints[{i}]")
+            waypoints.append(Waypoint(w["t"], w["position_w"], math.radians(w["yaw_deg"])))
         _times_increasing([w.t_s for w in waypoints], where, "flight.waypoints")
         return ControlledFlight(tuple(waypoints))
-    if mode == "orbit":
-        keys = {
-            "mode",
-            "center_w",
-            "radius_m",
-            "height_m",
-            "period_s",
-            "turns",
-            "start_angle_deg",
-            "ramp_s",
-        }
-        _allowed(table, keys, where, "flight")
-        for needed in ("center_w", "radius_m", "height_m", "period_s"):
-            if needed not in table:
-                raise _err(where, f"flight.{needed}", "missing")
-        period = _number(table["period_s"], where, "flight.period_s")
-        if abs(period) < 1.0:
-            raise _err(
-                where,
-                "flight.period_s",
-                f"must be at least 1 s in magnitude (negative: clockwise), got {period}",
-            )
-        return OrbitFlight(
-            center_w=_vector(table["center_w"], 3, where, "flight.center_w"),
-            radius_m=_number(table["radius_m"], where, "flight.radius_m", lo=0.0, lo_open=True),
-            height_m=_number(table["height_m"], where, "flight.height_m", lo=0.0, lo_open=True),
-            period_s=period,
-            turns=_number(table.get("turns", 1.0), where, "flight.turns", lo=0.0, lo_open=True),
-            start_angle_rad=math.radians(
-                _number(table.get("start_angle_deg", 180.0), where, "flight.start_angle_deg")
-            ),
-            ramp_s=_number(table.get("ramp_s", 3.0), where, "flight.ramp_s", lo=0.0),
+    if abs(values["period_s"]) < 1.0:
+        raise _err(
+            where,
+            "flight.period_s",
+            f"must be at least 1 s in magnitude (negative: clockwise), got {values['period_s']}",
         )
-    raise _err(where, "flight.mode", f'must be "kinematic", "controlled" or "orbit", got {mode!r}')
+    start_angle_rad = math.radians(values.pop("start_angle_deg"))
+    return OrbitFlight(**values, start_angle_rad=start_angle_rad)
 
 
 def _checks(raw: Any, where: str) -> tuple[Check, ...]:
@@ -341,27 +256,48 @@ def _checks(raw: Any, where: str) -> tuple[Check, ...]:
     out = []
     for i, entry in enumerate(raw):
         key = f"checks[{i}]"
-        entry = _table(entry, where, key)
-        _allowed(entry, {"kind", "method", "limit", "limit_m", "name"}, where, key)
-        kind = entry.get("kind")
-        if kind not in KINDS:
-            raise _err(where, f"{key}.kind", f"unknown check {kind!r}; valid: {sorted(KINDS)}")
-        method = entry.get("method", "depth_image")
-        if method not in METHOD_NAMES:
+        c = _read(entry, schema.CHECK, where, key)
+        if c["kind"] not in KINDS:
+            raise _err(where, f"{key}.kind", f"unknown check {c['kind']!r}; valid: {sorted(KINDS)}")
+        if c["method"] not in METHOD_NAMES:
             raise _err(
-                where, f"{key}.method", f"unknown method {method!r}; valid: {list(METHOD_NAMES)}"
+                where,
+                f"{key}.method",
+                f"unknown method {c['method']!r}; valid: {list(METHOD_NAMES)}",
             )
-        if ("limit" in entry) == ("limit_m" in entry):
+        if (c["limit"] is None) == (c["limit_m"] is None):
             raise _err(where, key, "give exactly one of limit or limit_m")
-        limit_key = "limit" if "limit" in entry else "limit_m"
-        limit = _number(entry[limit_key], where, f"{key}.{limit_key}", lo=0.0)
-        name = _string(entry["name"], where, f"{key}.name") if "name" in entry else ""
-        out.append(Check(kind=kind, limit=limit, method=method, name=name))
+        limit_key = "limit" if c["limit"] is not None else "limit_m"
+        try:
+            limit = schema.number(c[limit_key], f"{key}.{limit_key}", lo=0.0)
+        except schema.SchemaError as exc:
+            raise ScenarioError(f"{where}: {exc}") from None
+        out.append(Check(kind=c["kind"], limit=limit, method=c["method"], name=c["name"] or ""))
     return tuple(out)
 
 
+def _cones(raw: Any, where: str) -> list[tuple[float, ...]]:
+    if not isinstance(raw, list) or not raw:
+        raise _err(where, "cones", "must be a non-empty array of tables ([[cones]])")
+    return [
+        _read(entry, schema.CONE, where, f"cones[{i}]")["position_w"] for i, entry in enumerate(raw)
+    ]
+
+
+def _start_pose(flight) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """The drone's start position and attitude (quaternion xyzw) for a flight."""
+    if isinstance(flight, KinematicFlight):
+        return flight.keyframes[0].position_w, flight.keyframes[0].quat_xyzw
+    if isinstance(flight, ControlledFlight):
+        position_w, yaw_rad = flight.waypoints[0].position_w, flight.waypoints[0].yaw_rad
+    else:
+        position_w = flight.start_position_w
+        yaw_rad = flight.start_angle_rad + math.pi  # heading at the centre
+    return position_w, tuple(map(float, quat.from_axis_angle([0.0, 0.0, 1.0], yaw_rad)))
+
+
 def from_dict(data: dict[str, Any], where: str = "<scenario>") -> ScenarioSpec:
-    """Build a :class:`ScenarioSpec` from parsed TOML (user units).
+    """Build a ``ScenarioSpec`` from parsed TOML (user units), as ``scenarios.schema`` declares.
 
     Parameters
     ----------
@@ -375,61 +311,18 @@ def from_dict(data: dict[str, Any], where: str = "<scenario>") -> ScenarioSpec:
     ScenarioError
         Naming ``where`` and the offending key.
     """
-    _allowed(
-        data,
-        {
-            "name",
-            "description",
-            "duration_s",
-            "camera_rate_hz",
-            "camera",
-            "cones",
-            "flight",
-            "noise",
-            "checks",
-            "lesson",
-            "view",
-        },
-        where,
-        "",
-    )
-    for needed in ("name", "flight", "cones"):
-        if needed not in data:
-            raise _err(where, needed, "missing")
-    name = _string(data["name"], where, "name")
+    top = _read(data, schema.TOP, where, "")
+    name = top["name"]
     if not all(c.isalnum() or c in "-_" for c in name):
         raise _err(where, "name", f"may hold letters, digits, '-' and '_' only, got {name!r}")
-    description = _string(data.get("description", name), where, "description")
-
-    camera_table = _table(data.get("camera", {}), where, "camera")
+    camera_table = _read(top["camera"] or {}, schema.CAMERA, where, "camera")
     try:
         camera = CameraConfig.from_dict(camera_table)
     except ValueError as exc:
         raise _err(where, "camera", str(exc)) from None
-
-    cones_raw = data["cones"]
-    if not isinstance(cones_raw, list) or not cones_raw:
-        raise _err(where, "cones", "must be a non-empty array of tables ([[cones]])")
-    cones_w = []
-    for i, entry in enumerate(cones_raw):
-        entry = _table(entry, where, f"cones[{i}]")
-        _allowed(entry, {"position_w"}, where, f"cones[{i}]")
-        if "position_w" not in entry:
-            raise _err(where, f"cones[{i}].position_w", "missing")
-        cones_w.append(_vector(entry["position_w"], 3, where, f"cones[{i}].position_w"))
-
-    flight = _flight(_table(data["flight"], where, "flight"), where)
-    if isinstance(flight, KinematicFlight):
-        start_position_w = flight.keyframes[0].position_w
-        start_quat_xyzw = flight.keyframes[0].quat_xyzw
-    else:
-        if isinstance(flight, ControlledFlight):
-            start_position_w = flight.waypoints[0].position_w
-            start_yaw_rad = flight.waypoints[0].yaw_rad
-        else:
-            start_position_w = flight.start_position_w
-            start_yaw_rad = flight.start_angle_rad + math.pi  # heading at the centre
-        start_quat_xyzw = tuple(map(float, quat.from_axis_angle([0.0, 0.0, 1.0], start_yaw_rad)))
+    cones_w = _cones(top["cones"], where)
+    flight = _flight(top["flight"], where)
+    start_position_w, start_quat_xyzw = _start_pose(flight)
     try:
         scene = SceneConfig(
             camera=camera,
@@ -439,38 +332,20 @@ def from_dict(data: dict[str, Any], where: str = "<scenario>") -> ScenarioSpec:
         )
     except ValueError as exc:
         raise _err(where, "cones", str(exc)) from None
-
-    rate = _number(
-        data.get("camera_rate_hz", 10.0), where, "camera_rate_hz", lo=0.0, lo_open=True, hi=1000.0
-    )
-    duration = None
-    if "duration_s" in data:
-        duration = _number(data["duration_s"], where, "duration_s", lo=0.0, lo_open=True)
-
-    noise_table = _table(data.get("noise", {}), where, "noise")
-    _allowed(noise_table, {"position_std_m", "attitude_std_deg"}, where, "noise")
-    noise = Noise(
-        _number(noise_table.get("position_std_m", 0.0), where, "noise.position_std_m", lo=0.0),
-        _number(noise_table.get("attitude_std_deg", 0.0), where, "noise.attitude_std_deg", lo=0.0),
-    )
-    checks = _checks(data["checks"], where) if "checks" in data else ()
-    lesson = data.get("lesson", "")
-    if not isinstance(lesson, str):
-        raise _err(where, "lesson", f"must be a string, got {type(lesson).__name__}")
-    view = data.get("view", "errors")
-    if view not in VIEW_NAMES:
-        raise _err(where, "view", f"must be one of {list(VIEW_NAMES)}, got {view!r}")
+    noise = Noise(**_read(top["noise"] or {}, schema.NOISE, where, "noise"))
+    if not isinstance(top["lesson"], str):
+        raise _err(where, "lesson", f"must be a string, got {type(top['lesson']).__name__}")
     return ScenarioSpec(
-        view=view,
         name=name,
-        description=description,
+        description=top["description"] or name,
         scene=scene,
         flight=flight,
-        camera_rate_hz=rate,
-        duration_s=duration,
+        camera_rate_hz=top["camera_rate_hz"],
+        duration_s=top["duration_s"],
         noise=noise,
-        checks=checks,
-        lesson=lesson,
+        checks=_checks(top["checks"], where) if top["checks"] is not None else (),
+        lesson=top["lesson"],
+        view=top["view"],
     )
 
 

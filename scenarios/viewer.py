@@ -16,7 +16,8 @@ from types import SimpleNamespace
 import numpy as np
 import rerun.blueprint as rrb
 
-from scenarios.spec import VIEW_NAMES, ScenarioSpec
+from scenarios.schema import VIEW_NAMES
+from scenarios.spec import ScenarioSpec
 from vnav.methods import METHODS, PREFERENCE
 
 __all__ = [

@@ -1,0 +1,242 @@
+"""The scenario file's schema, declared once: every key, its type, unit, default and meaning.
+
+The parser (``scenarios.spec``) reads a file through :func:`read`, table by table; ``vnav-demo
+show`` annotates a built-in with each key's unit and meaning (:func:`comment`); the README's
+example is :func:`example_toml` (a test keeps the two identical). Units are in the key's name
+where it could be misread (``_m``, ``_deg``, ``_s``, ``_hz``); degrees become radians in
+``scenarios.spec``, once.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+from typing import Any
+
+from sim.config import CameraConfig
+
+__all__ = [
+    "CAMERA",
+    "CHECK",
+    "CONE",
+    "FLIGHT_MODES",
+    "KEYFRAME",
+    "NOISE",
+    "TOP",
+    "WAYPOINT",
+    "Key",
+    "SchemaError",
+    "comment",
+    "example_toml",
+    "read",
+]
+
+VIEW_NAMES: tuple[str, ...] = ("errors", "coordinates", "attitude")
+"""Values of the optional ``view`` key: which tab the recording shows first."""
+
+REQUIRED = object()
+"""The default of a key that must be given."""
+
+
+class SchemaError(ValueError):
+    """A value that does not fit its key: ``key path: what is wrong`` (the caller adds where)."""
+
+
+@dataclass(frozen=True)
+class Key:
+    """One key of a table of the scenario file.
+
+    Attributes
+    ----------
+    name : str
+    kind : {"number", "vector3", "string", "choice", "any"}
+        ``any`` keys are validated by whoever consumes them (camera, checks' limits).
+    doc : str
+        Meaning and unit, one line (shown by ``vnav-demo show`` and in the README).
+    default : object
+        Used when the key is absent; ``REQUIRED`` if it must be given, None if optional.
+    lo, hi : float, optional
+        Bounds of a number; ``lo_open`` makes the lower bound strict.
+    choices : tuple of str
+        Allowed values of a ``choice``.
+    """
+
+    name: str
+    kind: str
+    doc: str
+    default: Any = REQUIRED
+    lo: float | None = None
+    hi: float | None = None
+    lo_open: bool = False
+    choices: tuple[str, ...] = ()
+
+    def check(self, value: Any, path: str) -> Any:
+        """``value`` validated (numbers as float, vectors as tuples); SchemaError otherwise."""
+        if self.kind == "number":
+            return number(value, path, self.lo, self.hi, self.lo_open)
+        if self.kind == "vector3":
+            if not isinstance(value, list) or len(value) != 3:
+                raise SchemaError(f"{path}: must be a list of 3 numbers, got {value!r}")
+            return tuple(number(v, f"{path}[{i}]") for i, v in enumerate(value))
+        if self.kind == "string":
+            if not isinstance(value, str) or not value.strip():
+                raise SchemaError(f"{path}: must be a non-empty string, got {value!r}")
+            return value
+        if self.kind == "choice" and value not in self.choices:
+            raise SchemaError(f"{path}: must be one of {list(self.choices)}, got {value!r}")
+        return value
+
+
+def number(
+    value: Any, path: str, lo: float | None = None, hi: float | None = None, lo_open: bool = False
+) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise SchemaError(f"{path}: must be a number, got {value!r}")
+    x = float(value)
+    if not math.isfinite(x):
+        raise SchemaError(f"{path}: must be finite, got {value!r}")
+    if lo is not None and (x <= lo if lo_open else x < lo):
+        raise SchemaError(f"{path}: must be {'>' if lo_open else '>='} {lo}, got {value!r}")
+    if hi is not None and x > hi:
+        raise SchemaError(f"{path}: must be <= {hi}, got {value!r}")
+    return x
+
+
+def read(table: Any, keys: tuple[Key, ...], path: str) -> dict[str, Any]:
+    """Every key of ``keys`` read from ``table``: validated values, defaults filled in.
+
+    Raises
+    ------
+    SchemaError
+        Naming the key path: not a table, an unknown key, a missing key or a bad value.
+    """
+    if not isinstance(table, dict):
+        raise SchemaError(f"{path}: must be a table, got {type(table).__name__}")
+    allowed = {k.name for k in keys}
+    unknown = sorted(set(table) - allowed)
+    if unknown:
+        prefix = f"{path}." if path else ""
+        raise SchemaError(f"{prefix}{unknown[0]}: unknown key; expected one of {sorted(allowed)}")
+    out = {}
+    for key in keys:
+        where = f"{path}.{key.name}" if path else key.name
+        if key.name in table:
+            out[key.name] = key.check(table[key.name], where)
+        elif key.default is REQUIRED:
+            raise SchemaError(f"{where}: missing")
+        else:
+            out[key.name] = key.default
+    return out
+
+
+# ------------------------------------------------------------------------------ the schema
+
+TOP: tuple[Key, ...] = (
+    Key("name", "string", "letters, digits, '-' and '_'; names the output files"),
+    Key("description", "string", "shown by vnav-demo list and in the recording", None),
+    Key("lesson", "any", "longer text shown beside the recording", ""),
+    Key("duration_s", "number", "optional; default: the flight's last time", None, 0.0, None, True),
+    Key("camera_rate_hz", "number", "camera ticks per second", 10.0, 0.0, 1000.0, True),
+    Key("view", "choice", "first tab below the error plot", "errors", choices=VIEW_NAMES),
+    Key("camera", "any", "table: the onboard camera", None),
+    Key("cones", "any", "array of tables: the cones", REQUIRED),
+    Key("flight", "any", "table: how the drone flies", REQUIRED),
+    Key("noise", "any", "table: error on the pose the estimator is given", None),
+    Key("checks", "any", "array of tables: pass/fail criteria", None),
+)
+
+_CAMERA_DOCS = {
+    "position_b": "optical centre on the body (x forward, y left, z up), m",
+    "pitch_down_deg": "optical axis below the body's x axis, deg",
+    "fovy_deg": "vertical field of view, deg",
+    "width": "image width, px",
+    "height": "image height, px",
+}
+CAMERA: tuple[Key, ...] = tuple(
+    Key(f.name, "any", _CAMERA_DOCS[f.name], getattr(CameraConfig(), f.name))
+    for f in fields(CameraConfig)
+)
+"""Validated by ``sim.config.CameraConfig``, whose defaults these are."""
+
+CONE: tuple[Key, ...] = (Key("position_w", "vector3", "base centre in the world, z = 0, m"),)
+
+KEYFRAME: tuple[Key, ...] = (
+    Key("t", "number", "time, s", REQUIRED, 0.0),
+    Key("position_w", "vector3", "body origin in the world, m"),
+    Key("rpy_deg", "vector3", "[roll, pitch, yaw], R = Rz(yaw) Ry(pitch) Rx(roll), deg"),
+    Key("camera_position_b", "vector3", "slides the camera on the body, m", None),
+)
+WAYPOINT: tuple[Key, ...] = (
+    Key("t", "number", "time, s", REQUIRED, 0.0),
+    Key("position_w", "vector3", "body origin in the world, m"),
+    Key("yaw_deg", "number", "heading, deg", 0.0),
+)
+FLIGHT_MODES: dict[str, tuple[Key, ...]] = {
+    "kinematic": (Key("keyframes", "any", "timed poses: position linear, attitude slerp"),),
+    "controlled": (
+        Key("waypoints", "any", "timed positions and headings flown by the controller"),
+    ),
+    "orbit": (
+        Key("center_w", "vector3", "centre of the circle, m"),
+        Key("radius_m", "number", "radius, m", REQUIRED, 0.0, None, True),
+        Key("height_m", "number", "height above the ground, m", REQUIRED, 0.0, None, True),
+        Key("period_s", "number", "one turn, s; < 0: clockwise; |period| >= 1"),
+        Key("turns", "number", "how many turns", 1.0, 0.0, None, True),
+        Key("start_angle_deg", "number", "where on the circle it starts, deg", 180.0),
+        Key("ramp_s", "number", "speed-up time, s", 3.0, 0.0),
+    ),
+}
+"""The keys of ``[flight]`` per ``mode`` (besides ``mode`` itself)."""
+
+NOISE: tuple[Key, ...] = (
+    Key("position_std_m", "number", "error added to the body position, m", 0.0, 0.0),
+    Key(
+        "attitude_std_deg", "number", "error (rotation vector) added to the attitude, deg", 0.0, 0.0
+    ),
+)
+CHECK: tuple[Key, ...] = (
+    Key("kind", "any", "a check kind (scenarios.checks.KINDS)"),
+    Key("method", "any", "a localisation method (vnav.methods)", "depth_image"),
+    Key("limit", "any", "the limit (give limit or limit_m)", None),
+    Key("limit_m", "any", "the limit in metres", None),
+    Key("name", "string", "what the report calls it", None),
+)
+
+
+def comment(path: str) -> str | None:
+    """The schema's one-line doc of the key at ``path`` (``camera.fovy_deg``), or None."""
+    if path == "flight.mode":
+        return " | ".join(FLIGHT_MODES) + " (each mode has its own keys)"
+    table, _, name = path.rpartition(".")
+    keys = {
+        "": TOP,
+        "camera": CAMERA,
+        "noise": NOISE,
+        "flight": tuple(k for mode in FLIGHT_MODES.values() for k in mode),
+        "cones": CONE,
+        "checks": CHECK,
+    }.get(table, ())
+    return next((k.doc for k in keys if k.name == name), None)
+
+
+def example_toml() -> str:
+    """The README's example scenario file, its comments from this schema."""
+    from scenarios import toml_out
+
+    example = {
+        "name": "my-scene",
+        "description": "one line",
+        "camera_rate_hz": 10.0,
+        "camera": {k.name: k.default for k in CAMERA},
+        "cones": [{"position_w": [6.0, 1.0, 0.0]}],
+        "flight": {
+            "mode": "kinematic",
+            "keyframes": [
+                {"t": 0.0, "position_w": [0.0, 0.0, 10.0], "rpy_deg": [0.0, 0.0, 0.0]},
+                {"t": 5.0, "position_w": [0.0, 0.0, 10.0], "rpy_deg": [0.0, 0.0, 90.0]},
+            ],
+        },
+        "noise": {k.name: k.default for k in NOISE},
+        "checks": [{"kind": "max_error", "method": "depth_image", "limit_m": 0.1}],
+    }
+    return toml_out.dumps(example, comments=True)

@@ -1,0 +1,58 @@
+"""The documents a user reads agree with the declarations they describe."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+
+from scenarios import schema
+from vnav.methods import CONTRACT_DOMAIN, METHODS
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _table_rows(text: str, heading: str) -> list[list[str]]:
+    """The cells of the markdown table whose header row starts with ``heading``."""
+    lines = text.splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith(heading))
+    rows = []
+    for line in lines[start + 2 :]:
+        if not line.startswith("|"):
+            break
+        rows.append([cell.strip() for cell in line.strip("|").split("|")])
+    return rows
+
+
+@pytest.mark.parametrize("path", ["README.md", "docs/ACCURACY.md"])
+def test_method_tables_state_vnav_methods(path):
+    rows = _table_rows((ROOT / path).read_text(), "| method | depth from | accuracy promised")
+    assert [r[0] for r in rows] == [f"`{m.name}`" for m in METHODS]
+    assert [r[1] for r in rows] == [m.depth_from for m in METHODS]
+    assert [r[2] for r in rows] == [m.promise for m in METHODS]
+
+
+def test_readme_states_the_contract_domain():
+    assert f"accuracy promised ({CONTRACT_DOMAIN.text})" in (ROOT / "README.md").read_text()
+
+
+def test_accuracy_page_colours_are_the_recordings():
+    rows = _table_rows((ROOT / "docs/ACCURACY.md").read_text(), "| method | depth from")
+    assert [r[3] for r in rows] == [m.color_name for m in METHODS]
+
+
+def test_readme_example_is_the_schemas():
+    readme = (ROOT / "README.md").read_text()
+    (block,) = re.findall(r"```toml\n(.*?)```", readme, flags=re.S)
+    assert block == schema.example_toml()
+
+
+def test_readme_example_is_a_valid_scenario():
+    import tomllib
+
+    from scenarios.spec import from_dict
+
+    (block,) = re.findall(r"```toml\n(.*?)```", (ROOT / "README.md").read_text(), flags=re.S)
+    spec = from_dict(tomllib.loads(block), where="README.md")
+    assert spec.name == "my-scene" and spec.flight.mode == "kinematic"
