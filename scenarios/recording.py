@@ -148,7 +148,17 @@ class _Buffered:
     record: TickRecord
     encoded: Future[tuple[bytes, bytes | None]]
     """JPEG of the image and PNG of the depth (or None), from the encoder thread."""
-    cloud_w: np.ndarray | None
+    cloud_w: Future[np.ndarray] | None
+    """The decimated depth image in world coordinates, from the encoder thread."""
+
+
+def _depth_cloud_w(
+    depth_m: np.ndarray, camera: PinholeCamera, T_w_c: np.ndarray, far_m: float
+) -> np.ndarray:
+    """Every ``CLOUD_STRIDE_PX``-th pixel of the depth image in the world, float32 (M, 3)."""
+    return depth_to_world_points(
+        depth_m, camera, T_w_c, stride=CLOUD_STRIDE_PX, far_m=far_m
+    ).astype(np.float32)
 
 
 class Recording:
@@ -195,14 +205,15 @@ class Recording:
         encoded = self._encoder.submit(_encode, rgb, logged_depth)
         cloud_w = None
         if depth_m is not None:
-            # Drawn where the estimator believes the camera is (its pose, noise included).
-            cloud_w = depth_to_world_points(
+            # Drawn where the estimator believes the camera is (its pose, noise included);
+            # on the worker thread too, overlapping with the next tick's rendering.
+            cloud_w = self._encoder.submit(
+                _depth_cloud_w,
                 depth_m,
                 self._camera,
                 record.T_w_b_est @ record.T_b_c,
-                stride=CLOUD_STRIDE_PX,
-                far_m=self._far_m,
-            ).astype(np.float32)
+                self._far_m,
+            )
         self._buffer.append(_Buffered(record, encoded, cloud_w))
         if len(self._buffer) >= FLUSH_EVERY_TICKS:
             self._flush()
@@ -250,14 +261,13 @@ class Recording:
         _send_attitude(send, rows)
         _send_cone0(send, rows, self._cone0_w)
         with_cloud = [r for r in rows if r.cloud_w is not None]
+        clouds = [r.cloud_w.result() for r in with_cloud]
         send(
             entity.DEPTH_CLOUD,
             with_cloud,
             rr.Points3D.columns(
-                positions=np.concatenate([r.cloud_w for r in with_cloud])
-                if with_cloud
-                else np.zeros((0, 3)),
-            ).partition([len(r.cloud_w) for r in with_cloud]),
+                positions=np.concatenate(clouds) if clouds else np.zeros((0, 3)),
+            ).partition([len(c) for c in clouds]),
         )
 
 
