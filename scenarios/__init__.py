@@ -1,1 +1,1 @@
-"""scenarios: scripted headless scenarios, the `vnav-demo` command line and Rerun recording."""
+"""scenarios: scripted headless scenarios, the ``vnav-demo`` command line and Rerun recording."""

@@ -1,4 +1,4 @@
-"""`python -m scenarios` is `vnav-demo`."""
+"""``python -m scenarios`` is ``vnav-demo``."""
 
 import sys
 

@@ -1,8 +1,8 @@
 """The built-in scenarios, each a lesson of the lecture, with its own checks.
 
 Each entry is a function returning the scenario in the TOML schema (user units, degrees), so
-built-ins pass through exactly the validation a user's file does (`scenarios.spec.from_dict`).
-`load(name)` with a name not registered raises a ScenarioError listing the valid names.
+built-ins pass through exactly the validation a user's file does (``scenarios.spec.from_dict``).
+``load(name)`` with a name not registered raises a ScenarioError listing the valid names.
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 Each check kind computes one figure from the run's records (``scenarios.records``) and
 compares it with the scenario's limit. Kinds are registered where they are defined, with
-``@check_kind`` (as dm_control registers its tasks): the registry :data:`KINDS` is what the
+``@check_kind`` (as dm_control registers its tasks): the registry ``KINDS`` is what the
 scenario parser accepts, what ``Check.label`` reads and what the README points to. The accuracy
 bounds are those of the perception contract (docs/ACCURACY.md, declared in ``vnav.methods``).
 """
@@ -66,7 +66,7 @@ def check_kind(name: str, passes: Callable, *, uses_method: bool = True) -> Call
 
 @dataclass(frozen=True)
 class Check:
-    """One pass/fail criterion evaluated on a finished run (a kind from :data:`KINDS`)."""
+    """One pass/fail criterion evaluated on a finished run (a kind from ``KINDS``)."""
 
     kind: str
     limit: float
@@ -135,19 +135,19 @@ def _median(x: np.ndarray) -> float | None:
 
 @check_kind("max_error", operator.le)
 def _max_error(run: RunResult, method: str) -> float | None:
-    """largest position error of `method` over all matched detections <= limit_m"""
+    """largest position error of ``method`` over all matched detections <= limit_m"""
     return _max(run.errors(method))
 
 
 @check_kind("median_error", operator.le)
 def _median_error(run: RunResult, method: str) -> float | None:
-    """median position error of `method` <= limit_m"""
+    """median position error of ``method`` <= limit_m"""
     return _median(run.errors(method))
 
 
 @check_kind("error_bound", operator.le)
 def _error_bound(run: RunResult, method_name: str) -> float | None:
-    """error / accuracy bound of `method` <= limit: worst or median as the bound states,
+    """error / accuracy bound of ``method`` <= limit: worst or median as the bound states,
     over the contract's domain (docs/ACCURACY.md)"""
     bound = method(method_name).bound
     if bound is None:
@@ -183,7 +183,7 @@ def _per_cone(run: RunResult, method: str | None) -> dict[int, np.ndarray]:
 
 @check_kind("world_estimate_spread", operator.le)
 def _world_spread(run: RunResult, method: str) -> float | None:
-    """largest distance of `method`'s estimates of a cone from their mean <= limit_m"""
+    """largest distance of ``method``'s estimates of a cone from their mean <= limit_m"""
     spreads = [
         float(np.max(np.linalg.norm(p - p.mean(axis=0), axis=1)))
         for p in _per_cone(run, method).values()
@@ -200,7 +200,7 @@ def _camera_span(run: RunResult, method: str) -> float | None:
 
 @check_kind("naive_worse", operator.ge)
 def _naive_worse(run: RunResult, method: str) -> float | None:
-    """median naive error >= limit x the median error of `method`"""
+    """median naive error >= limit x the median error of ``method``"""
     naive, ref = _median(run.errors("naive")), _median(run.errors(method))
     if naive is None or ref is None:
         return None

@@ -1,10 +1,10 @@
-"""The `vnav-demo` command line.
+"""The ``vnav-demo`` command line.
 
-- `vnav-demo list`: the built-in scenarios, one line each.
-- `vnav-demo show NAME`: a built-in scenario as a TOML file, to start your own from.
-- `vnav-demo run NAME|FILE.toml [...] [--all] [--out DIR] [--seed N] [--duration S] [--quiet]`:
-  runs scenarios headless, writes `DIR/<name>.rrd` and `DIR/<name>.json`, prints a summary.
-- `vnav-demo lecture`: the lecture's worked examples next to vnav's results.
+- ``vnav-demo list``: the built-in scenarios, one line each.
+- ``vnav-demo show NAME``: a built-in scenario as a TOML file, to start your own from.
+- ``vnav-demo run NAME|FILE.toml [...] [--all] [--out DIR] [--seed N] [--duration S] [--quiet]``:
+  runs scenarios headless, writes ``DIR/<name>.rrd`` and ``DIR/<name>.json``, prints a summary.
+- ``vnav-demo lecture``: the lecture's worked examples next to vnav's results.
 
 Exit status: 0 when every check passed, 1 when a check failed (or a run diverged), 2 for bad
 usage or bad input (one line on stderr, no traceback; nothing is written).
@@ -22,7 +22,7 @@ PROG = "vnav-demo"
 
 
 class _UsageError(Exception):
-    """Raised instead of argparse's print-usage-and-exit, so `main` can say it in one line."""
+    """Raised instead of argparse's print-usage-and-exit, so ``main`` can say it in one line."""
 
 
 class _Parser(argparse.ArgumentParser):
@@ -129,7 +129,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run `vnav-demo` with ``argv`` (default: ``sys.argv[1:]``); return the exit status."""
+    """Run ``vnav-demo`` with ``argv`` (default: ``sys.argv[1:]``); return the exit status."""
     parser = build_parser()
     try:
         args = parser.parse_args(argv)

@@ -1,8 +1,8 @@
-"""The worked examples and quiz answers of MIT 16.485 VNAV lecture 1, computed with `vnav`.
+"""The worked examples and quiz answers of MIT 16.485 VNAV lecture 1, computed with ``vnav``.
 
-Each `Example` holds the lecture's own answer (as printed there, at its printed precision) and a
-function that computes the same quantity with the library; `vnav-demo lecture` prints them side
-by side (`table`). The tests (tests/test_lecture.py) state the lecture's numbers themselves
+Each ``Example`` holds the lecture's own answer (as printed there, at its printed precision) and a
+function that computes the same quantity with the library; ``vnav-demo lecture`` prints them side
+by side (``table``). The tests (tests/test_lecture.py) state the lecture's numbers themselves
 rather than reading them from here.
 """
 

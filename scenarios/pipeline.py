@@ -1,6 +1,6 @@
 """Run a scenario, judge it and, if asked, write its recording and report: the one entry point.
 
-The command line (``vnav-demo run``), the benchmarks and the tests all call :func:`run`, so a
+The command line (``vnav-demo run``), the benchmarks and the tests all call ``run``, so a
 scenario is run, judged and written the same way everywhere::
 
     run     scenarios.runner.run_scenario   (MuJoCo; the recording observes every tick)

@@ -23,7 +23,7 @@ Timelines: ``tick`` (camera tick index) and ``sim_time`` (simulated seconds). Tr
 logged parent-from-child (Rerun's default relation), which is exactly vnav's
 ``T_parent_child``: ``world/body`` gets ``T_w_b``, ``world/body/camera`` gets ``T_b_c``.
 
-:class:`Recording` is a ``scenarios.runner.TickObserver``: it is fed the run's records
+``Recording`` is a ``scenarios.runner.TickObserver``: it is fed the run's records
 (``scenarios.records``) and images, as evo's Rerun bridge is fed its trajectory objects. The
 file is written to a temporary name beside the final one and renamed only when the run
 finishes, so an interrupted run never leaves a truncated ``.rrd`` under the final name.
@@ -77,7 +77,7 @@ FLUSH_EVERY_TICKS = 50
 def depth_for_display_mm(depth_m: np.ndarray) -> np.ndarray:
     """Planar depth in metres -> uint16 millimetres for a PNG, 0 where there is no return.
 
-    Rounded to :data:`DEPTH_MANTISSA_BITS` significant bits (steps of 2**k mm, at most 1/64 of
+    Rounded to ``DEPTH_MANTISSA_BITS`` significant bits (steps of 2**k mm, at most 1/64 of
     the depth), so the far ground compresses; beyond 65.535 m (and the sky) it becomes 0.
     """
     depth_mm = np.nan_to_num(depth_m, nan=0.0, posinf=0.0).astype(np.float32) * 1000.0

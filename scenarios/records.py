@@ -1,6 +1,6 @@
 """What a run saw and computed, camera tick by camera tick: typed records, no simulator.
 
-A scenario's run is a list of :class:`TickRecord`, one per camera tick, each holding what the
+A scenario's run is a list of ``TickRecord``, one per camera tick, each holding what the
 camera saw (the detections), what each method estimated and the ground truth it is compared
 with. The runner (``scenarios.runner``) makes them, the checks (``scenarios.checks``) and the
 report (``scenarios.report``) read them, and the recording (``scenarios.recording``) draws
@@ -184,5 +184,5 @@ class RunResult:
         )
 
     def ranges_for(self, method: str, *, contract_only: bool = False) -> np.ndarray:
-        """Ranges of the detections behind :meth:`errors`, same order, metres."""
+        """Ranges of the detections behind ``errors``, same order, metres."""
         return np.array([d.range_m for d in self._scored(method, contract_only)], dtype=np.float64)

@@ -1,4 +1,4 @@
-"""`vnav-demo run`: resolve, validate, run, judge, write, summarise.
+"""``vnav-demo run``: resolve, validate, run, judge, write, summarise.
 
 Everything that can be checked before running is checked first (every name and file, the
 duration, the output directory), so bad input exits with status 2 and writes nothing.
@@ -136,7 +136,7 @@ def run_one(spec: ScenarioSpec, args: argparse.Namespace, out_dir: Path) -> bool
 
 
 def run(args: argparse.Namespace) -> int:
-    """Entry point of `vnav-demo run`; returns the exit status."""
+    """Entry point of ``vnav-demo run``; returns the exit status."""
     try:
         specs = resolve(args.scenarios, args.all)
         if args.duration is not None:

@@ -1,6 +1,6 @@
 """Run a scenario in the simulator: fly, render, detect, evaluate each camera tick.
 
-One camera tick of :func:`run_scenario`::
+One camera tick of ``run_scenario``::
 
     fly      step the physics (or the keyframes) to the tick's time     <- sim.flight
     truth    T_w_b, T_b_c, cones_w                                      <- sim.world.World

@@ -1,8 +1,8 @@
 """The scenario file's schema, declared once: every key, its type, unit, default and meaning.
 
-The parser (``scenarios.spec``) reads a file through :func:`read`, table by table; ``vnav-demo
-show`` annotates a built-in with each key's unit and meaning (:func:`comment`); the README's
-example is :func:`example_toml` (a test keeps the two identical). Units are in the key's name
+The parser (``scenarios.spec``) reads a file through ``read``, table by table; ``vnav-demo
+show`` annotates a built-in with each key's unit and meaning (``comment``); the README's
+example is ``example_toml`` (a test keeps the two identical). Units are in the key's name
 where it could be misread (``_m``, ``_deg``, ``_s``, ``_hz``); degrees become radians in
 ``scenarios.spec``, once.
 """

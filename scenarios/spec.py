@@ -36,7 +36,7 @@ A scenario file (TOML) holds, in user units (metres, degrees, seconds)::
     method = "depth_image"
     limit_m = 0.1
 
-Every mistake raises :class:`ScenarioError` (a ValueError) naming the file and the key.
+Every mistake raises ``ScenarioError`` (a ValueError) naming the file and the key.
 Angles become radians and ``rpy_deg`` becomes a quaternion once, here, so a keyframe at
 pitch = 90 deg is as good as any other.
 """

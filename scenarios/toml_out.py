@@ -1,6 +1,6 @@
 """Write a scenario (the TOML schema as plain dicts) back out as a TOML file.
 
-`vnav-demo show NAME` prints a built-in scenario this way, so a user can start a scenario
+``vnav-demo show NAME`` prints a built-in scenario this way, so a user can start a scenario
 file from one. Only what the schema uses is supported: strings, numbers, booleans, lists of
 those, tables, arrays of tables, and lists of inline tables (keyframes, waypoints).
 """
