@@ -131,16 +131,6 @@ def _pose_transform(T_parent_child: np.ndarray) -> rr.Transform3D:
     )
 
 
-def _pose_transform(T_parent_child: np.ndarray) -> rr.Transform3D:
-    # vnav and Rerun both order quaternions x, y, z, w: no reordering at this border.
-    quat_xyzw = quat.from_matrix(T_parent_child[:3, :3])
-    return rr.Transform3D(
-        translation=T_parent_child[:3, 3],
-        quaternion=rr.Quaternion(xyzw=quat_xyzw),
-        relation=rr.TransformRelation.ParentFromChild,
-    )
-
-
 @dataclass
 class _Buffered:
     """One camera tick waiting to be sent: its record, encoded images and depth cloud."""

@@ -1,40 +1,9 @@
 """What a scenario is: a typed specification, read from TOML or built in Python.
 
-A scenario file (TOML) holds, in user units (metres, degrees, seconds)::
-
-    name = "my-scene"
-    description = "one line"
-    duration_s = 5.0          # optional; default: the flight's last time
-    camera_rate_hz = 10.0
-
-    [camera]                  # sim.config.CameraConfig fields
-    position_b = [0.15, 0.0, 0.05]
-    pitch_down_deg = 30.0
-
-    [[cones]]
-    position_w = [6.0, 1.0, 0.0]
-
-    [flight]
-    mode = "kinematic"        # keyframes: position linear, attitude slerp
-    keyframes = [ { t = 0.0, position_w = [0, 0, 10], rpy_deg = [0, 0, 0] }, ... ]
-    # a keyframe may also slide the camera on the body: camera_position_b = [0.3, 0.0, 0.05]
-    # mode = "controlled"     # waypoints flown by the geometric controller
-    # waypoints = [ { t = 0.0, position_w = [0, 0, 10], yaw_deg = 0.0 }, ... ]
-    # mode = "orbit"          # a smooth circle, heading at the centre (controller)
-    # center_w = [0, 0, 0]; radius_m = 6.0; height_m = 4.0; period_s = 20.0 (< 0: clockwise)
-    # turns = 1.0; start_angle_deg = 180.0; ramp_s = 3.0
-
-    [noise]                   # optional, drawn from the run's seed
-    position_std_m = 0.0      # error added to the body position the estimator is given
-    attitude_std_deg = 0.0    # error (random rotation vector) added to its attitude
-
-    view = "coordinates"      # optional: first tab in the recording (errors, coordinates,
-                              # attitude)
-
-    [[checks]]                # optional; default: the accuracy bounds of every method
-    kind = "max_error"
-    method = "depth_image"
-    limit_m = 0.1
+A scenario file (TOML) holds, in user units (metres, degrees, seconds), the keys that
+``scenarios.schema`` declares (each with its type, unit, default and meaning; the README's
+example is generated from it). ``from_dict`` reads a parsed file table by table through the
+schema and builds the typed ``ScenarioSpec`` below.
 
 Every mistake raises ``ScenarioError`` (a ValueError) naming the file and the key.
 Angles become radians and ``rpy_deg`` becomes a quaternion once, here, so a keyframe at
