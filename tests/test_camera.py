@@ -1,4 +1,5 @@
-"""The pinhole camera: intrinsics from fovy, projection against OpenCV, exact inverses."""
+"""vnav.camera: intrinsics from fovy, projection against OpenCV, exact inverses, and the depth
+image as a world point cloud (``depth_to_world_points``) against the rendered scene's truth."""
 
 from __future__ import annotations
 
@@ -10,7 +11,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from vnav.camera import PinholeCamera
+from vnav import se3
+from vnav.camera import PinholeCamera, depth_to_world_points
+from vnav.cone import TRAFFIC_CONE
 
 CAM = PinholeCamera.from_fovy(60.0, 640, 480)
 
@@ -112,3 +115,61 @@ def test_bad_shapes_raise() -> None:
 def test_camera_is_frozen() -> None:
     with pytest.raises(AttributeError):
         CAM.fx = 1.0  # type: ignore[misc]
+
+
+# ------------------------------------------------------------------ depth_to_world_points
+
+
+def surface_residual_m(p_k: np.ndarray) -> np.ndarray:
+    """Distance-like residual of points (cone frame, base centre origin) to the cone's surface.
+
+    Points at the base plate's height inside its square count 0 distance from the plate; other
+    points get their radial distance to the body, `|r - r(z)|`, metres.
+    """
+    c = TRAFFIC_CONE
+    a, t, H, r0 = c.base_width_m / 2, c.base_thickness_m, c.height_m, c.body_radius_m
+    on_plate = (p_k[:, 2] <= t + 2e-3) & (np.abs(p_k[:, :2]) <= a + 2e-3).all(axis=1)
+    r_model = r0 * np.clip(H - p_k[:, 2], 0.0, H - t) / (H - t)
+    body = np.abs(np.hypot(p_k[:, 0], p_k[:, 1]) - r_model)
+    return np.where(on_plate, 0.0, body)
+
+
+def test_depth_cloud_lies_on_true_surfaces(one_view: dict) -> None:
+    world, frame, far_m = one_view["world"], one_view["frame"], one_view["far_m"]
+    T_w_c = world.T_w_c
+    cloud_w = depth_to_world_points(frame.depth, world.camera, T_w_c, far_m=far_m)
+    sky = frame.depth >= far_m
+    assert cloud_w.shape == (int((~sky).sum()), 3)
+    cone = one_view["detection"].full_mask(frame.depth.shape)[~sky]
+    # Ground pixels lie on z = 0 (float32 depth: relative 1e-5 of up to ~300 m).
+    ground_z = cloud_w[~cone, 2]
+    assert np.abs(ground_z).max() < 0.02
+    # Cone pixels lie on the cone's analytic surface.
+    p_k = cloud_w[cone] - world.cones_w[0]
+    assert np.median(surface_residual_m(p_k)) < 0.003
+    # The strided cloud is the subset of pixels.
+    sub = depth_to_world_points(frame.depth, world.camera, T_w_c, stride=4, far_m=far_m)
+    assert sub.shape[0] == int((frame.depth[::4, ::4] < far_m).sum())
+
+
+def test_depth_cloud_is_the_back_projection_of_every_valid_pixel(one_view: dict) -> None:
+    """``p_w = T_w_c @ backproject(uv, z)`` pixel by pixel, row-major, sky dropped."""
+    world, frame, far_m = one_view["world"], one_view["frame"], one_view["far_m"]
+    depth = frame.depth.astype(np.float64)
+    v, u = np.nonzero(depth < far_m)
+    uv = np.column_stack([u, v]).astype(np.float64)
+    expected = se3.apply(world.T_w_c, world.camera.backproject(uv, depth[v, u]))
+    cloud_w = depth_to_world_points(frame.depth, world.camera, world.T_w_c, far_m=far_m)
+    np.testing.assert_allclose(cloud_w, expected, rtol=0, atol=1e-9)
+
+
+def test_bad_input_raises(one_view: dict) -> None:
+    world, frame, detection = one_view["world"], one_view["frame"], one_view["detection"]
+    cam = world.camera
+    nan_depth = frame.depth.copy()
+    x, y, w, h = detection.bbox
+    nan_depth[y : y + h, x : x + w] = np.nan
+    with pytest.raises(ValueError, match="depth must not contain NaN"):
+        depth_to_world_points(nan_depth, cam, world.T_w_c)
+    with pytest.raises(ValueError, match="stride must be a positive int"):
+        depth_to_world_points(frame.depth, cam, world.T_w_c, stride=0)

@@ -11,7 +11,7 @@ import textwrap
 
 import numpy as np
 import pytest
-from rrd_tools import read_rows
+from helpers import read_rows
 
 import scenarios.runner
 from scenarios import builtin, pipeline

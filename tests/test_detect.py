@@ -4,31 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import ORANGE, blank, render_scene, synthetic_cone
 
-from sim.config import SceneConfig
-from sim.render import Renderer
-from sim.world import World
 from vnav import se3, so3
-from vnav.cone import TRAFFIC_CONE
-from vnav.detect import ConeDetection, HsvThresholds, detect_cones
-
-ORANGE = np.array([round(255 * c) for c in TRAFFIC_CONE.color_rgb], dtype=np.uint8)
-BACKGROUND = np.array([90, 110, 80], dtype=np.uint8)
-
-
-def synthetic_cone(
-    image: np.ndarray, apex_uv: tuple[float, float], height_px: float, half_angle: float = 0.22
-) -> None:
-    """Paint an upright triangle (apex at `apex_uv`, base `height_px` below) by pixel-centre
-    inclusion, the rasterisation rule of OpenGL."""
-    v, u = np.mgrid[0 : image.shape[0], 0 : image.shape[1]]
-    t = (v - apex_uv[1]) / height_px
-    inside = (t >= 0) & (t <= 1) & (np.abs(u - apex_uv[0]) <= half_angle * height_px * t)
-    image[inside] = ORANGE
-
-
-def blank() -> np.ndarray:
-    return np.tile(BACKGROUND, (480, 640, 1))
+from vnav.detect import ConeDetection, HsvThresholds, _fit_line, detect_cones
 
 
 def test_empty_scene_gives_empty_list() -> None:
@@ -72,13 +51,6 @@ def test_border_flag() -> None:
     assert d.touches_border
 
 
-def render_scene(cones_w: tuple, T_w_b: np.ndarray) -> np.ndarray:
-    world = World.from_config(SceneConfig(cones_w=cones_w))
-    world.set_pose(T_w_b)
-    with Renderer(world) as renderer:
-        return renderer.render(depth=False).rgb
-
-
 def test_rendered_scene_with_three_cones() -> None:
     cones_w = ((6.0, 1.0, 0.0), (9.0, -2.0, 0.0), (14.0, 3.0, 0.0))
     rgb = render_scene(cones_w, se3.make(np.eye(3), [0.0, 0.0, 3.0]))
@@ -112,3 +84,17 @@ def test_bad_parameters_raise() -> None:
         detect_cones(blank(), min_area_px=0)
     with pytest.raises(ValueError, match="h_min <= h_max"):
         HsvThresholds(h_min=30, h_max=10)
+
+
+def test_fit_line_matches_np_polyfit() -> None:
+    """The closed-form regression of the edge fit is what ``np.polyfit(v, u, 1)`` solves."""
+    rng = np.random.default_rng(0)
+    for n in (3, 4, 10, 60):
+        v = np.arange(n) + int(rng.integers(0, 400))
+        u = rng.uniform(0, 640) + rng.uniform(-2, 2) * v + rng.normal(0, 0.5, n)
+        a, b = _fit_line(v, np.round(u).astype(np.int64))
+        slope, intercept = np.polyfit(v, np.round(u), 1)
+        assert b == pytest.approx(slope, rel=1e-9, abs=1e-9)
+        assert a == pytest.approx(intercept, rel=1e-9, abs=1e-6)
+    assert _fit_line(np.array([1, 2]), np.array([3, 4])) is None  # fewer than 3 rows
+    assert _fit_line(np.array([5, 5, 6]), np.array([1, 2, 3])) is None  # no spread in v

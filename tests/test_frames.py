@@ -4,8 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import PROPERTY_SETTINGS, transforms
+from hypothesis import given
+from hypothesis import strategies as st
 
 from vnav import frames, se3, so3
+
+SETTINGS = PROPERTY_SETTINGS
+T_OK = se3.make(so3.rot_z(0.3), [1.0, 2.0, 3.0])
 
 ALL = {
     "R_FLU_RDF": frames.R_FLU_RDF,
@@ -82,3 +88,60 @@ def test_frame_tree_moving_body_and_properties():
     tree.add("map", "odom", np.eye(4))
     tree.add("odom", "world", se3.make(np.eye(3), [0.0, 0.0, 1.0]))
     np.testing.assert_allclose(tree.lookup("map", "cone")[:3, 3], [1.0, 0.0, 1.0], atol=1e-15)
+
+
+@SETTINGS
+@given(st.lists(transforms(), min_size=4, max_size=4), st.data())
+def test_frame_tree_lookup_equals_manual_composition(Ts, data):
+    # world -> body -> camera, and world -> landmark; body -> imu, all random.
+    T_w_b, T_b_c, T_w_l, T_b_i = Ts
+    tree = frames.FrameTree()
+    tree.add("world", "body", T_w_b)
+    tree.add("body", "camera", T_b_c)
+    tree.add("world", "landmark", T_w_l)
+    tree.add("body", "imu", T_b_i)
+    manual = {
+        "world": np.eye(4),
+        "body": T_w_b,
+        "camera": T_w_b @ T_b_c,
+        "landmark": T_w_l,
+        "imu": T_w_b @ T_b_i,
+    }  # T_w_x
+    a = data.draw(st.sampled_from(sorted(manual)))
+    b = data.draw(st.sampled_from(sorted(manual)))
+    expected = se3.invert(manual[a]) @ manual[b]
+    np.testing.assert_allclose(tree.lookup(a, b), expected, atol=1e-10)
+    np.testing.assert_allclose(tree.lookup(a, b) @ tree.lookup(b, a), np.eye(4), atol=1e-10)
+
+
+# ------------------------------------------------------------------------------- bad input
+# Bad input raises ValueError with a message that names the problem (issue 2, "Bad input").
+
+
+def test_bottom_row_not_0001():
+    T = T_OK.copy()
+    T[3] = [0.0, 0.0, 1.0, 1.0]
+    tree = frames.FrameTree()
+    with pytest.raises(ValueError, match=r"T_world_body must have bottom row"):
+        tree.add("world", "body", T)
+
+
+def test_frame_tree_errors():
+    tree = frames.FrameTree()
+    tree.add("world", "body", T_OK)
+    tree.add("body", "camera", T_OK)
+    tree.add("map", "odom", T_OK)
+    with pytest.raises(ValueError, match=r"unknown frame 'lidar'; known frames: 'world', 'body'"):
+        tree.lookup("world", "lidar")
+    with pytest.raises(ValueError, match=r"frames 'camera' and 'odom' are not connected"):
+        tree.lookup("camera", "odom")
+    with pytest.raises(ValueError, match=r"frame 'camera' already has parent 'body'"):
+        tree.add("world", "camera", T_OK)
+    with pytest.raises(ValueError, match=r"would close a cycle: 'world' is already an ancestor"):
+        tree.add("camera", "world", T_OK)
+    with pytest.raises(ValueError, match=r"cannot be its own parent"):
+        tree.add("body", "body", T_OK)
+    with pytest.raises(ValueError, match=r"no edge 'world' -> 'camera' to set"):
+        tree.set("world", "camera", T_OK)
+    with pytest.raises(ValueError, match=r"non-empty str"):
+        tree.add("", "x", T_OK)

@@ -7,7 +7,7 @@ import json
 import mujoco
 import numpy as np
 import pytest
-from rrd_tools import mat3x3, read_rows
+from helpers import R_GLC_TO_OPTICAL, mat3x3, mujoco_T_w_c, read_rows
 
 from scenarios import builtin
 from sim.render import Renderer
@@ -59,9 +59,7 @@ def test_camera_mount_and_pinhole_match_mujoco(recorded):
     R_w_b = quat.to_matrix(quat.from_axis_angle([0.3, -0.2, 1.0], 0.7))
     world.set_pose(se3.make(R_w_b, [1.0, -2.0, 4.0]))
     cam = world.camera_id
-    R_w_c = world.data.cam_xmat[cam].reshape(3, 3) @ np.diag([1.0, -1.0, -1.0])
-    T_w_c = se3.make(R_w_c, world.data.cam_xpos[cam])
-    T_b_c_mujoco = se3.invert(world.T_w_b) @ T_w_c
+    T_b_c_mujoco = se3.invert(world.T_w_b) @ mujoco_T_w_c(world)
 
     q_xyzw = np.array(mount["Transform3D:quaternion"][0])
     assert np.allclose(mount["Transform3D:translation"][0], T_b_c_mujoco[:3, 3], atol=1e-6)
@@ -166,7 +164,7 @@ def test_recording_reads_back_with_mujoco_independent_of_sim(recorded):
     q_wxyz = model.cam_quat[world.camera_id]
     R_b_glc = np.zeros(9)
     mujoco.mju_quat2Mat(R_b_glc, q_wxyz)
-    R_b_c = R_b_glc.reshape(3, 3) @ np.diag([1.0, -1.0, -1.0])
+    R_b_c = R_b_glc.reshape(3, 3) @ R_GLC_TO_OPTICAL
     mount = next(r for r in read_rows(rrd, "world/body/camera") if "Transform3D:translation" in r)
     q_xyzw = np.array(mount["Transform3D:quaternion"][0])
     assert np.allclose(quat.to_matrix(q_xyzw, normalize=True), R_b_c, atol=1e-6)

@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+from helpers import mujoco_T_w_c
 from scipy.spatial.transform import Rotation
 
 from sim import names
@@ -15,16 +16,6 @@ from sim.gl import mujoco
 from sim.render import Renderer
 from sim.world import World, build_spec
 from vnav.cone import TRAFFIC_CONE
-
-R_GLC_TO_OPTICAL = np.diag([1.0, -1.0, -1.0])
-
-
-def _mujoco_T_w_c(world: World) -> np.ndarray:
-    cam = world.model.camera(names.ONBOARD_CAMERA).id
-    T = np.eye(4)
-    T[:3, :3] = world.data.cam_xmat[cam].reshape(3, 3) @ R_GLC_TO_OPTICAL
-    T[:3, 3] = world.data.cam_xpos[cam]
-    return T
 
 
 def _pixel_grid(height: int, width: int) -> tuple[np.ndarray, np.ndarray]:
@@ -63,7 +54,7 @@ def test_sphere_centroids_match_projection(width: int, height: int, fovy_deg: fl
     # Where MuJoCo puts the camera (its own cam_xpos / cam_xmat) and the expected intrinsics
     # from the documented formula, independent of the code under test.
     probe = World.from_config(cfg)
-    T_w_c = _mujoco_T_w_c(probe)
+    T_w_c = mujoco_T_w_c(probe)
     f_px = (height / 2.0) / math.tan(math.radians(fovy_deg) / 2.0)
     cx, cy = (width - 1) / 2.0, (height - 1) / 2.0
     np.testing.assert_allclose(probe.camera.K, [[f_px, 0, cx], [0, f_px, cy], [0, 0, 1]])

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import mujoco_T_w_c
 from scipy.spatial.transform import Rotation
 
 from sim import names
@@ -17,7 +18,6 @@ from sim.config import CameraConfig, SceneConfig
 from sim.world import SimulationError, World
 from vnav import se3, so3
 
-R_GLC_TO_OPTICAL = np.diag([1.0, -1.0, -1.0])
 REPO = Path(__file__).resolve().parents[1]
 
 
@@ -25,15 +25,6 @@ def _random_pose(rng: np.random.Generator) -> np.ndarray:
     T = np.eye(4)
     T[:3, :3] = Rotation.random(random_state=rng.integers(1 << 31)).as_matrix()
     T[:3, 3] = rng.uniform([-50.0, -50.0, 0.5], [50.0, 50.0, 40.0])
-    return T
-
-
-def _mujoco_T_w_c(world: World) -> np.ndarray:
-    """The onboard camera pose from MuJoCo's cam_xpos / cam_xmat, turned optical."""
-    cam = world.model.camera(names.ONBOARD_CAMERA).id
-    T = np.eye(4)
-    T[:3, :3] = world.data.cam_xmat[cam].reshape(3, 3) @ R_GLC_TO_OPTICAL
-    T[:3, 3] = world.data.cam_xpos[cam]
     return T
 
 
@@ -50,8 +41,8 @@ def test_T_w_b_T_b_c_equals_mujoco_camera_pose(seed: int) -> None:
         T_w_b = _random_pose(rng)
         world.set_pose(T_w_b)
         np.testing.assert_allclose(world.T_w_b, T_w_b, atol=1e-12)
-        np.testing.assert_allclose(world.T_w_b @ world.T_b_c, _mujoco_T_w_c(world), atol=1e-9)
-        np.testing.assert_allclose(world.T_w_c, _mujoco_T_w_c(world), atol=1e-9)
+        np.testing.assert_allclose(world.T_w_b @ world.T_b_c, mujoco_T_w_c(world), atol=1e-9)
+        np.testing.assert_allclose(world.T_w_c, mujoco_T_w_c(world), atol=1e-9)
 
 
 def test_mount_matches_the_convention_by_hand() -> None:
@@ -66,7 +57,7 @@ def test_mount_matches_the_convention_by_hand() -> None:
     T = np.eye(4)
     T[:3, :3] = Rotation.from_euler("z", 90, degrees=True).as_matrix()
     level.set_pose(T)
-    np.testing.assert_allclose(_mujoco_T_w_c(level)[:3, 2], [0.0, 1.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(mujoco_T_w_c(level)[:3, 2], [0.0, 1.0, 0.0], atol=1e-12)
 
 
 def test_intrinsics_describe_mujoco_camera() -> None:
@@ -183,7 +174,7 @@ def test_ground_truth_is_current_after_physics_steps() -> None:
     np.testing.assert_allclose(world.T_w_b[:3, 3], world.data.qpos[:3], atol=1e-12)
     np.testing.assert_allclose(world.T_w_b[:3, :3], R_qpos, atol=1e-12)
     assert _angle_between(R_qpos, np.eye(3)) > 0.01
-    np.testing.assert_allclose(world.T_w_c, _mujoco_T_w_c(world), atol=1e-9)
+    np.testing.assert_allclose(world.T_w_c, mujoco_T_w_c(world), atol=1e-9)
 
 
 def _angle_between(R_a: np.ndarray, R_b: np.ndarray) -> float:
@@ -195,10 +186,7 @@ def test_camera_slides_on_its_mount_and_mujoco_agrees():
     world = World.from_config(SceneConfig())
     world.set_pose(se3.make(so3.from_rpy(0.2, -0.3, 1.1), [1.0, 2.0, 5.0]))
     world.set_camera_position_b([0.3, -0.1, 0.2])
-    cam = world.camera_id
-    R_w_c = world.data.cam_xmat[cam].reshape(3, 3) @ np.diag([1.0, -1.0, -1.0])
-    T_w_c_mujoco = se3.make(R_w_c, world.data.cam_xpos[cam])
-    np.testing.assert_allclose(world.T_w_b @ world.T_b_c, T_w_c_mujoco, atol=1e-9)
+    np.testing.assert_allclose(world.T_w_b @ world.T_b_c, mujoco_T_w_c(world), atol=1e-9)
     np.testing.assert_allclose(world.T_b_c[:3, 3], [0.3, -0.1, 0.2])
     with pytest.raises(ValueError, match="position_b must be 3 finite numbers"):
         world.set_camera_position_b([0.0, np.nan, 0.0])

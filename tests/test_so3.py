@@ -1,11 +1,34 @@
-"""Unit tests of so3, quat and se3 beyond the lecture, references and properties."""
+"""vnav.so3: exp, log, rotation checks, roll-pitch-yaw; against OpenCV, SciPy and MuJoCo.
+
+The group laws SO(3) shares with SE(3) and the unit quaternions are in test_group_laws.py.
+"""
 
 from __future__ import annotations
 
+import cv2
+import mujoco
 import numpy as np
 import pytest
+from helpers import (
+    N_REFERENCE,
+    PROPERTY_SETTINGS,
+    assert_same_rotvec,
+    rotation_vectors,
+    rotations,
+    rotvecs,
+)
+from hypothesis import given
+from hypothesis import strategies as st
+from scipy.spatial.transform import Rotation
 
-from vnav import quat, se3, so3
+from vnav import quat, so3
+
+N = N_REFERENCE
+SETTINGS = PROPERTY_SETTINGS
+R_OK = so3.rot_z(0.3)
+
+
+# ------------------------------------------------------------------------------- unit tests
 
 
 @pytest.mark.parametrize("eps", [0.0, 1e-15, 1e-12, 1e-9, 1e-6])
@@ -42,14 +65,6 @@ def test_batched_shapes():
     assert so3.from_rpy(np.zeros(6), 0.1, np.zeros((2, 1))).shape == (2, 6, 3, 3)
     assert so3.to_rpy(R).shape == (4, 5, 3)
     assert so3.gimbal_locked(R).shape == (4, 5)
-    q = quat.from_matrix(R)
-    assert q.shape == (4, 5, 4)
-    assert quat.to_matrix(q).shape == (4, 5, 3, 3)
-    assert quat.slerp(q[0, 0], q[1, 1], np.linspace(0, 1, 9)).shape == (9, 4)
-    assert se3.make(R, np.zeros(3)).shape == (4, 5, 4, 4)
-    assert se3.invert(se3.make(R, np.zeros(3))).shape == (4, 5, 4, 4)
-    p = rng.normal(size=(1000, 3))
-    assert se3.apply(se3.make(R[0, 0], [1, 2, 3]), p).shape == (1000, 3)
 
 
 def test_skew_is_cross_product():
@@ -69,50 +84,6 @@ def test_nearest_rotation():
     assert so3.is_rotation(so3.nearest_rotation(np.diag([1.0, 1.0, -1.0])))
 
 
-def test_quaternion_conventions():
-    q = quat.from_axis_angle([0.0, 0.0, 2.0], np.pi / 2)  # axis need not be unit
-    np.testing.assert_allclose(q, [0, 0, np.sqrt(0.5), np.sqrt(0.5)], atol=1e-16)
-    np.testing.assert_array_equal(quat.xyzw_to_wxyz([1.0, 2.0, 3.0, 4.0]), [4, 1, 2, 3])
-    np.testing.assert_array_equal(quat.wxyz_to_xyzw([4.0, 1.0, 2.0, 3.0]), [1, 2, 3, 4])
-    axis, angle = quat.to_axis_angle(-q)  # sign canonicalised
-    np.testing.assert_allclose(axis, [0, 0, 1], atol=1e-16)
-    np.testing.assert_allclose(angle, np.pi / 2, atol=1e-16)
-    axis, angle = quat.to_axis_angle([0.0, 0.0, 0.0, 1.0])
-    assert angle == 0.0 and np.linalg.norm(axis) == 1.0
-    # Rotations by pi: from_matrix w = 0, still a valid quaternion of the rotation.
-    for v in ([np.pi, 0, 0], [0, np.pi, 0], [0, 0, np.pi], np.pi * np.array([1, 1, 1]) / 3**0.5):
-        R = so3.exp(v)
-        np.testing.assert_allclose(quat.to_matrix(quat.from_matrix(R)), R, atol=1e-15)
-
-
-def test_slerp_takes_the_short_way():
-    a = quat.from_axis_angle([0, 0, 1], 0.0)
-    b = -quat.from_axis_angle([0, 0, 1], 0.4)  # same rotation as +b, opposite hemisphere
-    mid = quat.slerp(a, b, 0.5)
-    np.testing.assert_allclose(quat.to_matrix(mid), so3.rot_z(0.2), atol=1e-15)
-    np.testing.assert_allclose(quat.slerp(a, a, 0.3), a, atol=1e-16)
-
-
-def test_se3_invert_is_closed_form_exact():
-    T = se3.make(so3.exp([0.4, -1.2, 2.9]), [100.0, -3.0, 0.25])
-    T_inv = se3.invert(T)
-    assert T_inv[3].tolist() == [0.0, 0.0, 0.0, 1.0]  # exact bottom row, unlike a general inverse
-    np.testing.assert_array_equal(T_inv[:3, :3], T[:3, :3].T)
-    np.testing.assert_allclose(T_inv @ T, np.eye(4), atol=1e-13)
-
-
-def test_apply_nan_points_pass_through():
-    T = se3.make(so3.rot_z(0.5), [1.0, 2.0, 3.0])
-    p = np.array([[1.0, 2.0, 3.0], [np.nan, np.nan, np.nan]])
-    out = se3.apply(T, p)
-    assert np.all(np.isfinite(out[0])) and np.all(np.isnan(out[1]))
-    # The chunked fast path agrees with the plain formula at every length around its blocks.
-    rng = np.random.default_rng(3)
-    for n in (1, 511, 512, 513, 131071, 131073):
-        p = rng.normal(size=(n, 3))
-        np.testing.assert_allclose(se3.apply(T, p), p @ T[:3, :3].T + T[:3, 3], atol=1e-14)
-
-
 def test_vee_inverts_skew_and_gives_the_cross_product_vector():
     rng = np.random.default_rng(5)
     v = rng.normal(size=(20, 3))
@@ -122,3 +93,188 @@ def test_vee_inverts_skew_and_gives_the_cross_product_vector():
     np.testing.assert_allclose(so3.skew(v[0]) @ u, np.cross(v[0], u), atol=1e-15)
     with pytest.raises(ValueError, match="shape"):
         so3.vee(np.zeros((3, 2)))
+
+
+# ---------------------------------------------------------------------------- properties
+
+
+@SETTINGS
+@given(rotvecs())
+def test_exp_log_round_trip(v):
+    R = so3.exp(v)
+    assert so3.is_rotation(R, atol=1e-14)
+    w = so3.log(R)
+    assert 0.0 <= np.linalg.norm(w) <= np.pi + 1e-15  # the angle, up to rounding of the norm
+    assert_same_rotvec(w, v, atol=1e-12)
+    np.testing.assert_allclose(so3.exp(w), R, atol=1e-15)
+
+
+@SETTINGS
+@given(rotations())
+def test_log_exp_round_trip_from_matrix(R):
+    np.testing.assert_allclose(so3.exp(so3.log(R)), R, atol=1e-12)
+
+
+@SETTINGS
+@given(
+    st.floats(-np.pi + 1e-9, np.pi),
+    st.floats(-np.pi / 2 + 1e-6, np.pi / 2 - 1e-6),
+    st.floats(-np.pi + 1e-9, np.pi),
+)
+def test_rpy_round_trip_away_from_gimbal_lock(roll, pitch, yaw):
+    R = so3.from_rpy(roll, pitch, yaw)
+    np.testing.assert_allclose(R, so3.rot_z(yaw) @ so3.rot_y(pitch) @ so3.rot_x(roll), atol=1e-15)
+    assert not so3.gimbal_locked(R)
+    rpy = so3.to_rpy(R)
+    # Angles come back where they are well conditioned; the matrix always does.
+    np.testing.assert_allclose(so3.from_rpy(*rpy), R, atol=1e-15)
+    if abs(pitch) < np.pi / 2 - 1e-3:
+        np.testing.assert_allclose(rpy, [roll, pitch, yaw], atol=1e-12)
+
+
+@SETTINGS
+@given(
+    st.floats(-np.pi, np.pi),
+    st.sampled_from([-np.pi / 2, np.pi / 2]),
+    st.floats(-np.pi, np.pi),
+    st.floats(-1e-10, 1e-10),
+)
+def test_rpy_at_and_near_gimbal_lock_reproduces_R(roll, pitch, yaw, nudge):
+    R = so3.from_rpy(roll, pitch + nudge, yaw)
+    locked = so3.gimbal_locked(R)
+    rpy = so3.to_rpy(R, warn=False)
+    if locked:
+        assert rpy[0] == 0.0
+        assert abs(abs(rpy[1]) - np.pi / 2) < 1e-9
+    np.testing.assert_allclose(so3.from_rpy(*rpy), R, atol=1e-9 if locked else 1e-15)
+
+
+# ------------------------------------------------------------ independent implementations
+
+
+def test_from_rpy_matches_mju_euler2quat_zyx(rng):
+    # docs/CONVENTIONS.md: Rz(yaw) Ry(pitch) Rx(roll) is MuJoCo's intrinsic "zyx" sequence with
+    # angles [yaw, pitch, roll].
+    rpy = rng.uniform(-np.pi, np.pi, (N, 3))
+    rpy[:, 1] /= 2.0
+    R = so3.from_rpy(rpy[:, 0], rpy[:, 1], rpy[:, 2])
+    for (roll, pitch, yaw), R_vnav in zip(rpy, R, strict=True):
+        res = np.zeros(4)
+        mujoco.mju_euler2Quat(res, np.array([yaw, pitch, roll]), "zyx")
+        np.testing.assert_allclose(R_vnav, quat.to_matrix(quat.wxyz_to_xyzw(res)), atol=1e-15)
+
+
+def test_exp_matches_cv2_rodrigues(rng):
+    rotvec = rotation_vectors(rng, N)
+    R = so3.exp(rotvec)
+    for v, R_vnav in zip(rotvec, R, strict=True):
+        R_cv, _ = cv2.Rodrigues(v.reshape(3, 1))
+        np.testing.assert_allclose(R_vnav, R_cv, atol=1e-15)
+
+
+def test_log_matches_cv2_rodrigues_away_from_pi(rng):
+    # OpenCV's inverse Rodrigues is good to ~1e-11 (vnav's log is checked against the true
+    # rotation vector to 1e-12 below), returns zero below ~1e-5 rad and is inaccurate near pi,
+    # where both signs are valid at pi: there compare only the rotation.
+    rotvec = rotation_vectors(rng, N)
+    R = so3.exp(rotvec)
+    for v_true, R_i, v_vnav in zip(rotvec, R, so3.log(R), strict=True):
+        v_cv = cv2.Rodrigues(R_i)[0].ravel()
+        if 1e-5 < np.linalg.norm(v_vnav) < np.pi - 1e-3:
+            np.testing.assert_allclose(v_vnav, v_true, atol=1e-12)
+            np.testing.assert_allclose(v_vnav, v_cv, atol=1e-9)
+        np.testing.assert_allclose(so3.exp(v_vnav), R_i, atol=1e-15)
+
+
+def test_exp_log_match_scipy_rotvec(rng):
+    rotvec = rotation_vectors(rng, 2000)
+    R = so3.exp(rotvec)
+    np.testing.assert_allclose(R, Rotation.from_rotvec(rotvec).as_matrix(), atol=1e-15)
+    v = so3.log(R)
+    v_sp = Rotation.from_matrix(R).as_rotvec()
+    angle = np.linalg.norm(v, axis=1)
+    away = angle < np.pi - 1e-6  # at pi, u pi and -u pi are both right
+    np.testing.assert_allclose(v[away], v_sp[away], atol=1e-12)
+    np.testing.assert_allclose(angle, np.linalg.norm(v_sp, axis=1), atol=1e-12)
+
+
+def test_rpy_matches_scipy_euler_ZYX(rng):
+    rpy = np.column_stack(
+        [
+            rng.uniform(-np.pi, np.pi, 2000),
+            rng.uniform(-np.pi / 2 + 1e-6, np.pi / 2 - 1e-6, 2000),
+            rng.uniform(-np.pi, np.pi, 2000),
+        ]
+    )
+    R = so3.from_rpy(rpy[:, 0], rpy[:, 1], rpy[:, 2])
+    np.testing.assert_allclose(R, Rotation.from_euler("ZYX", rpy[:, ::-1]).as_matrix(), atol=1e-15)
+    ypr = Rotation.from_matrix(R).as_euler("ZYX")
+    np.testing.assert_allclose(so3.to_rpy(R), ypr[:, ::-1], atol=1e-9)
+
+
+# ------------------------------------------------------------------------------- bad input
+# Bad input raises ValueError with a message that names the problem (issue 2, "Bad input").
+
+
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (
+            lambda: so3.check_rotation(np.eye(4)),
+            r"R must have shape \(\.\.\., 3, 3\); got shape \(4, 4\)",
+        ),
+        (lambda: so3.check_rotation(np.ones(3)), r"got shape \(3,\)"),
+        (lambda: so3.exp([1.0, 2.0]), r"rotvec must have shape \(\.\.\., 3\); got shape \(2,\)"),
+        (lambda: so3.log(np.eye(3)[:2]), r"got shape \(2, 3\)"),
+        (lambda: so3.skew(np.zeros((2, 4))), r"v must have shape"),
+    ],
+)
+def test_wrong_shapes(call, match):
+    with pytest.raises(ValueError, match=match):
+        call()
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_nan_and_inf(bad):
+    R = R_OK.copy()
+    R[1, 2] = bad
+    with pytest.raises(ValueError, match=r"R must be finite; got \d NaN and \d inf"):
+        so3.check_rotation(R)
+    with pytest.raises(ValueError, match=r"rotvec must be finite"):
+        so3.exp([0.1, bad, 0.0])
+    with pytest.raises(ValueError, match=r"angle must be finite"):
+        so3.rot_x(bad)
+    with pytest.raises(ValueError, match=r"pitch must be finite"):
+        so3.from_rpy(0.0, bad, 0.0)
+
+
+def test_not_orthogonal_says_how_far_and_the_determinant():
+    M = R_OK + 1e-6
+    with pytest.raises(
+        ValueError, match=r"not a rotation matrix: max \|R\^T R - I\| = [0-9.e-]+.*det = "
+    ):
+        so3.check_rotation(M)
+    with pytest.raises(ValueError, match=r"R_w_b is not a rotation matrix"):
+        so3.check_rotation(2.0 * np.eye(3), name="R_w_b")
+    with pytest.raises(ValueError, match=r"det = 8"):
+        so3.check_rotation(2.0 * np.eye(3))
+    assert not so3.is_rotation(M)
+    assert so3.is_rotation(M, atol=1e-3)
+
+
+def test_reflection_is_rejected():
+    with pytest.raises(ValueError, match=r"reflection, not a rotation: det = -1"):
+        so3.check_rotation(np.diag([1.0, 1.0, -1.0]))
+    with pytest.raises(ValueError, match=r"reflection"):
+        so3.log(np.stack([np.eye(3), np.diag([-1.0, 1.0, 1.0])]))
+    assert not so3.is_rotation(np.diag([1.0, -1.0, 1.0]))
+
+
+def test_gimbal_lock_is_reported_and_can_be_silenced(recwarn):
+    R = so3.from_rpy(0.2, np.pi / 2, -0.4)
+    with pytest.warns(so3.GimbalLockWarning, match=r"gimbal lock"):
+        so3.to_rpy(R)
+    so3.to_rpy(R, warn=False)
+    assert not [w for w in recwarn if issubclass(w.category, so3.GimbalLockWarning)]
+    assert so3.gimbal_locked(R)
+    assert not so3.gimbal_locked(so3.from_rpy(0.2, 1.0, -0.4))

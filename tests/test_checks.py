@@ -1,0 +1,187 @@
+"""scenarios.checks: the registered check kinds, their figures and verdicts."""
+
+from __future__ import annotations
+
+import operator
+
+import numpy as np
+import pytest
+
+from scenarios import builtin, checks
+from scenarios.records import DetectionRecord, RunResult, TickRecord
+from scenarios.spec import from_dict
+from vnav.detect import ConeDetection
+from vnav.methods import METHODS
+
+
+@pytest.mark.parametrize("kind", sorted(checks.KINDS))
+def test_every_registered_check_kind_is_accepted_by_the_parser_and_documented(kind):
+    scenario = builtin.REGISTRY["frame-problem"]()
+    scenario["checks"] = [{"kind": kind, "limit": 1.0}]
+    (check,) = from_dict(scenario).checks
+    assert check.kind == kind and checks.KINDS[kind].doc
+
+
+# ------------------------------------------------------------- each kind on a run by hand
+
+
+def _detection(cone_index, errors_m, range_m, in_contract, p_w, p_c_true):
+    mask = np.ones((2, 2), dtype=bool)
+    blob = ConeDetection(
+        bbox=(10, 10, 2, 2),
+        area_px=4,
+        mask=mask,
+        apex_uv=np.array([10.5, 10.0]),
+        base_uv=np.array([10.5, 11.5]),
+        centroid_uv=np.array([10.5, 10.5]),
+        touches_border=False,
+        apex_from_edges=False,
+    )
+    estimates = {m: np.asarray(p, dtype=np.float64) for m, p in p_w.items()}
+    return DetectionRecord(
+        blob,
+        estimates,
+        cone_index,
+        errors_m,
+        range_m,
+        None if p_c_true is None else np.asarray(p_c_true, dtype=np.float64),
+        in_contract,
+    )
+
+
+def _tick(k, cones_in_view, detections, gimbal_locked=False, reference_error_m=None):
+    T = np.eye(4)
+    return TickRecord(
+        tick=k,
+        t_s=0.1 * k,
+        T_w_b=T,
+        T_w_b_est=T,
+        T_b_c=T,
+        quat_xyzw=np.array([0.0, 0.0, 0.0, 1.0]),
+        rpy_rad=np.zeros(3),
+        gimbal_locked=gimbal_locked,
+        cones_in_view=cones_in_view,
+        detections=detections,
+        reference_error_m=reference_error_m,
+    )
+
+
+@pytest.fixture(scope="module")
+def run() -> RunResult:
+    """Two ticks, two cones: cone 0 seen twice, cone 1 once (out of the contract's domain),
+    one unmatched detection."""
+    return RunResult(
+        spec=None,  # the checks read the ticks only
+        seed=0,
+        ticks=[
+            _tick(
+                0,
+                [0, 1],
+                [
+                    _detection(
+                        0,
+                        {"depth_image": 0.02, "naive": 3.0},
+                        2.0,
+                        True,
+                        {"depth_image": [1.0, 0.0, 0.0], "naive": [4.0, 0.0, 0.0]},
+                        [0.0, 0.0, 5.0],
+                    ),
+                    _detection(None, {}, None, False, {"depth_image": [9.0, 9.0, 0.0]}, None),
+                ],
+                reference_error_m=0.2,
+            ),
+            _tick(
+                1,
+                [0, 1],
+                [
+                    _detection(
+                        0,
+                        {"depth_image": 0.03, "naive": 5.0},
+                        10.0,
+                        True,
+                        {"depth_image": [1.02, 0.0, 0.0], "naive": [6.0, 0.0, 0.0]},
+                        [0.0, 1.0, 5.0],
+                    ),
+                    _detection(
+                        1,
+                        {"depth_image": 0.5},
+                        30.0,
+                        False,
+                        {"depth_image": [3.0, 3.0, 0.0]},
+                        [2.0, 0.0, 30.0],
+                    ),
+                ],
+                gimbal_locked=True,
+                reference_error_m=0.7,
+            ),
+        ],
+    )
+
+
+# The figure of each kind on `run`, computed by hand.
+FIGURES = {
+    "max_error": 0.5,  # over every matched detection
+    "median_error": 0.03,  # of 0.02, 0.03, 0.5
+    # max(0.02 / max(5 cm, 1% of 2 m), 0.03 / max(5 cm, 1% of 10 m)): in the contract only
+    "error_bound": 0.4,
+    "detection_rate": 0.75,  # cone 0 in tick 0; cones 0 and 1 in tick 1; of 2 + 2 in view
+    "world_estimate_spread": 0.01,  # cone 0 at x = 1.0 and 1.02 (cone 1 seen once)
+    "camera_coords_span": 1.0,  # cone 0's p_c moved 1 m in y
+    "naive_worse": 4.0 / 0.03,  # median naive 4.0 over median depth-image 0.03
+    "gimbal_lock_seen": 1.0,
+    "tracking_error": 0.7,
+    "matched_cones": 2.0,
+}
+
+
+def test_every_kind_has_a_figure_by_hand() -> None:
+    assert set(FIGURES) == set(checks.KINDS)
+
+
+@pytest.mark.parametrize("kind", sorted(FIGURES))
+def test_figure_and_verdict(run: RunResult, kind: str) -> None:
+    figure = FIGURES[kind]
+    result = checks.judge(checks.Check(kind, figure), run)
+    assert result.value == pytest.approx(figure, rel=1e-12)
+    assert checks.judge(checks.Check(kind, result.value), run).passed  # at the limit: passes
+    le = checks.KINDS[kind].passes is operator.le
+    stricter = figure * (0.99 if le else 1.01)
+    assert not checks.judge(checks.Check(kind, stricter), run).passed
+    looser = figure * (1.01 if le else 0.99)
+    assert checks.judge(checks.Check(kind, looser), run).passed
+
+
+def test_a_check_with_nothing_to_judge_fails(run: RunResult) -> None:
+    # The naive method has no accuracy bound; no tick of an empty run has errors.
+    result = checks.judge(checks.Check("error_bound", 1e9, "naive"), run)
+    assert result.value is None and not result.passed
+    empty = RunResult(spec=None, seed=0, ticks=[_tick(0, [], [])])
+    for kind in ("max_error", "median_error", "detection_rate", "tracking_error"):
+        result = checks.judge(checks.Check(kind, 1e9), empty)
+        assert result.value is None and not result.passed, kind
+    assert result.as_dict() == {
+        "name": "tracking_error",
+        "kind": "tracking_error",
+        "value": None,
+        "limit": 1e9,
+        "passed": False,
+    }
+
+
+def test_check_labels_and_bad_checks() -> None:
+    assert checks.Check("max_error", 0.1, "ground_plane").label == "ground_plane max_error"
+    assert checks.Check("detection_rate", 0.9).label == "detection_rate"
+    assert checks.Check("max_error", 0.1, name="mine").label == "mine"
+    with pytest.raises(ValueError, match=r"unknown check 'min_error'; valid: \["):
+        checks.Check("min_error", 0.1)
+    with pytest.raises(ValueError, match=r"unknown method 'lidar'"):
+        checks.Check("max_error", 0.1, "lidar")
+
+
+def test_default_checks_are_every_bound_and_the_detection_rate() -> None:
+    defaults = checks.default_checks()
+    bounds = [c for c in defaults if c.kind == "error_bound"]
+    assert [c.method for c in bounds] == [m.name for m in METHODS if m.bound is not None]
+    assert all(c.limit == 1.0 for c in bounds)
+    (rate,) = [c for c in defaults if c.kind == "detection_rate"]
+    assert rate.limit == 0.95

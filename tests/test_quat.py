@@ -1,0 +1,255 @@
+"""vnav.quat: unit quaternions [x, y, z, w] (scalar last); against MuJoCo and SciPy.
+
+MuJoCo stores quaternions as [w, x, y, z]; every crossing goes through quat.xyzw_to_wxyz /
+quat.wxyz_to_xyzw. SciPy is scalar last, like vnav. The group laws the unit quaternions share
+with SO(3) and SE(3) are in test_group_laws.py.
+"""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+import pytest
+from helpers import (
+    N_REFERENCE,
+    PROPERTY_SETTINGS,
+    assert_same_rotvec,
+    quaternions,
+    rotation_vectors,
+    rotations,
+    rotvecs,
+    same_rotation_quat,
+    unit_quaternions,
+    unit_vectors,
+)
+from hypothesis import given
+from hypothesis import strategies as st
+from scipy.spatial.transform import Rotation, Slerp
+
+from vnav import quat, so3
+
+N = N_REFERENCE
+SETTINGS = PROPERTY_SETTINGS
+
+
+# ------------------------------------------------------------------------------- unit tests
+
+
+def test_batched_shapes():
+    rng = np.random.default_rng(1)
+    R = so3.exp(rng.normal(size=(4, 5, 3)))
+    q = quat.from_matrix(R)
+    assert q.shape == (4, 5, 4)
+    assert quat.to_matrix(q).shape == (4, 5, 3, 3)
+    assert quat.slerp(q[0, 0], q[1, 1], np.linspace(0, 1, 9)).shape == (9, 4)
+
+
+def test_quaternion_conventions():
+    q = quat.from_axis_angle([0.0, 0.0, 2.0], np.pi / 2)  # axis need not be unit
+    np.testing.assert_allclose(q, [0, 0, np.sqrt(0.5), np.sqrt(0.5)], atol=1e-16)
+    np.testing.assert_array_equal(quat.xyzw_to_wxyz([1.0, 2.0, 3.0, 4.0]), [4, 1, 2, 3])
+    np.testing.assert_array_equal(quat.wxyz_to_xyzw([4.0, 1.0, 2.0, 3.0]), [1, 2, 3, 4])
+    axis, angle = quat.to_axis_angle(-q)  # sign canonicalised
+    np.testing.assert_allclose(axis, [0, 0, 1], atol=1e-16)
+    np.testing.assert_allclose(angle, np.pi / 2, atol=1e-16)
+    axis, angle = quat.to_axis_angle([0.0, 0.0, 0.0, 1.0])
+    assert angle == 0.0 and np.linalg.norm(axis) == 1.0
+    # Rotations by pi: from_matrix w = 0, still a valid quaternion of the rotation.
+    for v in ([np.pi, 0, 0], [0, np.pi, 0], [0, 0, np.pi], np.pi * np.array([1, 1, 1]) / 3**0.5):
+        R = so3.exp(v)
+        np.testing.assert_allclose(quat.to_matrix(quat.from_matrix(R)), R, atol=1e-15)
+
+
+def test_slerp_takes_the_short_way():
+    a = quat.from_axis_angle([0, 0, 1], 0.0)
+    b = -quat.from_axis_angle([0, 0, 1], 0.4)  # same rotation as +b, opposite hemisphere
+    mid = quat.slerp(a, b, 0.5)
+    np.testing.assert_allclose(quat.to_matrix(mid), so3.rot_z(0.2), atol=1e-15)
+    np.testing.assert_allclose(quat.slerp(a, a, 0.3), a, atol=1e-16)
+
+
+# ---------------------------------------------------------------------------- properties
+
+
+@SETTINGS
+@given(rotations())
+def test_matrix_quaternion_round_trip(R):
+    q = quat.from_matrix(R)
+    assert q[3] >= 0.0
+    np.testing.assert_allclose(np.linalg.norm(q), 1.0, atol=1e-15)
+    np.testing.assert_allclose(quat.to_matrix(q), R, atol=1e-15)
+
+
+@SETTINGS
+@given(unit_quaternions())
+def test_quaternion_matrix_round_trip_and_double_cover(q):
+    R = quat.to_matrix(q)
+    np.testing.assert_allclose(quat.to_matrix(-q), R, atol=0)  # q and -q: one rotation
+    back = quat.from_matrix(R)
+    sign = 1.0 if np.dot(back, q) >= 0 else -1.0
+    np.testing.assert_allclose(back, sign * q, atol=1e-15)
+
+
+@SETTINGS
+@given(rotvecs())
+def test_quaternion_rotvec_and_axis_angle_round_trips(v):
+    q = quat.from_rotvec(v)
+    np.testing.assert_allclose(quat.to_matrix(q), so3.exp(v), atol=1e-15)
+    assert_same_rotvec(quat.to_rotvec(q), v, atol=1e-12)
+    assert_same_rotvec(quat.to_rotvec(-q), v, atol=1e-12)
+    axis, angle = quat.to_axis_angle(-q)
+    assert 0.0 <= angle <= np.pi
+    np.testing.assert_allclose(
+        quat.to_matrix(quat.from_axis_angle(axis, angle)), so3.exp(v), atol=1e-15
+    )
+
+
+@SETTINGS
+@given(unit_quaternions(), unit_quaternions())
+def test_multiply_is_matrix_product(a, b):
+    np.testing.assert_allclose(
+        quat.to_matrix(quat.multiply(a, b)), quat.to_matrix(a) @ quat.to_matrix(b), atol=1e-15
+    )
+    np.testing.assert_allclose(quat.multiply(a, quat.conjugate(a)), [0, 0, 0, 1], atol=1e-15)
+
+
+@SETTINGS
+@given(unit_quaternions(), unit_quaternions(), st.floats(0.0, 1.0))
+def test_slerp_shortest_constant_speed(a, b, t):
+    q = quat.slerp(a, b, t)
+    np.testing.assert_allclose(np.linalg.norm(q), 1.0, atol=1e-15)
+    R_a, R_b, R_t = quat.to_matrix(a), quat.to_matrix(b), quat.to_matrix(q)
+    total = np.linalg.norm(so3.log(R_a.T @ R_b))
+    # Rotation angle from a to q is t times the whole (shortest) angle, within rounding.
+    np.testing.assert_allclose(np.linalg.norm(so3.log(R_a.T @ R_t)), t * total, atol=1e-7)
+    np.testing.assert_allclose(quat.to_matrix(quat.slerp(a, b, 0.0)), R_a, atol=1e-15)
+    np.testing.assert_allclose(quat.to_matrix(quat.slerp(a, b, 1.0)), R_b, atol=1e-14)
+
+
+# ------------------------------------------------------------ independent implementations
+
+
+def test_to_matrix_matches_mju_quat2mat(rng):
+    q_xyzw = quaternions(rng, N)
+    R = quat.to_matrix(q_xyzw)
+    for q, R_vnav in zip(q_xyzw, R, strict=True):
+        mat = np.zeros(9)
+        mujoco.mju_quat2Mat(mat, quat.xyzw_to_wxyz(q))
+        np.testing.assert_allclose(R_vnav, mat.reshape(3, 3), atol=1e-15)
+
+
+def test_multiply_matches_mju_mulquat(rng):
+    a, b = quaternions(rng, N), quaternions(rng, N)
+    ab = quat.multiply(a, b)
+    for qa, qb, q_vnav in zip(a, b, ab, strict=True):
+        res = np.zeros(4)
+        mujoco.mju_mulQuat(res, quat.xyzw_to_wxyz(qa), quat.xyzw_to_wxyz(qb))
+        np.testing.assert_allclose(q_vnav, quat.wxyz_to_xyzw(res), atol=1e-15)
+
+
+def test_from_matrix_matches_mju_mat2quat(rng):
+    R = so3.exp(rotation_vectors(rng, N))
+    q = quat.from_matrix(R)
+    assert np.all(q[:, 3] >= 0.0)
+    for R_i, q_vnav in zip(R, q, strict=True):
+        res = np.zeros(4)
+        mujoco.mju_mat2Quat(res, R_i.reshape(9))
+        same_rotation_quat(q_vnav, quat.wxyz_to_xyzw(res), atol=1e-12)
+
+
+def test_from_axis_angle_matches_mju_axisangle2quat(rng):
+    axes = unit_vectors(rng, N) * rng.uniform(0.1, 5.0, (N, 1))  # not unit: vnav normalises
+    angles = rng.uniform(-2 * np.pi, 2 * np.pi, N)
+    q = quat.from_axis_angle(axes, angles)
+    for axis, angle, q_vnav in zip(axes, angles, q, strict=True):
+        res = np.zeros(4)
+        mujoco.mju_axisAngle2Quat(res, axis / np.linalg.norm(axis), angle)
+        np.testing.assert_allclose(q_vnav, quat.wxyz_to_xyzw(res), atol=1e-15)
+
+
+def test_quaternion_conversions_match_scipy(rng):
+    q = quaternions(rng, 2000)
+    np.testing.assert_allclose(quat.to_matrix(q), Rotation.from_quat(q).as_matrix(), atol=1e-15)
+    R = Rotation.from_quat(q).as_matrix()
+    same_rotation_quat(quat.from_matrix(R), Rotation.from_matrix(R).as_quat(), atol=1e-15)
+    np.testing.assert_allclose(
+        so3.exp(quat.to_rotvec(q)), Rotation.from_quat(q).as_matrix(), atol=1e-14
+    )
+    rotvec = rotation_vectors(rng, 2000)
+    same_rotation_quat(quat.from_rotvec(rotvec), Rotation.from_rotvec(rotvec).as_quat(), 1e-15)
+
+
+def test_slerp_matches_scipy(rng):
+    q0, q1 = quaternions(rng, 200), quaternions(rng, 200)
+    times = np.linspace(0.0, 1.0, 7)
+    for a, b in zip(q0, q1, strict=True):
+        ours = quat.slerp(a, b, times)
+        # SciPy's Slerp also takes the shorter path between rotations.
+        theirs = Slerp([0.0, 1.0], Rotation.from_quat([a, b]))(times).as_quat()
+        same_rotation_quat(ours, theirs, atol=1e-12)
+
+
+# ------------------------------------------------------------------------------- bad input
+# Bad input raises ValueError with a message that names the problem (issue 2, "Bad input").
+
+
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (
+            lambda: quat.to_matrix([0.0, 0.0, 1.0]),
+            r"q must have shape \(\.\.\., 4\); got shape \(3,\)",
+        ),
+    ],
+)
+def test_wrong_shapes(call, match):
+    with pytest.raises(ValueError, match=match):
+        call()
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_nan_and_inf(bad):
+    with pytest.raises(ValueError, match=r"q must be finite"):
+        quat.to_matrix([0.0, 0.0, bad, 1.0])
+
+
+def test_not_orthogonal_says_how_far_and_the_determinant():
+    with pytest.raises(ValueError, match=r"not a rotation matrix"):
+        quat.from_matrix(np.ones((3, 3)))
+
+
+def test_zero_axis():
+    with pytest.raises(ValueError, match=r"axis must be non-zero"):
+        quat.from_axis_angle([0.0, 0.0, 0.0], 1.0)
+
+
+@pytest.mark.parametrize(
+    "call",
+    [
+        lambda q: quat.to_matrix(q),
+        lambda q: quat.multiply(q, q),
+        lambda q: quat.to_rotvec(q),
+        lambda q: quat.to_axis_angle(q),
+        lambda q: quat.slerp(q, q, 0.5),
+        lambda q: quat.check_quaternion(q),
+    ],
+)
+def test_non_unit_quaternion_needs_explicit_opt_in(call):
+    with pytest.raises(ValueError, match=r"unit quaternion .*got norm 2(\.0+)?\b.*normalize=True"):
+        call(np.array([0.0, 0.0, 0.0, 2.0]))
+    with pytest.raises(ValueError, match=r"zero quaternion \(norm 0\)"):
+        call(np.zeros(4))
+
+
+def test_non_unit_quaternion_with_opt_in():
+    q = np.array([0.0, 0.0, 1.0, 1.0])  # norm sqrt(2)
+    np.testing.assert_allclose(quat.to_matrix(q, normalize=True), so3.rot_z(np.pi / 2), atol=1e-15)
+    np.testing.assert_allclose(quat.to_rotvec(q, normalize=True), [0, 0, np.pi / 2], atol=1e-15)
+    np.testing.assert_allclose(quat.normalize(q), q / np.sqrt(2.0))
+    with pytest.raises(ValueError, match=r"zero quaternion"):
+        quat.to_matrix(np.zeros(4), normalize=True)
+    with pytest.raises(ValueError, match=r"zero quaternion"):
+        quat.normalize(np.zeros(4))
+    # Within the tolerance (1e-6) a quaternion is accepted and still gives an exact rotation.
+    R = quat.to_matrix(np.array([0.0, 0.0, 0.0, 1.0 + 5e-7]))
+    np.testing.assert_allclose(R, np.eye(3), atol=1e-15)

@@ -1,0 +1,134 @@
+"""vnav.se3: rigid transforms as 4x4 matrices; against SciPy's RigidTransform.
+
+The group laws SE(3) shares with SO(3) and the unit quaternions are in test_group_laws.py.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from helpers import PROPERTY_SETTINGS, rotation_vectors, transforms, translations
+from hypothesis import given
+from hypothesis import strategies as st
+
+from vnav import se3, so3
+
+SETTINGS = PROPERTY_SETTINGS
+R_OK = so3.rot_z(0.3)
+T_OK = se3.make(R_OK, [1.0, 2.0, 3.0])
+
+
+# ------------------------------------------------------------------------------- unit tests
+
+
+def test_batched_shapes():
+    rng = np.random.default_rng(1)
+    R = so3.exp(rng.normal(size=(4, 5, 3)))
+    assert se3.make(R, np.zeros(3)).shape == (4, 5, 4, 4)
+    assert se3.invert(se3.make(R, np.zeros(3))).shape == (4, 5, 4, 4)
+    p = rng.normal(size=(1000, 3))
+    assert se3.apply(se3.make(R[0, 0], [1, 2, 3]), p).shape == (1000, 3)
+
+
+def test_se3_invert_is_closed_form_exact():
+    T = se3.make(so3.exp([0.4, -1.2, 2.9]), [100.0, -3.0, 0.25])
+    T_inv = se3.invert(T)
+    assert T_inv[3].tolist() == [0.0, 0.0, 0.0, 1.0]  # exact bottom row, unlike a general inverse
+    np.testing.assert_array_equal(T_inv[:3, :3], T[:3, :3].T)
+    np.testing.assert_allclose(T_inv @ T, np.eye(4), atol=1e-13)
+
+
+def test_apply_nan_points_pass_through():
+    T = se3.make(so3.rot_z(0.5), [1.0, 2.0, 3.0])
+    p = np.array([[1.0, 2.0, 3.0], [np.nan, np.nan, np.nan]])
+    out = se3.apply(T, p)
+    assert np.all(np.isfinite(out[0])) and np.all(np.isnan(out[1]))
+    # The chunked fast path agrees with the plain formula at every length around its blocks.
+    rng = np.random.default_rng(3)
+    for n in (1, 511, 512, 513, 131071, 131073):
+        p = rng.normal(size=(n, 3))
+        np.testing.assert_allclose(se3.apply(T, p), p @ T[:3, :3].T + T[:3, 3], atol=1e-14)
+
+
+# ---------------------------------------------------------------------------- properties
+
+
+@SETTINGS
+@given(transforms(), st.lists(translations, min_size=1, max_size=20))
+def test_apply_is_homogeneous_multiplication(T, points):
+    p = np.array(points)
+    p_h = np.column_stack([p, np.ones(len(p))])
+    np.testing.assert_allclose(se3.apply(T, p), (T @ p_h.T).T[:, :3], atol=1e-12)
+    np.testing.assert_allclose(se3.apply(se3.invert(T), se3.apply(T, p)), p, atol=1e-11)
+    np.testing.assert_allclose(se3.apply(T, p[0]), se3.apply(T, p)[0], atol=1e-12)
+
+
+# ------------------------------------------------------------ independent implementations
+
+
+def test_se3_apply_matches_scipy_rigid_transform(rng):
+    from scipy.spatial.transform import RigidTransform
+
+    for v, t in zip(rotation_vectors(rng, 50), rng.uniform(-5, 5, (50, 3)), strict=True):
+        T = se3.make(so3.exp(v), t)
+        p = rng.uniform(-10, 10, (1000, 3))
+        rigid = RigidTransform.from_matrix(T)
+        np.testing.assert_allclose(se3.apply(T, p), rigid.apply(p), atol=1e-13)
+        np.testing.assert_allclose(se3.invert(T), rigid.inv().as_matrix(), atol=1e-14)
+
+
+# ------------------------------------------------------------------------------- bad input
+# Bad input raises ValueError with a message that names the problem (issue 2, "Bad input").
+
+
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda: se3.make(R_OK, [1.0, 2.0]), r"t must have shape \(\.\.\., 3\); got shape \(2,\)"),
+        (
+            lambda: se3.check_transform(np.eye(3)),
+            r"T must have shape \(\.\.\., 4, 4\); got shape \(3, 3\)",
+        ),
+        (
+            lambda: se3.apply(T_OK, np.zeros((5, 2))),
+            r"p must have shape \(\.\.\., 3\); got shape \(5, 2\)",
+        ),
+        (lambda: se3.apply(np.stack([T_OK, T_OK]), np.zeros(3)), r"T must have shape \(4, 4\)"),
+    ],
+)
+def test_wrong_shapes(call, match):
+    with pytest.raises(ValueError, match=match):
+        call()
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_nan_and_inf(bad):
+    with pytest.raises(ValueError, match=r"t must be finite"):
+        se3.make(R_OK, [0.0, bad, 0.0])
+    T = T_OK.copy()
+    T[0, 3] = bad
+    with pytest.raises(ValueError, match=r"T must be finite"):
+        se3.invert(T)
+
+
+def test_not_orthogonal_says_how_far_and_the_determinant():
+    with pytest.raises(ValueError, match=r"rotation block T\[:3, :3\] is not a rotation"):
+        se3.check_transform(np.diag([1.0, 1.0, 1.1, 1.0]))
+
+
+def test_reflection_is_rejected():
+    with pytest.raises(ValueError, match=r"R is a reflection"):
+        se3.make(-np.eye(3), [0.0, 0.0, 0.0])
+
+
+def test_bottom_row_not_0001():
+    T = T_OK.copy()
+    T[3] = [0.0, 0.0, 1.0, 1.0]
+    with pytest.raises(
+        ValueError, match=r"bottom row \[0, 0, 0, 1\].*got bottom row \[0\.?, 0\.?, 1\.?, 1\.?\]"
+    ):
+        se3.check_transform(T)
+    with pytest.raises(ValueError, match=r"bottom row"):
+        se3.invert(T)
+    with pytest.raises(ValueError, match=r"T_w_b must have bottom row"):
+        se3.check_transform(T, name="T_w_b")
