@@ -239,10 +239,13 @@ def _fit_axis(
 
     Residual `e_i = |q_i - c| - r_i`, Jacobian row `-(q_i - c)^T / |q_i - c|`; each step solves
     the 2x2 normal equations (the rows are unit vectors, so `J^T J` is well conditioned
-    whenever the points do not all lie in one direction from `c`).
+    whenever the points do not all lie in one direction from `c`). Once, after the 4th step
+    or at convergence if that comes first, points whose residual is more than 3 sigma (MAD)
+    from the median residual are dropped and the fit goes on with the rest.
     """
     cx, cy = c0
     ux, uy, ur = qx, qy, r
+    trimmed = False
     buf = np.empty((3, qx.size))  # rows: the unit vectors (q_i - c) / |q_i - c| and e_i
     for it in range(12):
         m = ux.size
@@ -265,14 +268,16 @@ def _fit_axis(
         step_x = (syy * gx - sxy * gy) / det
         step_y = (sxx * gy - sxy * gx) / det
         cx, cy = cx + step_x, cy + step_y
-        if it == 3:
+        converged = math.hypot(step_x, step_y) < 1e-7
+        if not trimmed and (it == 3 or converged):
             ax, ay = qx - cx, qy - cy
             e_all = np.sqrt(ax * ax + ay * ay) - r
             dev = np.abs(e_all - _median(e_all))
             mad = 1.4826 * _median(dev)
             use = dev <= max(3.0 * mad, 0.005)
             ux, uy, ur = qx[use], qy[use], r[use]
-        elif math.hypot(step_x, step_y) < 1e-7:
+            trimmed = True
+        elif converged:
             break
     return cx, cy
 
