@@ -1,1 +1,1 @@
-"""Speed measurements that print figures: `python -m benchmarks NAME [--json]`."""
+"""Speed measurements that print figures: ``python -m benchmarks NAME [--json]``."""

@@ -1,7 +1,7 @@
-"""Run one benchmark: `python -m benchmarks NAME [--json]`.
+"""Run one benchmark: ``python -m benchmarks NAME [--json]``.
 
-Each benchmark is a module `benchmarks/<NAME>.py` with a function `run(args) -> dict` that
-prints a table (unless `--json`) and returns its figures, and `add_arguments(parser)`.
+Each benchmark is a module ``benchmarks/<NAME>.py`` with a function ``run(args) -> dict`` that
+prints a table (unless ``--json``) and returns its figures, and ``add_arguments(parser)``.
 """
 
 from __future__ import annotations

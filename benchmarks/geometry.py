@@ -1,10 +1,10 @@
 """vnav geometry core against SciPy: SE(3) on points, quaternions and rotation vectors to matrices.
 
 Same data for both, float64, best of several repeats (the least disturbed run). The point
-transform is compared with SciPy's SE(3) type (`RigidTransform.apply`) and with its fastest
-route, `Rotation.apply(p) + t`. Targets
-(issue 2): vnav at least as fast as SciPy on each operation (ratio scipy/vnav >= 1.0), and the
-point transform within 3x of a plain copy of the same (N, 3) array, the memory-bandwidth floor.
+transform is compared with SciPy's SE(3) type (``RigidTransform.apply``) and with its fastest
+route, ``Rotation.apply(p) + t``. Targets: vnav at least as fast as SciPy on each operation
+(ratio scipy/vnav >= 1.0), and the point transform within 3x of a plain copy of the same (N, 3)
+array, the memory-bandwidth floor.
 SciPy is imported here only, never by the library.
 """
 
@@ -20,7 +20,7 @@ from vnav import quat, se3, so3
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Options of `python -m benchmarks geometry`."""
+    """Options of ``python -m benchmarks geometry``."""
     parser.add_argument("--n", type=int, default=1_000_000, help="points/rotations (1e6)")
     parser.add_argument("--repeats", type=int, default=20, help="repeats; the best one counts")
     parser.add_argument("--seed", type=int, default=0)

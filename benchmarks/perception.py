@@ -1,7 +1,7 @@
 """Perception speed: cone detection, localisation of one detection, depth image to world cloud.
 
-Uses a 640x480 frame rendered by the simulator (one cone 8 m ahead, the default camera); the
-figures are the median and the best of `--repeat` timed calls, in milliseconds.
+Uses a 640x480 image rendered by the simulator (one cone 8 m ahead, the default camera); the
+figures are the median and the best of ``--repeat`` timed calls, in milliseconds.
 """
 
 from __future__ import annotations

@@ -1,11 +1,11 @@
-"""End-to-end scenario speed: frames per second, share of each stage, .rrd bytes per frame.
+"""End-to-end scenario speed: ticks per second, share of each stage, .rrd bytes per tick.
 
-Runs built-in scenarios exactly as `vnav-demo run` does (640x480, recording to a temporary
-directory) and prints, per scenario and in total: frames, frames per second, milliseconds per
-frame of each stage (physics, render, detect, localize, log), the overhead ratio
+Runs built-in scenarios exactly as ``vnav-demo run`` does (640x480, recording to a temporary
+directory) and prints, per scenario and in total: ticks, ticks per second, milliseconds per
+tick of each stage (physics, render, detect, localize, log), the overhead ratio
 (detect + localize + log) / render (target <= 0.5), and the average bytes of the .rrd per
-frame (target <= 60 KB). The total wall time of all built-ins is the figure behind
-"`vnav-demo run --all` finishes within 2 minutes" (target <= 120 s).
+tick (target <= 60 KB). The total wall time of all built-ins is the figure behind
+"``vnav-demo run --all`` finishes within 2 minutes" (target <= 120 s).
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from pathlib import Path
 from scenarios import builtin, pipeline
 from scenarios.runner import STAGES
 
-TARGETS = {"overhead_ratio": 0.5, "rrd_bytes_per_frame": 60_000, "all_wall_s": 120.0}
+TARGETS = {"overhead_ratio": 0.5, "rrd_bytes_per_tick": 60_000, "all_wall_s": 120.0}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -36,17 +36,17 @@ def _run_one(name: str, out: Path) -> dict:
     outcome = pipeline.run(spec, seed=1, out_dir=out)
     wall_s = time.perf_counter() - start
     result, rrd = outcome.result, outcome.rrd_path
-    frames = len(result.ticks)
-    ms = {k: 1e3 * result.timing_s[k] / frames for k in STAGES}
+    ticks = len(result.ticks)
+    ms = {k: 1e3 * result.timing_s[k] / ticks for k in STAGES}
     return {
-        "frames": frames,
+        "ticks": ticks,
         "wall_s": wall_s,
-        "fps": frames / wall_s,
-        "ms_per_frame": ms,
+        "ticks_per_s": ticks / wall_s,
+        "ms_per_tick": ms,
         "overhead_ratio": (ms["detect"] + ms["localize"] + ms["log"]) / ms["render"],
         "setup_s": result.timing_s["setup"],
         "rrd_bytes": rrd.stat().st_size,
-        "rrd_bytes_per_frame": rrd.stat().st_size / frames,
+        "rrd_bytes_per_tick": rrd.stat().st_size / ticks,
         "passed": outcome.passed,
     }
 
@@ -57,32 +57,32 @@ def run(args: argparse.Namespace) -> dict:
         start = time.perf_counter()
         per = {name: _run_one(name, Path(tmp)) for name in names}
         all_wall_s = time.perf_counter() - start
-    frames = sum(p["frames"] for p in per.values())
+    ticks = sum(p["ticks"] for p in per.values())
     total_ms = {
-        k: sum(p["ms_per_frame"][k] * p["frames"] for p in per.values()) / frames for k in STAGES
+        k: sum(p["ms_per_tick"][k] * p["ticks"] for p in per.values()) / ticks for k in STAGES
     }
     figures = {
         "scenarios": per,
         "total": {
-            "frames": frames,
+            "ticks": ticks,
             "all_wall_s": all_wall_s,
-            "fps": frames / all_wall_s,
-            "ms_per_frame": total_ms,
+            "ticks_per_s": ticks / all_wall_s,
+            "ms_per_tick": total_ms,
             "overhead_ratio": (total_ms["detect"] + total_ms["localize"] + total_ms["log"])
             / total_ms["render"],
-            "rrd_bytes_per_frame": sum(p["rrd_bytes"] for p in per.values()) / frames,
+            "rrd_bytes_per_tick": sum(p["rrd_bytes"] for p in per.values()) / ticks,
             "setup_s": sum(p["setup_s"] for p in per.values()),
         },
         "targets": TARGETS,
     }
     if not args.json:
         header = (
-            f"{'scenario':<19}{'frames':>7}{'fps':>7}"
+            f"{'scenario':<19}{'ticks':>7}{'ticks/s':>8}"
             + "".join(f"{s:>10}" for s in STAGES)
-            + f"{'overhead':>10}{'KB/frame':>10}{'setup s':>9}"
+            + f"{'overhead':>10}{'KB/tick':>10}{'setup s':>9}"
         )
         print(
-            "pipeline at 640x480, ms per frame by stage; overhead = (detect + localize + log)"
+            "pipeline at 640x480, ms per tick by stage; overhead = (detect + localize + log)"
             " / render;\nsetup = world, GL context, file header and close, once per run; JPEG/PNG"
             " encoding overlaps rendering on a worker thread"
         )
@@ -91,9 +91,9 @@ def run(args: argparse.Namespace) -> dict:
         rows = [*per.items(), ("ALL", figures["total"])]
         for name, p in rows:
             print(
-                f"{name:<19}{p['frames']:>7}{p['fps']:>7.1f}"
-                + "".join(f"{p['ms_per_frame'][s]:>10.2f}" for s in STAGES)
-                + f"{p['overhead_ratio']:>10.2f}{p['rrd_bytes_per_frame'] / 1e3:>10.1f}"
+                f"{name:<19}{p['ticks']:>7}{p['ticks_per_s']:>8.1f}"
+                + "".join(f"{p['ms_per_tick'][s]:>10.2f}" for s in STAGES)
+                + f"{p['overhead_ratio']:>10.2f}{p['rrd_bytes_per_tick'] / 1e3:>10.1f}"
                 + f"{p['setup_s']:>9.2f}"
             )
         t = figures["total"]
@@ -103,7 +103,7 @@ def run(args: argparse.Namespace) -> dict:
         )
         print(f"overhead ratio: {t['overhead_ratio']:.2f} (target <= {TARGETS['overhead_ratio']})")
         print(
-            f".rrd bytes per frame: {t['rrd_bytes_per_frame'] / 1e3:.1f} KB (target <= "
-            f"{TARGETS['rrd_bytes_per_frame'] / 1e3:.0f} KB)"
+            f".rrd bytes per tick: {t['rrd_bytes_per_tick'] / 1e3:.1f} KB (target <= "
+            f"{TARGETS['rrd_bytes_per_tick'] / 1e3:.0f} KB)"
         )
     return figures

@@ -1,6 +1,6 @@
 """Rendering and physics speed: FPS for RGB and RGB+depth (one pass), physics real-time factor.
 
-Figures: frames per second at 640x480 and 320x240 for RGB alone and for RGB + metric depth
+Figures: images per second at 640x480 and 320x240 for RGB alone and for RGB + metric depth
 from the same render pass, their ratio (target: time(RGB+depth) / time(RGB) <= 1.25), and the
 physics real-time factor (simulated seconds per wall-clock second) at the default time step,
 with and without the geometric controller in the loop.
@@ -22,7 +22,7 @@ SCENE_CONES = ((6.0, 1.0, 0.0), (9.0, -2.0, 0.0), (12.0, 3.0, 0.0), (15.0, 0.0, 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
-        "--frames", type=int, default=200, help="frames timed per figure (in 5 rounds)"
+        "--images", type=int, default=200, help="images timed per figure (in 5 rounds)"
     )
     parser.add_argument("--physics-s", type=float, default=20.0, help="simulated seconds timed")
     parser.add_argument("--quality", choices=("fast", "high"), default="fast")
@@ -31,12 +31,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 ROUNDS = 5
 
 
-def _fps_pair(renderer: Renderer, frames: int) -> tuple[float, float]:
-    """(RGB fps, RGB+depth fps): interleaved rounds, best round of each (the machine is shared,
-    so the fastest round is the least disturbed)."""
+def _rates(renderer: Renderer, images: int) -> tuple[float, float]:
+    """(RGB images/s, RGB+depth images/s): interleaved rounds, best round of each (the
+    machine is shared, so the fastest round is the least disturbed)."""
     for _ in range(5):  # warm up
         renderer.render(depth=True)
-    per_round = max(1, frames // ROUNDS)
+    per_round = max(1, images // ROUNDS)
     best = {False: float("inf"), True: float("inf")}
     for _ in range(ROUNDS):
         for depth in (False, True):
@@ -48,7 +48,7 @@ def _fps_pair(renderer: Renderer, frames: int) -> tuple[float, float]:
 
 
 def run(args: argparse.Namespace) -> dict:
-    frames = getattr(args, "frames", 200)
+    images = getattr(args, "images", 200)
     physics_s = getattr(args, "physics_s", 20.0)
     quality = getattr(args, "quality", "fast")
     figures: dict = {"quality": quality}
@@ -60,10 +60,10 @@ def run(args: argparse.Namespace) -> dict:
         )
         world = World.from_config(cfg)
         with Renderer(world) as renderer:
-            rgb, rgbd = _fps_pair(renderer, frames)
+            rgb, rgbd = _rates(renderer, images)
         key = f"{width}x{height}"
-        figures[f"fps_rgb_{key}"] = rgb
-        figures[f"fps_rgb_depth_{key}"] = rgbd
+        figures[f"images_per_s_rgb_{key}"] = rgb
+        figures[f"images_per_s_rgb_depth_{key}"] = rgbd
         figures[f"ratio_rgb_depth_over_rgb_{key}"] = rgb / rgbd
 
     world = World.from_config(SceneConfig())
@@ -84,14 +84,14 @@ def run(args: argparse.Namespace) -> dict:
     figures["timestep_s"] = float(world.model.opt.timestep)
 
     if not getattr(args, "json", False):
-        print(f"render quality: {quality}, {frames} frames per figure, best of {ROUNDS} rounds")
-        print(f"{'size':>9} | {'RGB fps':>8} | {'RGB+depth fps':>13} | {'ratio':>6}")
+        print(f"render quality: {quality}, {images} images per figure, best of {ROUNDS} rounds")
+        print(f"{'size':>9} | {'RGB img/s':>8} | {'RGB+depth img/s':>13} | {'ratio':>6}")
         print("-" * 46)
         for width, height in SIZES:
             key = f"{width}x{height}"
             print(
-                f"{key:>9} | {figures[f'fps_rgb_{key}']:8.1f} | "
-                f"{figures[f'fps_rgb_depth_{key}']:13.1f} | "
+                f"{key:>9} | {figures[f'images_per_s_rgb_{key}']:8.1f} | "
+                f"{figures[f'images_per_s_rgb_depth_{key}']:13.1f} | "
                 f"{figures[f'ratio_rgb_depth_over_rgb_{key}']:6.2f}"
             )
         print()

@@ -1,6 +1,6 @@
 """Typed scene configuration: frozen dataclasses, validated when they are made.
 
-Every field is checked in ``__post_init__``; nonsense raises :class:`ValueError` naming the field,
+Every field is checked in ``__post_init__``; nonsense raises ``ValueError`` naming the field,
 what was expected and what was received. Degrees appear here only, in names that say so; the
 simulator converts them at the edge.
 """
@@ -158,7 +158,7 @@ class SceneConfig:
     timestep_s : float
         Physics time step, seconds, in (0, 0.1].
     render_quality : str
-        ``"fast"`` or ``"high"`` (see :data:`RENDER_QUALITIES`).
+        ``"fast"`` or ``"high"`` (see ``RENDER_QUALITIES``).
     ground_size_m : float
         Half side of the square ground plane, metres.
     znear_m, zfar_m : float
@@ -210,7 +210,7 @@ class SceneConfig:
     def from_dict(cls, values: dict[str, Any]) -> SceneConfig:
         """Build from a nested mapping (e.g. parsed TOML), rejecting unknown keys.
 
-        ``camera`` may be a mapping of :class:`CameraConfig` fields.
+        ``camera`` may be a mapping of ``CameraConfig`` fields.
         """
         _check_names(cls, values)
         values = dict(values)

@@ -1,20 +1,20 @@
 """Flying the quadrotor: a geometric SE(3) controller, a rotor mixer, smooth references, keyframes.
 
 Controlled flight
-    :class:`GeometricController` is the tracking controller of T. Lee, M. Leok and
+    ``GeometricController`` is the tracking controller of T. Lee, M. Leok and
     N. H. McClamroch, "Geometric tracking control of a quadrotor UAV on SE(3)", IEEE CDC 2010
     (equation numbers below are the paper's). The paper's world and body z axes point down and
     the thrust is ``-f R e3``; here (docs/CONVENTIONS.md) z is up and the thrust is ``+f R e3``,
     so gravity changes sign in eq. (12)-(15). Attitude errors are taken on SO(3) with vnav
     (``e_R = 1/2 vee(R_d^T R - R^T R_d)``, eq. 10), never with Euler angles.
-    :class:`Mixer` maps collective thrust and body moments to the four rotor thrusts, built
+    ``Mixer`` maps collective thrust and body moments to the four rotor thrusts, built
     from the model's own rotor sites and gears and kept within their ``ctrlrange``.
-    :class:`MinimumJerkTrajectory` is a smooth reference through timed waypoints with a yaw at
-    each; :class:`Autopilot` ties them to a :class:`~sim.world.World`.
+    ``MinimumJerkTrajectory`` is a smooth reference through timed waypoints with a yaw at
+    each; ``Autopilot`` ties them to a ``sim.world.World``.
 
 Kinematic playback
-    :class:`KeyframeTrajectory` interpolates timed poses (position linearly, attitude by slerp)
-    and :class:`KeyframePlayer` writes them straight into the free joint, for exact poses no
+    ``KeyframeTrajectory`` interpolates timed poses (position linearly, attitude by slerp)
+    and ``KeyframePlayer`` writes them straight into the free joint, for exact poses no
     controller would fly (a 90 deg pitch).
 """
 
@@ -234,7 +234,7 @@ class GeometricController:
     inertia_kg_m2 : array_like, shape (3,) or (3, 3)
         Inertia about the centre of mass in body axes (principal values or matrix).
     gains : ControllerGains, optional
-        Defaults to :meth:`ControllerGains.from_bandwidth`.
+        Defaults to ``ControllerGains.from_bandwidth``.
     """
 
     def __init__(
@@ -379,7 +379,7 @@ class Mixer:
         return cls(np.array(xy), np.array(k), (lo[0], hi[0]))
 
     def thrusts(self, thrust_N: float, moment_b: np.ndarray) -> np.ndarray:
-        """Rotor thrusts (4,), newtons, in the order of :data:`sim.names.MOTORS`."""
+        """Rotor thrusts (4,), newtons, in the order of ``sim.names.MOTORS``."""
         wrench = np.array([thrust_N, moment_b[0], moment_b[1], 0.0])
         u0 = self.A_inv @ wrench
         u_yaw = self.A_inv[:, 3] * moment_b[2]
@@ -483,16 +483,16 @@ class OrbitTrajectory:
 
 # ------------------------------------------------------------------------------- autopilot
 class Autopilot:
-    """Flies a :class:`World` along a reference with the geometric controller and mixer.
+    """Flies a ``World`` along a reference with the geometric controller and mixer.
 
     Parameters
     ----------
     world : World
     trajectory : MinimumJerkTrajectory or any object with ``sample(t_s) -> Reference``
     controller : GeometricController, optional
-        Default: :meth:`GeometricController.from_world`.
+        Default: ``GeometricController.from_world``.
     mixer : Mixer, optional
-        Default: :meth:`Mixer.from_world`.
+        Default: ``Mixer.from_world``.
     """
 
     def __init__(
@@ -579,7 +579,7 @@ class KeyframeTrajectory:
 
 
 class KeyframePlayer:
-    """Writes a :class:`KeyframeTrajectory` into the world's free joint each step (no physics)."""
+    """Writes a ``KeyframeTrajectory`` into the world's free joint each step (no physics)."""
 
     def __init__(self, world: World, keyframes: KeyframeTrajectory) -> None:
         self.world = world

@@ -9,7 +9,7 @@ Every module of ``sim`` imports MuJoCo through this one::
 If ``MUJOCO_GL`` is unset and there is no display (``DISPLAY`` / ``WAYLAND_DISPLAY``), the first
 of EGL and OSMesa whose system library loads is chosen. Physics never needs OpenGL, so nothing
 here raises at import (with no platform library at all ``MUJOCO_GL=disable`` is set);
-:func:`create_gl_context` raises one clear :class:`GLBackendError` when a rendering context cannot
+``create_gl_context`` raises one clear ``GLBackendError`` when a rendering context cannot
 be made.
 
 MuJoCo's own warnings (e.g. "Nan, Inf or huge value in QVEL") are routed to the ``mujoco``

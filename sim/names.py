@@ -13,7 +13,7 @@ IMU_SITE = "imu"
 THRUST_SITES: tuple[str, ...] = ("thrust_fl", "thrust_rl", "thrust_rr", "thrust_fr")
 """Rotor sites: front-left, rear-left, rear-right, front-right (thrust along site +z)."""
 MOTORS: tuple[str, ...] = ("motor_fl", "motor_rl", "motor_rr", "motor_fr")
-"""Rotor thrust actuators, in the order of :data:`THRUST_SITES`."""
+"""Rotor thrust actuators, in the order of ``THRUST_SITES``."""
 
 ONBOARD_CAMERA = "onboard"
 """The body-mounted camera (MuJoCo/OpenGL convention inside sim, optical outside)."""

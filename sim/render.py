@@ -1,13 +1,13 @@
 """Off-screen rendering of the onboard camera (RGB + metric depth in one pass, segmentation).
 
-One :func:`mujoco.mjr_render` fills the colour and the depth buffer; one
-:func:`mujoco.mjr_readPixels` reads both. The depth buffer is reversed-Z
+One ``mujoco.mjr_render`` fills the colour and the depth buffer; one
+``mujoco.mjr_readPixels`` reads both. The depth buffer is reversed-Z
 (``mjDEPTH_ZEROFAR``) and is linearised to planar z-depth in metres exactly as MuJoCo's own
 ``mujoco.Renderer`` does (``mujoco/rendering/classic/renderer.py``).
 
-The onboard view leaves out the drone's geom group (:data:`sim.names.DRONE_GEOM_GROUP`): a real
+The onboard view leaves out the drone's geom group (``sim.names.DRONE_GEOM_GROUP``): a real
 camera does not image its own housing. External views (``camera="chase"`` or a
-:class:`mujoco.MjvCamera`) show it.
+``mujoco.MjvCamera``) show it.
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ SKY_THRESHOLD_FRACTION = 0.65
 
 @dataclass(frozen=True)
 class RenderedImage:
-    """What one call of :meth:`Renderer.render` returns: colour, and depth and ids if asked.
+    """What one call of ``Renderer.render`` returns: colour, and depth and ids if asked.
 
     Attributes
     ----------
@@ -62,7 +62,7 @@ def _tan_half_fovy(scene: mujoco.MjvScene) -> float:
 
 
 class Renderer:
-    """Renders a :class:`World`'s cameras off-screen at the configured resolution.
+    """Renders a ``World``'s cameras off-screen at the configured resolution.
 
     Parameters
     ----------
@@ -74,7 +74,7 @@ class Renderer:
         Image size; defaults to the onboard camera's configured size. Must fit the model's
         off-screen buffer.
 
-    Use as a context manager (or call :meth:`close`) to free the OpenGL context.
+    Use as a context manager (or call ``close``) to free the OpenGL context.
     """
 
     def __init__(
@@ -210,7 +210,7 @@ class Renderer:
             Also return per-pixel geom ids (one extra render pass).
         camera : None, str, int or mujoco.MjvCamera
             ``None``: the onboard camera. A camera name (e.g. ``"chase"``), id, or a free
-            camera from :meth:`free_camera` for external views.
+            camera from ``free_camera`` for external views.
         show_drone : bool, optional
             Draw the drone's own geoms; default: hidden for the onboard camera, shown otherwise.
 
@@ -268,13 +268,13 @@ class Renderer:
         """Set sky pixels to the far clipping distance, in place.
 
         The skybox is drawn as a dome about the camera whose ray distance is at least
-        :data:`SKY_DOME_MIN_FRACTION` of ``zfar`` (measured: 0.696 zfar, wherever the camera
+        ``SKY_DOME_MIN_FRACTION`` of ``zfar`` (measured: 0.696 zfar, wherever the camera
         is); everything real is nearer (``SceneConfig`` keeps the ground well inside it).
         """
         model = self.world.model
         zfar = float(model.vis.map.zfar * model.stat.extent)
         # ray > f zfar  <=>  depth > f zfar / (ray per depth): one compare against a cached
-        # per-pixel threshold instead of a multiply and a compare per frame.
+        # per-pixel threshold instead of a multiply and a compare per image.
         threshold_m = self._sky_threshold_m(scene, SKY_THRESHOLD_FRACTION * zfar)
         np.putmask(depth_m, depth_m > threshold_m, np.float32(zfar))
 

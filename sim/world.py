@@ -1,8 +1,8 @@
 """The simulated world: a quadrotor with a body-mounted camera among traffic cones.
 
-The model is assembled in code with :class:`mujoco.MjSpec`: ``models/scene.xml`` (ground, sky,
+The model is assembled in code with ``mujoco.MjSpec``: ``models/scene.xml`` (ground, sky,
 lights, and the quadrotor of ``models/quadrotor.xml``) is loaded, then the onboard camera, an
-external chase camera and the cones (a mesh built from :data:`vnav.cone.TRAFFIC_CONE`) are added.
+external chase camera and the cones (a mesh built from ``vnav.cone.TRAFFIC_CONE``) are added.
 
 Ground truth comes out in vnav's conventions (docs/CONVENTIONS.md): ``T_w_b`` (body FLU in the
 world ENU), ``T_b_c`` (the mount, optical frame RDF), ``T_w_c`` and the pinhole intrinsics that
@@ -100,7 +100,7 @@ def cone_mesh_vertices(cone: ConeModel = TRAFFIC_CONE, segments: int = CONE_MESH
 
 
 def build_spec(cfg: SceneConfig, cone: ConeModel = TRAFFIC_CONE) -> mujoco.MjSpec:
-    """Assemble the scene's :class:`mujoco.MjSpec` from the configuration.
+    """Assemble the scene's ``mujoco.MjSpec`` from the configuration.
 
     Parameters
     ----------
@@ -133,7 +133,7 @@ def build_spec(cfg: SceneConfig, cone: ConeModel = TRAFFIC_CONE) -> mujoco.MjSpe
     spec.visual.quality.offsamples = quality.offsamples
 
     # The plane is drawn as a grid of quads this many metres wide: 1 m quads over a 400 m
-    # plane cost ~8 ms per 640x480 frame on a CPU renderer; 10 m quads cost ~1 ms.
+    # plane cost ~8 ms per 640x480 image on a CPU renderer; 10 m quads cost ~1 ms.
     ground = spec.geom(names.GROUND_GEOM)
     ground.size = [cfg.ground_size_m, cfg.ground_size_m, GROUND_GRID_SPACING_M]
 
@@ -215,7 +215,7 @@ class World:
     data : mujoco.MjData
     config : SceneConfig
     spec : mujoco.MjSpec
-        The spec the model was compiled from (add elements and call :meth:`recompile`).
+        The spec the model was compiled from (add elements and call ``recompile``).
     """
 
     def __init__(self, spec: mujoco.MjSpec, config: SceneConfig) -> None:
@@ -228,7 +228,7 @@ class World:
 
     @classmethod
     def from_config(cls, cfg: SceneConfig | None = None) -> World:
-        """Build the world of a :class:`SceneConfig` (default scene if ``None``)."""
+        """Build the world of a ``SceneConfig`` (default scene if ``None``)."""
         if cfg is None:
             cfg = SceneConfig()
         if not isinstance(cfg, SceneConfig):
@@ -236,7 +236,7 @@ class World:
         return cls(build_spec(cfg), cfg)
 
     def recompile(self) -> None:
-        """Recompile after editing :attr:`spec`, keeping the state."""
+        """Recompile after editing ``spec``, keeping the state."""
         self.model, self.data = self.spec.recompile(self.model, self.data)
         self._index()
         mujoco.mj_forward(self.model, self.data)
@@ -281,7 +281,7 @@ class World:
         orientation: the lecture's chapter 8 composer moves the camera offset at run time.
 
         Writes MuJoCo's ``cam_pos`` (a body-relative position, no recompile needed) and the
-        mount returned by :attr:`T_b_c`, then recomputes the kinematics.
+        mount returned by ``T_b_c``, then recomputes the kinematics.
 
         Raises
         ------
@@ -376,7 +376,7 @@ class World:
         self.data.time = float(time_s)
 
     def set_rotor_thrusts(self, thrusts_N: np.ndarray) -> None:
-        """Command the four rotor thrusts (order of :data:`sim.names.MOTORS`), newtons."""
+        """Command the four rotor thrusts (order of ``sim.names.MOTORS``), newtons."""
         thrusts_N = np.asarray(thrusts_N, dtype=np.float64)
         if thrusts_N.shape != (4,) or not np.all(np.isfinite(thrusts_N)):
             raise ValueError(f"thrusts_N must be 4 finite values, got {thrusts_N!r}")
@@ -391,7 +391,7 @@ class World:
         """Advance the physics by ``n`` time steps.
 
         Afterwards every derived quantity (``T_w_b``, camera poses, what is rendered) is that
-        of the new state at :attr:`time_s`.
+        of the new state at ``time_s``.
 
         Raises
         ------

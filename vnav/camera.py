@@ -1,6 +1,6 @@
 """The pinhole camera: intrinsics, projection, back-projection and viewing rays.
 
-Every function here works in the **optical** frame `c` (x right, y down, z forward) and in
+Every function here works in the **optical** frame ``c`` (x right, y down, z forward) and in
 OpenCV pixel coordinates (u right, v down, the centre of the top-left pixel is (0, 0));
 see docs/CONVENTIONS.md. There is no lens distortion: MuJoCo renders an ideal pinhole.
 
@@ -26,7 +26,7 @@ __all__ = ["PinholeCamera", "check_depth_image", "depth_to_world_points"]
 
 
 def _as_points(name: str, p: np.ndarray, dim: int) -> np.ndarray:
-    """Return `p` as a float64 (N, dim) array; accept (dim,) as one point."""
+    """Return ``p`` as a float64 (N, dim) array; accept (dim,) as one point."""
     arr = np.asarray(p, dtype=np.float64)
     if arr.ndim == 1 and arr.shape[0] == dim:
         arr = arr[None, :]
@@ -92,10 +92,10 @@ class PinholeCamera:
 
     @classmethod
     def from_fovy(cls, fovy_deg: float, width: int, height: int) -> PinholeCamera:
-        """The camera MuJoCo renders for a vertical field of view `fovy_deg`.
+        """The camera MuJoCo renders for a vertical field of view ``fovy_deg``.
 
-        Square pixels with `fx = fy = (H / 2) / tan(fovy / 2)` and the principal point at the
-        image centre, `cx = (W - 1) / 2`, `cy = (H - 1) / 2` in OpenCV pixel-centre coordinates
+        Square pixels with ``fx = fy = (H / 2) / tan(fovy / 2)`` and the principal point at the
+        image centre, ``cx = (W - 1) / 2``, ``cy = (H - 1) / 2`` in OpenCV pixel-centre coordinates
         (docs/CONVENTIONS.md, "Pixels and the pinhole camera", where the measurement is
         described).
 
@@ -109,7 +109,7 @@ class PinholeCamera:
         Raises
         ------
         ValueError
-            If `fovy_deg` is not finite or outside (0, 180), or the size is invalid.
+            If ``fovy_deg`` is not finite or outside (0, 180), or the size is invalid.
         """
         fovy_deg = float(fovy_deg)
         if not (math.isfinite(fovy_deg) and 0.0 < fovy_deg < 180.0):
@@ -129,23 +129,23 @@ class PinholeCamera:
 
     @property
     def K(self) -> np.ndarray:
-        """The (3, 3) float64 intrinsic matrix `[[fx, 0, cx], [0, fy, cy], [0, 0, 1]]`."""
+        """The (3, 3) float64 intrinsic matrix ``[[fx, 0, cx], [0, fy, cy], [0, 0, 1]]``."""
         return np.array(
             [[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]], dtype=np.float64
         )
 
     @property
     def fovy_deg(self) -> float:
-        """Vertical field of view in degrees, `2 atan((H / 2) / fy)`."""
+        """Vertical field of view in degrees, ``2 atan((H / 2) / fy)``."""
         return math.degrees(2.0 * math.atan((self.height / 2.0) / self.fy))
 
     @property
     def fovx_deg(self) -> float:
-        """Horizontal field of view in degrees, `2 atan((W / 2) / fx)`."""
+        """Horizontal field of view in degrees, ``2 atan((W / 2) / fx)``."""
         return math.degrees(2.0 * math.atan((self.width / 2.0) / self.fx))
 
     def project(self, p_c: np.ndarray) -> np.ndarray:
-        """Project points in the optical frame to pixels, `u = fx x/z + cx`, `v = fy y/z + cy`.
+        """Project points in the optical frame to pixels, ``u = fx x/z + cx``, ``v = fy y/z + cy``.
 
         Parameters
         ----------
@@ -155,14 +155,14 @@ class PinholeCamera:
         Returns
         -------
         uv : ndarray, shape (N, 2), float64
-            Pixel coordinates (OpenCV). A point at or behind the camera (`z <= 0`) or with a
+            Pixel coordinates (OpenCV). A point at or behind the camera (``z <= 0``) or with a
             non-finite coordinate gives a row of NaN. A (3,) input gives a (1, 2) result.
-            Pixels outside the image are returned as they are (see `in_image`).
+            Pixels outside the image are returned as they are (see ``in_image``).
 
         Raises
         ------
         ValueError
-            If `p_c` does not have shape (3,) or (N, 3).
+            If ``p_c`` does not have shape (3,) or (N, 3).
         """
         p_c = _as_points("p_c", p_c, 3)
         z = p_c[:, 2]
@@ -176,8 +176,8 @@ class PinholeCamera:
     def backproject(self, uv: np.ndarray, depth: float | np.ndarray) -> np.ndarray:
         """Back-project pixels with planar z-depth to points in the optical frame.
 
-        `x = (u - cx) z / fx`, `y = (v - cy) z / fy`, `z = depth`: the exact inverse of
-        `project` for `z > 0`.
+        ``x = (u - cx) z / fx``, ``y = (v - cy) z / fy``, ``z = depth``: the exact inverse of
+        ``project`` for ``z > 0``.
 
         Parameters
         ----------
@@ -195,7 +195,7 @@ class PinholeCamera:
         Raises
         ------
         ValueError
-            If `uv` does not have shape (2,) or (N, 2), or `depth` is neither a scalar nor a
+            If ``uv`` does not have shape (2,) or (N, 2), or ``depth`` is neither a scalar nor a
             length-N vector.
         """
         uv = _as_points("uv", uv, 2)
@@ -216,7 +216,7 @@ class PinholeCamera:
     def rays(self, uv: np.ndarray) -> np.ndarray:
         """Unit viewing rays through pixels, in the optical frame.
 
-        The ray through `(u, v)` is `K^-1 [u, v, 1]^T` normalised; it points forward (z > 0).
+        The ray through ``(u, v)`` is ``K^-1 [u, v, 1]^T`` normalised; it points forward (z > 0).
 
         Parameters
         ----------
@@ -231,7 +231,7 @@ class PinholeCamera:
         Raises
         ------
         ValueError
-            If `uv` does not have shape (2,) or (N, 2).
+            If ``uv`` does not have shape (2,) or (N, 2).
         """
         p_c = self.backproject(uv, 1.0)
         return p_c / np.linalg.norm(p_c, axis=1, keepdims=True)
@@ -251,10 +251,10 @@ class PinholeCamera:
         return np.sqrt(1.0 + x[None, :] ** 2 + y[:, None] ** 2)
 
     def in_image(self, uv: np.ndarray, margin_px: float = 0.0) -> np.ndarray:
-        """Whether pixels lie inside the image, shrunk by `margin_px` on every side.
+        """Whether pixels lie inside the image, shrunk by ``margin_px`` on every side.
 
-        A pixel centre is inside when `-0.5 + m <= u < W - 0.5 - m` and likewise for v (each
-        pixel covers `[c - 0.5, c + 0.5)` around its centre c). NaN rows are outside.
+        A pixel centre is inside when ``-0.5 + m <= u < W - 0.5 - m`` and likewise for v (each
+        pixel covers ``[c - 0.5, c + 0.5)`` around its centre c). NaN rows are outside.
 
         Parameters
         ----------

@@ -3,21 +3,21 @@
 The pipeline (one pass over the image, no pose needed):
 
 1. RGB -> HSV (OpenCV scale: H in [0, 180), S and V in [0, 255]) and a threshold box around
-   the cone's orange (`vnav.cone.ConeModel.color_rgb` = (1, 0.35, 0) has hue 21 deg, i.e.
+   the cone's orange (``vnav.cone.ConeModel.color_rgb`` = (1, 0.35, 0) has hue 21 deg, i.e.
    10.5 on OpenCV's scale); shading changes V and, with specular light, S, but hardly H.
 2. A 3x3 morphological closing fills one-pixel holes and gaps (no opening: it would eat the
    cone's thin tip, on which the apex estimate depends).
-3. 8-connected components; components smaller than `min_area_px` are dropped as noise.
+3. 8-connected components; components smaller than ``min_area_px`` are dropped as noise.
    One component is one detection. Cones that overlap in the image merge into one.
 
 Per detection the apex pixel is estimated to sub-pixel precision by intersecting two straight
 lines fitted to the left and right silhouette edges of the upper half of the blob (the cone's
 sides are straight lines in the image, the images of its two contour generators); when that
 is ill-conditioned (a blob too small or seen from above) the top-most pixel is used. The
-base-centre pixel `base_uv` is a pose-free estimate: the point of the blob farthest along the
+base-centre pixel ``base_uv`` is a pose-free estimate: the point of the blob farthest along the
 image direction of the cone's axis (from apex towards the blob's centroid), i.e. the near
 bottom edge of the base plate. The true base centre is hidden inside the base plate and lies
-a little above that point in the image; `vnav.localize` refines it with the camera pose and
+a little above that point in the image; ``vnav.localize`` refines it with the camera pose and
 the cone's known dimensions.
 """
 
@@ -71,17 +71,17 @@ class HsvThresholds:
 
     @property
     def lower(self) -> np.ndarray:
-        """(3,) uint8 lower corner for `cv2.inRange`."""
+        """(3,) uint8 lower corner for ``cv2.inRange``."""
         return np.array([self.h_min, self.s_min, self.v_min], dtype=np.uint8)
 
     @property
     def upper(self) -> np.ndarray:
-        """(3,) uint8 upper corner for `cv2.inRange`."""
+        """(3,) uint8 upper corner for ``cv2.inRange``."""
         return np.array([self.h_max, 255, 255], dtype=np.uint8)
 
 
 DEFAULT_THRESHOLDS = HsvThresholds()
-"""Thresholds tuned on MuJoCo renders of `vnav.cone.TRAFFIC_CONE` (see tests/test_detect.py)."""
+"""Thresholds tuned on MuJoCo renders of ``vnav.cone.TRAFFIC_CONE`` (see tests/test_detect.py)."""
 
 _KERNEL_3X3 = np.ones((3, 3), dtype=np.uint8)
 
@@ -93,12 +93,12 @@ class ConeDetection:
     Attributes
     ----------
     bbox : tuple of int
-        `(x, y, w, h)`: column and row of the top-left pixel, width and height in pixels.
+        ``(x, y, w, h)``: column and row of the top-left pixel, width and height in pixels.
     area_px : int
         Number of pixels in the mask.
     mask : ndarray, shape (h, w), bool
-        The blob, **cropped to bbox**: `mask[r, c]` is image pixel `(row, col) = (y + r,
-        x + c)`. Use `full_mask(shape)` for an image-sized mask and `pixels_uv()` for the
+        The blob, **cropped to bbox**: ``mask[r, c]`` is image pixel `(row, col) = (y + r,
+        x + c)``. Use ``full_mask(shape)`` for an image-sized mask and ``pixels_uv()` for the
         pixel centres.
     apex_uv : ndarray, shape (2,), float64
         Estimated image of the cone's apex (sub-pixel, see the module docstring).
@@ -110,7 +110,7 @@ class ConeDetection:
     touches_border : bool
         True if the mask reaches the first or last row or column: the cone may be cut off.
     apex_from_edges : bool
-        True if `apex_uv` came from the two-edge fit, False if from the top-most pixel.
+        True if ``apex_uv`` came from the two-edge fit, False if from the top-most pixel.
     """
 
     bbox: tuple[int, int, int, int]
@@ -128,12 +128,12 @@ class ConeDetection:
         return float(np.linalg.norm(self.base_uv - self.apex_uv))
 
     def pixels_uv(self) -> np.ndarray:
-        """Pixel centres `(u, v)` of the mask, shape (area_px, 2), float64."""
+        """Pixel centres ``(u, v)`` of the mask, shape (area_px, 2), float64."""
         rows, cols = np.nonzero(self.mask)
         return np.column_stack((cols + self.bbox[0], rows + self.bbox[1])).astype(np.float64)
 
     def full_mask(self, shape: tuple[int, int]) -> np.ndarray:
-        """The mask pasted into an all-False (H, W) bool image of `shape`."""
+        """The mask pasted into an all-False (H, W) bool image of ``shape``."""
         out = np.zeros(shape[:2], dtype=bool)
         x, y, w, h = self.bbox
         out[y : y + h, x : x + w] = self.mask
@@ -209,14 +209,14 @@ def detect_cones(
     Raises
     ------
     ValueError
-        If `rgb` is not a non-empty (H, W, 3) uint8 array or `min_area_px` < 1.
+        If ``rgb`` is not a non-empty (H, W, 3) uint8 array or ``min_area_px`` < 1.
     """
     check_rgb(rgb)
     if min_area_px < 1:
         raise ValueError(f"min_area_px must be >= 1, got {min_area_px}")
     mask = cone_mask(rgb, thresholds)
     height, width = mask.shape
-    # Label only the bounding box of all candidate pixels (labelling the full frame costs
+    # Label only the bounding box of all candidate pixels (labelling the full image costs
     # about 1 ms; the box is usually small).
     rx, ry, rw, rh = cv2.boundingRect(mask)
     detections: list[ConeDetection] = []
@@ -240,7 +240,7 @@ def detect_cones(
 
 
 def _fit_line(v: np.ndarray, u: np.ndarray) -> tuple[float, float] | None:
-    """Least-squares `u = a + b v`; None if fewer than 3 rows or no spread in v."""
+    """Least-squares ``u = a + b v``; None if fewer than 3 rows or no spread in v."""
     if v.size < 3 or np.ptp(v) < 2:
         return None
     # Closed-form simple regression on centred data (what np.polyfit(v, u, 1) solves, without
@@ -256,8 +256,8 @@ def _fit_line(v: np.ndarray, u: np.ndarray) -> tuple[float, float] | None:
 def _apex_from_edges(crop: np.ndarray, x0: int, y0: int) -> np.ndarray | None:
     """Intersect lines fitted to the left and right edges of the upper half of a blob.
 
-    In a row whose pixel centres `c_min..c_max` are inside the blob the silhouette's edges lie
-    in `(c_min - 1, c_min]` and `[c_max, c_max + 1)`, so `c_min - 0.5` and `c_max + 0.5` are
+    In a row whose pixel centres ``c_min..c_max`` are inside the blob the silhouette's edges lie
+    in ``(c_min - 1, c_min]`` and ``[c_max, c_max + 1)``, so ``c_min - 0.5`` and ``c_max + 0.5`` are
     unbiased edge estimates. Returns None when the fit is ill-conditioned.
     """
     rows = np.flatnonzero(crop.any(axis=1))
@@ -320,16 +320,16 @@ def _describe_blob(
 def extreme_point(crop: np.ndarray, x0: int, y0: int, direction_uv: np.ndarray) -> np.ndarray:
     """The blob's extreme point along a unit image direction, to sub-pixel precision.
 
-    Along `d`: the largest projection `s = p . d` of a pixel centre, moved by half a pixel's
-    extent along `d` (`0.5 (|d_u| + |d_v|)`) from the centre to the edge (for `d` along an
+    Along ``d``: the largest projection ``s = p . d`` of a pixel centre, moved by half a pixel's
+    extent along ``d`` (``0.5 (|d_u| + |d_v|)``) from the centre to the edge (for ``d`` along an
     image axis the silhouette's edge lies within one pixel beyond the last covered centre, so
-    half a pixel is its unbiased estimate). Across `d`: the mean of the pixel centres within
+    half a pixel is its unbiased estimate). Across ``d``: the mean of the pixel centres within
     1 px of the largest projection (the middle of the extreme edge).
 
     Parameters
     ----------
     crop : ndarray, shape (h, w), bool
-        The blob, cropped; its top-left pixel is `(x0, y0)` in the image.
+        The blob, cropped; its top-left pixel is ``(x0, y0)`` in the image.
     direction_uv : ndarray, shape (2,)
         Unit direction in the image.
 

@@ -96,13 +96,13 @@ def estimate_from_depth(
 ) -> np.ndarray | None:
     """Base centre from the depth image over the detection's mask.
 
-    1. Back-project every mask pixel with its planar depth, `p_w = T_w_c @ p_c` (pixels with
-       depth <= 0 or >= `far_m` are dropped; far outliers beyond 2 m of the median depth too).
-    2. `z_base` = 2nd percentile of the points' heights (the base plate's bottom edge).
-    3. Body points (height above `z_base` between plate + 2 cm and apex - 3 cm) lie at the
-       known radius `r(h) = r0 (H - h) / (H - t)` from the axis. Start each at
-       `p_xy + r(h) b_i` (`b_i` the horizontal viewing direction), take the median, then
-       minimise `sum_i (|p_xy,i - c| - r_i)^2` over the axis `c` by Gauss-Newton with one
+    1. Back-project every mask pixel with its planar depth, ``p_w = T_w_c @ p_c`` (pixels with
+       depth <= 0 or >= ``far_m`` are dropped; far outliers beyond 2 m of the median depth too).
+    2. ``z_base`` = 2nd percentile of the points' heights (the base plate's bottom edge).
+    3. Body points (height above ``z_base`` between plate + 2 cm and apex - 3 cm) lie at the
+       known radius ``r(h) = r0 (H - h) / (H - t)`` from the axis. Start each at
+       ``p_xy + r(h) b_i`` (``b_i`` the horizontal viewing direction), take the median, then
+       minimise ``sum_i (|p_xy,i - c| - r_i)^2`` over the axis ``c`` by Gauss-Newton with one
        3-sigma (MAD) outlier trim.
 
     Parameters
@@ -211,7 +211,7 @@ def _world_points(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``p_w = T_w_c @ backproject(uv, z_c)`` per coordinate: the x, y, z rows, each (N,).
 
-    Lecture form: :func:`_world_points_reference`.
+    Lecture form: ``_world_points_reference``.
     """
     x_c = (u - view.cx) * z_c / view.fx
     y_c = (v - view.cy) * z_c / view.fy
@@ -227,7 +227,7 @@ def _world_points(
 def _world_points_reference(
     camera: PinholeCamera, T_w_c: np.ndarray, uv: np.ndarray, z_c: np.ndarray
 ) -> np.ndarray:
-    """Lecture form of :func:`_world_points`: ``se3.apply(T_w_c, camera.backproject(uv, z))``,
+    """Lecture form of ``_world_points``: ``se3.apply(T_w_c, camera.backproject(uv, z))``,
     (N, 3)."""
     return se3.apply(T_w_c, camera.backproject(uv, z_c))
 
@@ -235,11 +235,11 @@ def _world_points_reference(
 def _fit_axis(
     qx: np.ndarray, qy: np.ndarray, r: np.ndarray, c0: tuple[float, float]
 ) -> tuple[float, float] | None:
-    """Gauss-Newton for the centre `c` of circles of known radii `r_i` through points `q_i`.
+    """Gauss-Newton for the centre ``c`` of circles of known radii ``r_i`` through points ``q_i``.
 
-    Residual `e_i = |q_i - c| - r_i`, Jacobian row `-(q_i - c)^T / |q_i - c|`; each step solves
-    the 2x2 normal equations (the rows are unit vectors, so `J^T J` is well conditioned
-    whenever the points do not all lie in one direction from `c`). Once, after the 4th step
+    Residual ``e_i = |q_i - c| - r_i``, Jacobian row ``-(q_i - c)^T / |q_i - c|``; each step solves
+    the 2x2 normal equations (the rows are unit vectors, so ``J^T J`` is well conditioned
+    whenever the points do not all lie in one direction from ``c``). Once, after the 4th step
     or at convergence if that comes first, points whose residual is more than 3 sigma (MAD)
     from the median residual are dropped and the fit goes on with the rest.
     """
@@ -293,9 +293,10 @@ def estimate_from_ground_plane(
 ) -> np.ndarray | None:
     """Base centre from the ray through the blob's bottom pixel meeting the ground z = 0.
 
-    `g_w = t_w_c + lambda d_w` with `lambda = -z_c / d_z` (`d_w` the unit ray in the world
-    through `bottom_pixel`, the base plate's near bottom edge on the cone's image axis), then
-    `p_w = g_w + s b` with `b` the horizontal bearing from the camera and `s` the mean distance
+    ``g_w = t_w_c + lambda d_w`` with ``lambda = -z_c / d_z`` (``d_w`` the unit ray in the
+    world through ``SilhouetteView.bottom``, the base plate's near bottom edge on the cone's
+    image axis), then ``p_w = g_w + s b`` with ``b`` the horizontal bearing from the camera and
+    ``s`` the mean distance
     from the base centre to that edge (``ConeModel.base_axis_distance_m``).
 
     Returns
@@ -303,7 +304,7 @@ def estimate_from_ground_plane(
     p_w : ndarray, shape (3,), or None
         None when the detection touches the image border (the cone may be cut off: its bottom
         may be outside the image), when the camera is not above the ground, or when the ray
-        is parallel to the ground or points away from it (`d_z >= -1e-9`).
+        is parallel to the ground or points away from it (``d_z >= -1e-9``).
     """
     check_detection(detection, camera)
     T_w_c = se3.check_pose(T_w_c, "T_w_c")
@@ -313,7 +314,7 @@ def estimate_from_ground_plane(
 
 
 def _ground_plane(view: SilhouetteView, cone: ConeModel) -> np.ndarray | None:
-    """`estimate_from_ground_plane` after validation, for a detection clear of the border."""
+    """``estimate_from_ground_plane`` after validation, for a detection clear of the border."""
     bottom = view.bottom(cone)
     tx, ty, tz = view.t
     dx, dy, dz = view.ray(float(bottom[0]), float(bottom[1]))
@@ -331,11 +332,11 @@ def _ground_plane(view: SilhouetteView, cone: ConeModel) -> np.ndarray | None:
 
 
 MIN_TRIANGLE_FRACTION = 0.10
-"""`estimate_from_known_height` needs at least this `triangle_fraction` of the silhouette (the
+"""``estimate_from_known_height`` needs at least this ``triangle_fraction`` of the silhouette (the
 apex clear of the base plate's image): up to about 69 deg of elevation for the standard cone."""
 
 MAX_RANGE_ERROR_PER_PX = 0.10
-"""`estimate_from_known_height` gives no estimate when one pixel of error in the apex or the
+"""``estimate_from_known_height`` gives no estimate when one pixel of error in the apex or the
 bottom pixel (along the image vertical) moves it by more than this fraction of its range."""
 
 
@@ -349,9 +350,9 @@ def _solve_known_height(
     height_m: float,
     s: float,
 ) -> tuple[tuple[float, float, float], float, float, float] | None:
-    """`(p_w, alpha, gamma, residual)` of the 3x2 least-squares triangle, or None.
+    """``(p_w, alpha, gamma, residual)`` of the 3x2 least-squares triangle, or None.
 
-    `[a, -g] (alpha, gamma)^T = (0, 0, H) + s b` solved by a QR factorisation (Gram-Schmidt
+    ``[a, -g] (alpha, gamma)^T = (0, 0, H) + s b`` solved by a QR factorisation (Gram-Schmidt
     on the two columns, as well conditioned as the problem: the rays are at least 1e-4 rad
     apart), in plain floats.
     """
@@ -383,7 +384,7 @@ def _solve_known_height(
 def _solve_known_height_reference(
     c_w: np.ndarray, a_w: np.ndarray, g_w: np.ndarray, height_m: float, s: float
 ) -> tuple[np.ndarray, float, float, float]:
-    """Lecture form of :func:`_solve_known_height`: ``np.linalg.lstsq`` on the 3x2 system."""
+    """Lecture form of ``_solve_known_height``: ``np.linalg.lstsq`` on the 3x2 system."""
     b = np.array([g_w[0], g_w[1], 0.0]) / math.hypot(g_w[0], g_w[1])
     A = np.column_stack([a_w, -np.asarray(g_w)])
     rhs = np.array([0.0, 0.0, height_m]) + s * b
@@ -401,21 +402,22 @@ def estimate_from_known_height(
     """Base centre from the cone's known height and its apparent size (generalised similar
     triangles).
 
-    With `c = t_w_c`, unit world rays `a` (through `apex_pixel`) and `g` (through
-    `bottom_pixel`, the plate's near bottom edge on the cone's image axis), horizontal
-    bearing `b` and `s = ConeModel.base_axis_distance_m`, the apex `c + alpha a` and the edge point
-    `c + gamma g` satisfy `alpha a - gamma g = (0, 0, H) + s b`; `(alpha, gamma)` is the
-    least-squares solution and `p_w = c + gamma g + s b`. For a level camera and a distant cone
-    this reduces to `Z = f H / h_px`.
+    With ``c = t_w_c``, unit world rays ``a`` (through ``apex_pixel``) and ``g`` (through
+    ``SilhouetteView.bottom``, the plate's near bottom edge on the cone's image axis),
+    horizontal bearing ``b`` and ``s = ConeModel.base_axis_distance_m``, the apex
+    ``c + alpha a`` and the edge point
+    ``c + gamma g`` satisfy ``alpha a - gamma g = (0, 0, H) + s b``; ``(alpha, gamma)`` is the
+    least-squares solution and ``p_w = c + gamma g + s b``. For a level camera and a distant cone
+    this reduces to ``Z = f H / h_px``.
 
     Conditioning. The estimate is refused (None) when the triangle cannot be measured well:
 
     - the apex must be clear of the base plate's image: `triangle_fraction(e) >=
-      MIN_TRIANGLE_FRACTION` at the line of sight's elevation `e` (up to about 69 deg for the
+      MIN_TRIANGLE_FRACTION`` at the line of sight's elevation ``e` (up to about 69 deg for the
       standard cone; looking down more steeply the apex projects inside the cone's outline
       and its height is foreshortened onto the plate);
     - one pixel of error in the apex or the bottom pixel, along the image vertical, may move
-      the estimate by at most `MAX_RANGE_ERROR_PER_PX` of its range (the sensitivity of the
+      the estimate by at most ``MAX_RANGE_ERROR_PER_PX`` of its range (the sensitivity of the
       least-squares solution, by finite differences): a cone only a few pixels tall gives no
       estimate rather than a wrong one.
 
@@ -434,7 +436,7 @@ def estimate_from_known_height(
 
 
 def _known_height(view: SilhouetteView, cone: ConeModel) -> np.ndarray | None:
-    """`estimate_from_known_height` after validation, for a detection clear of the border."""
+    """``estimate_from_known_height`` after validation, for a detection clear of the border."""
     vertical = view.vertical_at_blob()
     if vertical is None:
         logger.debug("known height: camera looks straight down at the cone")

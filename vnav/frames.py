@@ -9,7 +9,7 @@ Constants are read-only (3, 3) float64 rotations ``R_A_B`` that map B-coordinate
 - ``ENU``: x east, y north, z up (world); ``NED``: x north, y east, z down;
 - ``FRD``: x forward, y right, z down (aerospace body).
 
-`FrameTree` is the lecture's chapter 8 "transform composer": register ``T_parent_child``
+``FrameTree`` is the lecture's chapter 8 "transform composer": register ``T_parent_child``
 edges (world -> body -> camera) and look up ``T_a_b`` between any two frames.
 """
 
@@ -52,7 +52,7 @@ def _transpose(R: FloatArray) -> FloatArray:
 #: Optical (RDF) into body (FLU): camera z (forward) -> body x, camera x (right) -> body -y,
 #: camera y (down) -> body -z. A forward-looking camera at the body origin has R_b_c = this.
 R_FLU_RDF = _constant([[0, -1, 0], [0, 0, -1], [1, 0, 0]])
-#: Body (FLU) into optical (RDF), the transpose of `R_FLU_RDF`.
+#: Body (FLU) into optical (RDF), the transpose of ``R_FLU_RDF``.
 R_RDF_FLU = _transpose(R_FLU_RDF)
 #: Optical (RDF) into the MuJoCo/OpenGL camera frame: diag(1, -1, -1) (flip y and z).
 R_GLC_RDF = _constant([[1, 0, 0], [0, -1, 0], [0, 0, -1]])
@@ -92,9 +92,9 @@ def mount_rotation(pitch_down_rad: float) -> FloatArray:
 
 
 class FrameTree:
-    """Named frames linked by ``T_parent_child`` edges; `lookup` composes ``T_a_b``.
+    """Named frames linked by ``T_parent_child`` edges; ``lookup`` composes ``T_a_b``.
 
-    Each frame has at most one parent, so the edges form a forest; `lookup` walks up from both
+    Each frame has at most one parent, so the edges form a forest; ``lookup`` walks up from both
     frames to their lowest common ancestor ``r`` and returns
     ``T_a_b = invert(T_r_a) @ T_r_b`` (lecture chapter 7: inner letters cancel).
 

@@ -1,8 +1,8 @@
 """From a cone detection to the cone's base-centre position in the world, by every method.
 
-:func:`localize` validates its inputs once, builds one :class:`vnav.silhouette.SilhouetteView`
-of the detection and runs each estimator of :mod:`vnav.estimators` on it; the methods and
-their accuracy contract are declared in :mod:`vnav.methods`.
+``localize`` validates its inputs once, builds one ``vnav.silhouette.SilhouetteView``
+of the detection and runs each estimator of ``vnav.estimators`` on it; the methods and
+their accuracy contract are declared in ``vnav.methods``.
 """
 
 from __future__ import annotations

@@ -4,10 +4,10 @@ Every estimate of a cone's base centre goes through the same chain,
 ``p_w = T_w_b @ T_b_c @ p_c`` (VNAV lecture 1, chapter 0); the methods differ only in where
 the depth along the viewing ray comes from. Everything that lists methods (the estimates of
 ``vnav.localize``, the checks and the report of a scenario, the recording's colours and
-plots, the README's table) derives from :data:`METHODS`, in this order.
+plots, the README's table) derives from ``METHODS``, in this order.
 
 The accuracy contract (``docs/ACCURACY.md``) is stated here as data: each checked method has
-an :class:`AccuracyBound`, promised over the :data:`CONTRACT_DOMAIN` (a cone fully in view, at
+an ``AccuracyBound``, promised over the ``CONTRACT_DOMAIN`` (a cone fully in view, at
 least 12 px tall, 2 to 25 m away).
 """
 
@@ -167,7 +167,7 @@ _BY_NAME = {m.name: m for m in METHODS}
 
 
 def method(name: str) -> Method:
-    """The :class:`Method` called ``name``.
+    """The ``Method`` called ``name``.
 
     Raises
     ------

@@ -1,10 +1,10 @@
 """Error statistics of position estimates against ground truth, in the style of evo.
 
-evo (`evo/core/metrics.py`) reports every error series with the same statistics: rmse, mean,
+evo (``evo/core/metrics.py``) reports every error series with the same statistics: rmse, mean,
 median, std, min, max. The same here, plus the count. Reference (ground truth) comes first in
 every argument list. Errors are Euclidean distances in metres.
 
-An empty series is not an error: `error_stats` returns count 0 and NaN for every statistic,
+An empty series is not an error: ``error_stats`` returns count 0 and NaN for every statistic,
 so a table of several methods keeps its rows when one method never produced an estimate.
 """
 
@@ -24,7 +24,7 @@ __all__ = [
 ]
 
 STATS = ("rmse", "mean", "median", "std", "min", "max", "count")
-"""The keys of `error_stats`, in display order."""
+"""The keys of ``error_stats``, in display order."""
 
 _BRUTE_FORCE_MAX = 7
 """Up to this many estimates or truths, matching tries every assignment (7! = 5040)."""
@@ -40,9 +40,9 @@ def _points(x: np.ndarray, name: str) -> np.ndarray:
 
 
 def error_stats(errors: np.ndarray) -> dict[str, float]:
-    """Statistics of a series of non-negative errors (evo's set, plus `count`).
+    """Statistics of a series of non-negative errors (evo's set, plus ``count``).
 
-    `rmse = sqrt(mean(e^2))`; `std` is the population standard deviation (ddof = 0, as evo).
+    ``rmse = sqrt(mean(e^2))``; ``std`` is the population standard deviation (ddof = 0, as evo).
 
     Parameters
     ----------
@@ -52,12 +52,12 @@ def error_stats(errors: np.ndarray) -> dict[str, float]:
     Returns
     -------
     dict
-        Keys `STATS`; `count` is an int. For N = 0 every other value is NaN.
+        Keys ``STATS``; ``count`` is an int. For N = 0 every other value is NaN.
 
     Raises
     ------
     ValueError
-        If `errors` is not one-dimensional or holds NaN/inf.
+        If ``errors`` is not one-dimensional or holds NaN/inf.
     """
     e = np.asarray(errors, dtype=np.float64)
     if e.ndim != 1:
@@ -80,7 +80,7 @@ def error_stats(errors: np.ndarray) -> dict[str, float]:
 
 
 def position_error(p_ref: np.ndarray, p_est: np.ndarray) -> np.ndarray:
-    """Euclidean (3-D) distance per row, `|p_est - p_ref|`, shape (N,), metres.
+    """Euclidean (3-D) distance per row, ``|p_est - p_ref|``, shape (N,), metres.
 
     Raises
     ------
@@ -113,8 +113,8 @@ def match_nearest(
     """Pair estimates with true positions one-to-one, minimising the total distance.
 
     Exact (every assignment tried) when either set has at most 7 points, else greedy: the
-    globally closest remaining pair first. Pairs farther apart than `max_distance` are left
-    unmatched. 2-D or 3-D points (pass `[:, :2]` to match in the ground plane).
+    globally closest remaining pair first. Pairs farther apart than ``max_distance`` are left
+    unmatched. 2-D or 3-D points (pass ``[:, :2]`` to match in the ground plane).
 
     Parameters
     ----------
@@ -128,7 +128,7 @@ def match_nearest(
     Returns
     -------
     list of (i_ref, i_est)
-        Sorted by `i_ref`.
+        Sorted by ``i_ref``.
 
     Raises
     ------

@@ -2,12 +2,12 @@
 
 vnav stores a quaternion as ``[x, y, z, w]``, the lecture's ``q = [v; s]`` with
 ``v = sin(theta/2) u`` and ``s = cos(theta/2)``. MuJoCo stores ``[w, x, y, z]``: convert with
-`xyzw_to_wxyz` / `wxyz_to_xyzw` exactly where data crosses that border; SciPy and Rerun are
+``xyzw_to_wxyz`` / ``wxyz_to_xyzw`` exactly where data crosses that border; SciPy and Rerun are
 scalar last like vnav. ``q`` and ``-q`` are the same rotation (the double cover of SO(3) by
 S^3). Products are Hamilton's: ``to_matrix(multiply(a, b)) == to_matrix(a) @ to_matrix(b)``.
 
 Only unit quaternions are accepted: a non-unit input raises ``ValueError`` unless the caller
-opts in with ``normalize=True`` (where offered) or calls `normalize` first. Every function is
+opts in with ``normalize=True`` (where offered) or calls ``normalize`` first. Every function is
 batched over leading axes: a (..., 4) stack of quaternions. Conventions: docs/CONVENTIONS.md.
 """
 
@@ -228,7 +228,7 @@ def to_axis_angle(q: ArrayLike, *, normalize: bool = False) -> tuple[FloatArray,
     Raises
     ------
     ValueError
-        See `check_quaternion`.
+        See ``check_quaternion``.
     """
     q = _unit(q, "q", normalize)
     sign = np.where(q[..., 3] < 0.0, -1.0, 1.0)
@@ -294,7 +294,7 @@ def to_rotvec(q: ArrayLike, *, normalize: bool = False) -> FloatArray:
     Raises
     ------
     ValueError
-        See `check_quaternion`.
+        See ``check_quaternion``.
     """
     q = _unit(q, "q", normalize)
     sign = np.where(q[..., 3] < 0.0, -1.0, 1.0)
@@ -401,7 +401,7 @@ def from_matrix(R: ArrayLike) -> FloatArray:
     Parameters
     ----------
     R : array_like, shape (..., 3, 3)
-        Rotation matrices (validated with `vnav.so3.check_rotation`).
+        Rotation matrices (validated with ``vnav.so3.check_rotation``).
 
     Returns
     -------
@@ -411,7 +411,7 @@ def from_matrix(R: ArrayLike) -> FloatArray:
     Raises
     ------
     ValueError
-        If ``R`` is not a rotation (see `vnav.so3.check_rotation`).
+        If ``R`` is not a rotation (see ``vnav.so3.check_rotation``).
     """
     from vnav.so3 import check_rotation
 
@@ -451,7 +451,7 @@ def multiply(a: ArrayLike, b: ArrayLike) -> FloatArray:
     Raises
     ------
     ValueError
-        See `check_quaternion` (for ``a`` and ``b``).
+        See ``check_quaternion`` (for ``a`` and ``b``).
     """
     a = check_quaternion(a, "a")
     b = check_quaternion(b, "b")
@@ -514,7 +514,7 @@ def slerp(q0: ArrayLike, q1: ArrayLike, t: ArrayLike) -> FloatArray:
     Raises
     ------
     ValueError
-        See `check_quaternion` (for ``q0`` and ``q1``); also if ``t`` is NaN or inf.
+        See ``check_quaternion`` (for ``q0`` and ``q1``); also if ``t`` is NaN or inf.
     """
     q0 = check_quaternion(q0, "q0")
     q1 = check_quaternion(q1, "q1")

@@ -1,9 +1,9 @@
 """Rigid-body transforms, the group SE(3), as 4x4 homogeneous matrices (lecture chapter 7).
 
 ``T_a_b = [[R_a_b, t_a_b], [0, 0, 0, 1]]`` is the pose of frame b in frame a: it maps
-b-coordinates into a, ``p_a = R_a_b @ p_b + t_a_b`` (`apply`). Composition is plain ``@`` and
+b-coordinates into a, ``p_a = R_a_b @ p_b + t_a_b`` (``apply``). Composition is plain ``@`` and
 the inner letters cancel, ``T_a_c = T_a_b @ T_b_c``; the inverse has the closed form
-``T_b_a = [[R^T, -R^T t], [0, 1]]`` (`invert`). Arrays are the interchange format: (4, 4)
+``T_b_a = [[R^T, -R^T t], [0, 1]]`` (``invert``). Arrays are the interchange format: (4, 4)
 float64, or (..., 4, 4) stacks where a function says so. Conventions: docs/CONVENTIONS.md.
 """
 
@@ -34,7 +34,7 @@ def make(R: ArrayLike, t: ArrayLike) -> FloatArray:
     Parameters
     ----------
     R : array_like, shape (..., 3, 3)
-        Rotation ``R_a_b`` (validated with `vnav.so3.check_rotation`).
+        Rotation ``R_a_b`` (validated with ``vnav.so3.check_rotation``).
     t : array_like, shape (..., 3)
         Translation ``t_a_b``, the position of b's origin in a. Leading shapes broadcast.
 
@@ -89,7 +89,7 @@ def check_transform(T: ArrayLike, name: str = "T", atol: float = 1e-9) -> FloatA
     name : str
         The argument's name, used in error messages.
     atol : float
-        Tolerance on the rotation block (see `vnav.so3.check_rotation`); the bottom row must be
+        Tolerance on the rotation block (see ``vnav.so3.check_rotation``); the bottom row must be
         exactly ``[0, 0, 0, 1]``.
 
     Returns
@@ -134,7 +134,7 @@ def invert(T: ArrayLike) -> FloatArray:
     Raises
     ------
     ValueError
-        If ``T`` is not a rigid transform (see `check_transform`).
+        If ``T`` is not a rigid transform (see ``check_transform``).
     """
     T = check_transform(T)
     Rt = np.swapaxes(T[..., :3, :3], -1, -2)

@@ -8,7 +8,7 @@ the downward direction is ``(n_x - u n_z, n_y - v n_z)`` (the derivative of the 
 to that same vanishing point, so "down the image axis" is also "towards the camera on the
 ground".
 
-:class:`SilhouetteView` holds one detection with one camera pose and computes each of these
+``SilhouetteView`` holds one detection with one camera pose and computes each of these
 once, in plain Python floats (a 3-vector in scalar arithmetic costs a fraction of a numpy
 call). Next to each rewritten kernel is its lecture form (``_ray_reference``,
 ``_vertical_reference``, ``_boundary_reference``); the tests check that the two agree.
@@ -69,14 +69,14 @@ class SilhouetteView:
         self._exit: dict[tuple[float, float], np.ndarray] = {}
 
     def uv(self) -> np.ndarray:
-        """`detection.pixels_uv()`, computed once."""
+        """``detection.pixels_uv()``, computed once."""
         if self._uv is None:
             self._uv = self.detection.pixels_uv()
         return self._uv
 
     def ray(self, u: float, v: float) -> tuple[float, float, float]:
         """Unit ray through pixel ``(u, v)`` in world coordinates, ``R_w_c K^-1 [u, v, 1]``
-        normalised (lecture form: :func:`_ray_reference`)."""
+        normalised (lecture form: ``_ray_reference``)."""
         x = (u - self.cx) / self.fx
         y = (v - self.cy) / self.fy
         norm = math.sqrt(x * x + y * y + 1.0)
@@ -101,7 +101,7 @@ class SilhouetteView:
     def vertical(self, u: float, v: float) -> tuple[float, float] | None:
         """Unit image direction of the world's downward vertical at pixel ``(u, v)``, or None.
 
-        Two floats (lecture form: :func:`_vertical_reference`); None at the nadir's image,
+        Two floats (lecture form: ``_vertical_reference``); None at the nadir's image,
         where the camera looks straight down through the pixel.
         """
         m0, m1, m2 = -self.R[2][0], -self.R[2][1], -self.R[2][2]
@@ -151,7 +151,7 @@ class SilhouetteView:
     def bottom(self, cone: ConeModel) -> np.ndarray:
         """Where the image of the cone's axis leaves the blob at the bottom, (2,) float64.
 
-        The image of the vertical through the apex (the line through :func:`apex_pixel`, else
+        The image of the vertical through the apex (the line through ``apex_pixel``, else
         the detector's apex, along the image of the downward vertical) meets the blob's lower
         boundary (interpolated linearly between columns) at the image of the base plate's near
         bottom edge, in the vertical plane through the camera and the cone's axis:
@@ -170,14 +170,14 @@ class SilhouetteView:
 
 
 def _ray_reference(camera: PinholeCamera, T_w_c: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """Lecture form of :meth:`SilhouetteView.ray`: ``R_w_c @ camera.rays(uv)``, (3,)."""
+    """Lecture form of ``SilhouetteView.ray``: ``R_w_c @ camera.rays(uv)``, (3,)."""
     return T_w_c[:3, :3] @ camera.rays(uv)[0]
 
 
 def _vertical_reference(
     camera: PinholeCamera, T_w_c: np.ndarray, uv: np.ndarray
 ) -> np.ndarray | None:
-    """Lecture form of :meth:`SilhouetteView.vertical`: the vanishing point, with numpy.
+    """Lecture form of ``SilhouetteView.vertical``: the vanishing point, with numpy.
 
     ``n = K R_c_w (0, 0, -1)^T`` is the vertical vanishing point (homogeneous); the direction
     at ``(u, v)`` is ``(n_x - u n_z, n_y - v n_z)``, normalised; None at the nadir's image.
@@ -193,12 +193,12 @@ def _vertical_reference(
 def triangle_fraction(elevation_rad: float, cone: ConeModel = TRAFFIC_CONE) -> float:
     """Fraction of the silhouette's length, from the apex down, that is the body's triangle.
 
-    Seen at elevation `e` (line of sight below the horizontal; orthographic approximation),
-    the apex lies `(H - t) cos e` above the image of the body's base circle's centre and the
-    plate's far top corners at most `a sin e` above it (`a` the plate's half-width), the
-    plate's near bottom edge `a sin e + t cos e` below it. Down to the plate's far corners the
+    Seen at elevation ``e`` (line of sight below the horizontal; orthographic approximation),
+    the apex lies ``(H - t) cos e`` above the image of the body's base circle's centre and the
+    plate's far top corners at most ``a sin e`` above it (``a`` the plate's half-width), the
+    plate's near bottom edge ``a sin e + t cos e`` below it. Down to the plate's far corners the
     silhouette is the triangle between the apex and the two tangents to the body's base, so
-    `f(e) = ((H - t) cos e - a sin e) / ((H - t) cos e + 2 a sin e + t cos e)` when positive,
+    ``f(e) = ((H - t) cos e - a sin e) / ((H - t) cos e + 2 a sin e + t cos e)`` when positive,
     else 0: at about 74 deg (standard cone) and steeper the apex projects onto the base plate
     and the cone's height cannot be read off the image.
     """
@@ -211,16 +211,16 @@ def triangle_fraction(elevation_rad: float, cone: ConeModel = TRAFFIC_CONE) -> f
 def apex_pixel(detection: ConeDetection, d: np.ndarray, fraction: float) -> np.ndarray | None:
     """The apex's image from the area of the silhouette's top triangle, (2,) float64, or None.
 
-    With `t` the pixel coordinate along the image vertical `d` (down), the triangle between
-    the apex (at `t0`) and the two tangents to the body's base has cross-section width
-    `k (t - t0)`, so its area above `tau` is `N(tau) = (k / 2) (tau - t0)^2`: `sqrt N` is a
-    straight line in `tau` that crosses zero at the apex. `N` is counted from the mask, each
-    pixel spread uniformly over `[t_i - 1/2, t_i + 1/2]` (a unit square's extent along `d`,
-    matching its variance), and the line is fitted on `tau` from where `N` reaches 3 px down to
-    `0.85 fraction` of the blob's length (`fraction` from `triangle_fraction`). Counting
+    With ``t`` the pixel coordinate along the image vertical ``d`` (down), the triangle between
+    the apex (at ``t0``) and the two tangents to the body's base has cross-section width
+    ``k (t - t0)``, so its area above ``tau`` is ``N(tau) = (k / 2) (tau - t0)^2``: ``sqrt N`` is a
+    straight line in ``tau`` that crosses zero at the apex. ``N`` is counted from the mask, each
+    pixel spread uniformly over ``[t_i - 1/2, t_i + 1/2]`` (a unit square's extent along ``d``,
+    matching its variance), and the line is fitted on ``tau`` from where ``N`` reaches 3 px down to
+    ``0.85 fraction`` of the blob's length (``fraction`` from ``triangle_fraction``). Counting
     pixels measures area without bias, where the top-most pixel is several pixels below the
     apex of a thin tip and edge lines fitted to the top rows are biased by the rows whose
-    width rounds up to one pixel. The apex's coordinate across `d` is the mean of the
+    width rounds up to one pixel. The apex's coordinate across ``d`` is the mean of the
     triangle's pixels in the upper half of that range (the triangle is symmetric about the
     image of the cone's axis).
 
@@ -230,7 +230,7 @@ def apex_pixel(detection: ConeDetection, d: np.ndarray, fraction: float) -> np.n
 
 
 def _apex_pixel(uv: np.ndarray, d: np.ndarray, fraction: float) -> np.ndarray | None:
-    """`apex_pixel` on the pixel centres `uv` (N, 2)."""
+    """``apex_pixel`` on the pixel centres ``uv`` (N, 2)."""
     d0, d1 = float(d[0]), float(d[1])
     t, s = uv @ d, uv @ np.array([-d1, d0])
     n = t.size
@@ -273,14 +273,14 @@ def _apex_pixel(uv: np.ndarray, d: np.ndarray, fraction: float) -> np.ndarray | 
 
 
 def _boundary_reference(uv: np.ndarray, d: np.ndarray) -> np.ndarray:
-    """Lecture form of :func:`boundary_from_mask`: from the pixel list, with numpy.
+    """Lecture form of ``boundary_from_mask``: from the pixel list, with numpy.
 
     The blob's boundary points farthest along ``d``, one per image column (or row).
 
-    Columns when `d` is closer to the image's v axis, else rows; in each, the extreme pixel
+    Columns when ``d`` is closer to the image's v axis, else rows; in each, the extreme pixel
     centre moved half a pixel outwards along that axis (the silhouette's edge lies within half
     a pixel of it and this is its unbiased estimate over the unknown sub-pixel phase).
-    Returns (M, 2) `(u, v)` points sorted along the other axis.
+    Returns (M, 2) ``(u, v)`` points sorted along the other axis.
     """
     along = 1 if abs(d[1]) >= abs(d[0]) else 0
     lat = 1 - along
@@ -301,7 +301,7 @@ def boundary_from_mask(detection: ConeDetection, d0: float, d1: float) -> np.nda
     centre moved half a pixel outwards along that axis (the silhouette's edge lies within half
     a pixel of it, and this is its unbiased estimate over the unknown sub-pixel phase); sorted
     along the other axis. Read off the cropped mask directly (first or last set pixel of each
-    column or row); :func:`_boundary_reference` computes the same from the pixel list.
+    column or row); ``_boundary_reference`` computes the same from the pixel list.
     """
     mask = detection.mask
     x0, y0 = detection.bbox[0], detection.bbox[1]
@@ -329,10 +329,10 @@ def boundary_from_mask(detection: ConeDetection, d0: float, d1: float) -> np.nda
 def exit_on_boundary(pts: np.ndarray, d: np.ndarray, apex_uv: np.ndarray) -> np.ndarray:
     """Intersection of the line ``apex_uv + lambda d`` with the boundary polyline ``pts``.
 
-    ``pts`` as from :func:`boundary_from_mask`; in plain floats.
+    ``pts`` as from ``boundary_from_mask``; in plain floats.
 
     Where the boundary polyline crosses the axis line (or touches it at a vertex) the crossing
-    farthest along `d` wins (the first of equals); without a crossing, the vertex nearest the
+    farthest along ``d`` wins (the first of equals); without a crossing, the vertex nearest the
     line. The result is put back onto the axis line exactly.
     """
     a0, a1 = float(apex_uv[0]), float(apex_uv[1])

@@ -46,7 +46,7 @@ _CHUNK = 8192
 
 
 class GimbalLockWarning(UserWarning):
-    """`to_rpy` met a rotation with pitch = +-90 deg, where only yaw -+ roll is defined."""
+    """``to_rpy`` met a rotation with pitch = +-90 deg, where only yaw -+ roll is defined."""
 
 
 # --------------------------------------------------------------------------------------------
@@ -160,7 +160,7 @@ def skew(v: ArrayLike) -> FloatArray:
 
 
 def vee(S: ArrayLike) -> FloatArray:
-    """The vector of a skew-symmetric matrix, the inverse of `skew`: ``vee(skew(v)) == v``.
+    """The vector of a skew-symmetric matrix, the inverse of ``skew``: ``vee(skew(v)) == v``.
 
     Only the entries below the diagonal are read, as in Lee et al. (CDC 2010), whose attitude
     error is ``e_R = vee(R_d^T R - R^T R_d) / 2``.
@@ -445,7 +445,7 @@ def log(R: ArrayLike) -> FloatArray:
     Parameters
     ----------
     R : array_like, shape (..., 3, 3)
-        Rotation matrices (validated with `check_rotation`).
+        Rotation matrices (validated with ``check_rotation``).
 
     Returns
     -------
@@ -455,7 +455,7 @@ def log(R: ArrayLike) -> FloatArray:
     Raises
     ------
     ValueError
-        If ``R`` is not a rotation (see `check_rotation`).
+        If ``R`` is not a rotation (see ``check_rotation``).
     """
     R_in = check_rotation(R)
     R = R_in.reshape(-1, 3, 3)
@@ -547,7 +547,7 @@ def gimbal_locked(R: ArrayLike, atol: float = 1e-9) -> bool | np.ndarray:
     Parameters
     ----------
     R : array_like, shape (..., 3, 3)
-        Rotation matrices (validated with `check_rotation`).
+        Rotation matrices (validated with ``check_rotation``).
     atol : float
         Largest ``cos(pitch) = hypot(R[0, 0], R[1, 0])`` counted as locked (about the distance
         of the pitch from +-90 deg, radians).
@@ -559,7 +559,7 @@ def gimbal_locked(R: ArrayLike, atol: float = 1e-9) -> bool | np.ndarray:
     Raises
     ------
     ValueError
-        If ``R`` is not a rotation (see `check_rotation`).
+        If ``R`` is not a rotation (see ``check_rotation``).
     """
     R = check_rotation(R)
     locked = np.hypot(R[..., 0, 0], R[..., 1, 0]) <= atol
@@ -576,17 +576,17 @@ def to_rpy(R: ArrayLike, *, warn: bool = True, atol: float = 1e-9) -> FloatArray
 
     At gimbal lock (pitch = +-90 deg within ``atol``) only yaw - roll (pitch = +90) or
     yaw + roll (pitch = -90) is defined: roll is set to 0, yaw carries the whole
-    angle, ``from_rpy`` of the result still reproduces ``R``, and a `GimbalLockWarning` is
-    emitted unless ``warn=False`` (use `gimbal_locked` to test for it without warnings).
+    angle, ``from_rpy`` of the result still reproduces ``R``, and a ``GimbalLockWarning`` is
+    emitted unless ``warn=False`` (use ``gimbal_locked`` to test for it without warnings).
 
     Parameters
     ----------
     R : array_like, shape (..., 3, 3)
-        Rotation matrices (validated with `check_rotation`).
+        Rotation matrices (validated with ``check_rotation``).
     warn : bool
-        Emit `GimbalLockWarning` when some matrix is at gimbal lock.
+        Emit ``GimbalLockWarning`` when some matrix is at gimbal lock.
     atol : float
-        Gimbal-lock tolerance, as in `gimbal_locked`.
+        Gimbal-lock tolerance, as in ``gimbal_locked``.
 
     Returns
     -------
@@ -596,7 +596,7 @@ def to_rpy(R: ArrayLike, *, warn: bool = True, atol: float = 1e-9) -> FloatArray
     Raises
     ------
     ValueError
-        If ``R`` is not a rotation (see `check_rotation`).
+        If ``R`` is not a rotation (see ``check_rotation``).
 
     Warns
     -----
