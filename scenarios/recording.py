@@ -351,24 +351,17 @@ class _Sender:
 
 def _send_poses(send: _Sender, rows: list[_Buffered], mount_moves: bool) -> None:
     """``T_w_b`` on ``world/body`` and, if it moves, ``T_b_c`` on the camera."""
-    T_w_b = np.array([r.record.T_w_b for r in rows])
-    # vnav and Rerun both order quaternions x, y, z, w: no reordering here.
-    send(
-        entity.BODY,
-        rows,
-        rr.Transform3D.columns(
-            translation=T_w_b[:, :3, 3], quaternion=quat.from_matrix(T_w_b[:, :3, :3])
-        ),
-    )
+    poses = {entity.BODY: [r.record.T_w_b for r in rows]}
     if mount_moves:
-        T_b_c = np.array([r.record.T_b_c for r in rows])
-        send(
-            entity.CAMERA,
-            rows,
-            rr.Transform3D.columns(
-                translation=T_b_c[:, :3, 3], quaternion=quat.from_matrix(T_b_c[:, :3, :3])
-            ),
+        poses[entity.CAMERA] = [r.record.T_b_c for r in rows]
+    for path, T in poses.items():
+        T_parent_child = np.array(T)
+        # vnav and Rerun both order quaternions x, y, z, w: no reordering here.
+        columns = rr.Transform3D.columns(
+            translation=T_parent_child[:, :3, 3],
+            quaternion=quat.from_matrix(T_parent_child[:, :3, :3]),
         )
+        send(path, rows, columns)
 
 
 def _send_images(send: _Sender, rows: list[_Buffered], images: list) -> None:

@@ -63,6 +63,16 @@ _MIN_DEPTH_POINTS = 5
 """Fewest valid depth pixels on a cone's body for a depth-image estimate."""
 
 
+def _view_clear_of_border(
+    detection: ConeDetection, camera: PinholeCamera, T_w_c: np.ndarray
+) -> SilhouetteView | None:
+    """Validate a detection and a camera pose; their shared view, or None for a detection
+    that touches the image border (no method estimates a cone that may be cut off)."""
+    check_detection(detection, camera)
+    T_w_c = se3.check_pose(T_w_c, "T_w_c")
+    return None if detection.touches_border else SilhouetteView(detection, camera, T_w_c)
+
+
 def depth_under_mask(detection: ConeDetection, depth: np.ndarray) -> np.ndarray:
     """The (validated) depth image's values over the detection's mask, float64, (area_px,).
 
@@ -128,13 +138,10 @@ def estimate_from_depth(
     ValueError
         On a depth image of the wrong dtype or size, or NaN/inf depth under the mask.
     """
-    check_detection(detection, camera)
+    view = _view_clear_of_border(detection, camera, T_w_c)
     check_depth_image(depth, camera)
-    T_w_c = se3.check_pose(T_w_c, "T_w_c")
-    z_c = depth_under_mask(detection, depth)
-    if detection.touches_border:
-        return None
-    return _from_depth(SilhouetteView(detection, camera, T_w_c), z_c, cone, far_m)
+    z_c = depth_under_mask(detection, depth)  # checked finite even when not used
+    return None if view is None else _from_depth(view, z_c, cone, far_m)
 
 
 def _median(a: np.ndarray) -> float:
@@ -306,11 +313,8 @@ def estimate_from_ground_plane(
         may be outside the image), when the camera is not above the ground, or when the ray
         is parallel to the ground or points away from it (``d_z >= -1e-9``).
     """
-    check_detection(detection, camera)
-    T_w_c = se3.check_pose(T_w_c, "T_w_c")
-    if detection.touches_border:
-        return None
-    return _ground_plane(SilhouetteView(detection, camera, T_w_c), cone)
+    view = _view_clear_of_border(detection, camera, T_w_c)
+    return None if view is None else _ground_plane(view, cone)
 
 
 def _ground_plane(view: SilhouetteView, cone: ConeModel) -> np.ndarray | None:
@@ -428,11 +432,8 @@ def estimate_from_known_height(
         geometry is ill-conditioned (above), the two rays are (nearly) parallel, a ray length
         comes out non-positive or the equations are inconsistent (residual above 25% of H).
     """
-    check_detection(detection, camera)
-    T_w_c = se3.check_pose(T_w_c, "T_w_c")
-    if detection.touches_border:
-        return None
-    return _known_height(SilhouetteView(detection, camera, T_w_c), cone)
+    view = _view_clear_of_border(detection, camera, T_w_c)
+    return None if view is None else _known_height(view, cone)
 
 
 def _known_height(view: SilhouetteView, cone: ConeModel) -> np.ndarray | None:
