@@ -138,8 +138,8 @@ class _Buffered:
     record: TickRecord
     encoded: Future[tuple[bytes, bytes | None]]
     """JPEG of the image and PNG of the depth (or None), from the encoder thread."""
-    cloud_w: Future[np.ndarray] | None
-    """The decimated depth image in world coordinates, from the encoder thread."""
+    cloud_w: np.ndarray | None
+    """The decimated depth image in world coordinates, float32 (M, 3)."""
 
 
 def _depth_cloud_w(
@@ -195,14 +195,9 @@ class Recording:
         encoded = self._encoder.submit(_encode, rgb, logged_depth)
         cloud_w = None
         if depth_m is not None:
-            # Drawn where the estimator believes the camera is (its pose, noise included);
-            # on the worker thread too, overlapping with the next tick's rendering.
-            cloud_w = self._encoder.submit(
-                _depth_cloud_w,
-                depth_m,
-                self._camera,
-                record.T_w_b_est @ record.T_b_c,
-                self._far_m,
+            # Drawn where the estimator believes the camera is (its pose, noise included).
+            cloud_w = _depth_cloud_w(
+                depth_m, self._camera, record.T_w_b_est @ record.T_b_c, self._far_m
             )
         self._buffer.append(_Buffered(record, encoded, cloud_w))
         if len(self._buffer) >= FLUSH_EVERY_TICKS:
@@ -251,7 +246,7 @@ class Recording:
         _send_attitude(send, rows)
         _send_cone0(send, rows, self._cone0_w)
         with_cloud = [r for r in rows if r.cloud_w is not None]
-        clouds = [r.cloud_w.result() for r in with_cloud]
+        clouds = [r.cloud_w for r in with_cloud]
         send(
             entity.DEPTH_CLOUD,
             with_cloud,
