@@ -223,7 +223,7 @@ BACKGROUND = np.array([90, 110, 80], dtype=np.uint8)
 def synthetic_cone(
     image: np.ndarray, apex_uv: tuple[float, float], height_px: float, half_angle: float = 0.22
 ) -> None:
-    """Paint an upright triangle (apex at `apex_uv`, base `height_px` below) by pixel-centre
+    """Paint an upright triangle (apex at ``apex_uv``, base ``height_px`` below) by pixel-centre
     inclusion, the rasterisation rule of OpenGL."""
     v, u = np.mgrid[0 : image.shape[0], 0 : image.shape[1]]
     t = (v - apex_uv[1]) / height_px

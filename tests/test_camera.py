@@ -124,7 +124,7 @@ def surface_residual_m(p_k: np.ndarray) -> np.ndarray:
     """Distance-like residual of points (cone frame, base centre origin) to the cone's surface.
 
     Points at the base plate's height inside its square count 0 distance from the plate; other
-    points get their radial distance to the body, `|r - r(z)|`, metres.
+    points get their radial distance to the body, ``|r - r(z)|``, metres.
     """
     c = TRAFFIC_CONE
     a, t, H, r0 = c.base_width_m / 2, c.base_thickness_m, c.height_m, c.body_radius_m

@@ -1,4 +1,4 @@
-"""The `vnav-demo` command: a user's TOML scenario end to end, and every bad-input path."""
+"""The ``vnav-demo`` command: a user's TOML scenario end to end, and every bad-input path."""
 
 from __future__ import annotations
 

@@ -57,7 +57,7 @@ CAM = PinholeCamera.from_fovy(60.0, 640, 480)
 def test_known_height_refuses_steep_views(
     cone_x_m: float, pitch_deg: float, expect_estimate: bool
 ) -> None:
-    """Both sides of the steep-view criterion `triangle_fraction(e) >= MIN_TRIANGLE_FRACTION`,
+    """Both sides of the steep-view criterion ``triangle_fraction(e) >= MIN_TRIANGLE_FRACTION``,
     seen from 10 m above; the other methods keep working."""
     world, frame, (detection,) = render_one((cone_x_m, 0.0), 10.0, pitch_deg)
     T_w_c = world.T_w_c

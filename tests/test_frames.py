@@ -115,7 +115,7 @@ def test_frame_tree_lookup_equals_manual_composition(Ts, data):
 
 
 # ------------------------------------------------------------------------------- bad input
-# Bad input raises ValueError with a message that names the problem (issue 2, "Bad input").
+# Bad input raises ValueError with a message that names the problem (docs/CONVENTIONS.md, "Errors").
 
 
 def test_bottom_row_not_0001():

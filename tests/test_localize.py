@@ -1,4 +1,4 @@
-"""Cone localisation against the simulator's ground truth (issue 4's accuracy contract), and
+"""Cone localisation against the simulator's ground truth (the accuracy contract, docs/ACCURACY.md), and
 ``vnav.localize.localize`` itself.
 
 Poses are drawn from a seeded generator and kept by the TRUE geometry only (the whole cone in
@@ -6,7 +6,7 @@ view with a 2 px margin, at least 12 px tall, range 2-25 m, drone height 2-15 m)
 pose must then give exactly one detection. A second, shallow set (drone height 2-4 m, range
 8-25 m, camera pitch 0-20 deg: lines of sight 5-30 deg below the horizontal, where a 1 px
 error in the apex is 4-7% of range) is drawn the same way. The per-method error statistics
-of both sets are printed and attached to the test report (`record_property`).
+of both sets are printed and attached to the test report (``record_property``).
 
 Each estimator's own rules (when it refuses, its fast kernels against their lecture forms) are
 tested in test_estimators.py, the silhouette geometry in test_silhouette.py.
@@ -54,11 +54,11 @@ def sample_poses(
     heights_m: tuple[float, float] = (2.0, 15.0),
     ranges_m: tuple[float, float] = (2.0, 25.0),
 ) -> list[tuple[np.ndarray, float]]:
-    """`n` drone poses `(T_w_b, range_m)` that see the whole cone, chosen by true geometry.
+    """``n`` drone poses ``(T_w_b, range_m)`` that see the whole cone, chosen by true geometry.
 
     Roll and pitch uniform in +-30 deg, yaw all around; the base centre's pixel uniform over the
-    image and its range uniform in `ranges_m` place the drone; kept if the camera's height is
-    within `heights_m`, every corner of the cone projects inside the image with a 2 px margin
+    image and its range uniform in ``ranges_m`` place the drone; kept if the camera's height is
+    within ``heights_m``, every corner of the cone projects inside the image with a 2 px margin
     and the cone's projection is at least 12 px tall.
     """
     camera, T_b_c = world.camera, world.T_b_c
@@ -222,7 +222,7 @@ def test_known_height_shallow_views_unbiased(grid: dict) -> None:
 
 
 def test_known_height_straight_ahead_low_camera() -> None:
-    """The cone dead ahead of a level drone 3 m up, camera pitched 12 deg (the `approach`
+    """The cone dead ahead of a level drone 3 m up, camera pitched 12 deg (the ``approach``
     scenario): its axis falls on a pixel boundary, the worst case for a thin tip (the top-most
     pixel lies 2-3 px below the apex at 20 m, and the known height erred by 26% there). The
     median within 5% of range (the contract) and each within 10% (about one pixel at 24 m)."""

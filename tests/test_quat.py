@@ -190,7 +190,7 @@ def test_slerp_matches_scipy(rng):
 
 
 # ------------------------------------------------------------------------------- bad input
-# Bad input raises ValueError with a message that names the problem (issue 2, "Bad input").
+# Bad input raises ValueError with a message that names the problem (docs/CONVENTIONS.md, "Errors").
 
 
 @pytest.mark.parametrize(

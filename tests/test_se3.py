@@ -78,7 +78,7 @@ def test_se3_apply_matches_scipy_rigid_transform(rng):
 
 
 # ------------------------------------------------------------------------------- bad input
-# Bad input raises ValueError with a message that names the problem (issue 2, "Bad input").
+# Bad input raises ValueError with a message that names the problem (docs/CONVENTIONS.md, "Errors").
 
 
 @pytest.mark.parametrize(

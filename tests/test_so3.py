@@ -213,7 +213,7 @@ def test_rpy_matches_scipy_euler_ZYX(rng):
 
 
 # ------------------------------------------------------------------------------- bad input
-# Bad input raises ValueError with a message that names the problem (issue 2, "Bad input").
+# Bad input raises ValueError with a message that names the problem (docs/CONVENTIONS.md, "Errors").
 
 
 @pytest.mark.parametrize(

@@ -103,7 +103,7 @@ def test_bad_flights_name_the_key(flight, message):
 
 @pytest.mark.parametrize("name", builtin.names())
 def test_show_prints_a_file_that_parses_to_the_same_scenario(tmp_path, capsys, name):
-    """`vnav-demo show NAME` output, parsed by tomllib (the independent reader) and by
+    """``vnav-demo show NAME`` output, parsed by tomllib (the independent reader) and by
     load_toml, gives the built-in's own dict and spec back."""
     assert main(["show", name]) == 0
     text = capsys.readouterr().out
