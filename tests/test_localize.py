@@ -1,5 +1,5 @@
-"""Cone localisation against the simulator's ground truth (the accuracy contract, docs/ACCURACY.md), and
-``vnav.localize.localize`` itself.
+"""Cone localisation against the simulator's ground truth (the accuracy contract,
+docs/ACCURACY.md), and ``vnav.localize.localize`` itself.
 
 Poses are drawn from a seeded generator and kept by the TRUE geometry only (the whole cone in
 view with a 2 px margin, at least 12 px tall, range 2-25 m, drone height 2-15 m); every kept
