@@ -6,19 +6,23 @@
   runs scenarios headless, writes ``DIR/<name>.rrd`` and ``DIR/<name>.json``, prints a summary.
 - ``vnav-demo lecture``: the lecture's worked examples next to vnav's results.
 
-Exit status: 0 when every check passed, 1 when a check failed (or a run diverged), 2 for bad
-usage or bad input (one line on stderr, no traceback; nothing is written).
+Exit status: 0 when every check passed, 1 when a check failed, 2 for bad usage or bad input
+(one line on stderr, no traceback; nothing is written), 3 when a run could not complete (I/O
+error, diverging simulation, out of memory, internal error), 128 + N on signal N.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from collections.abc import Sequence
 
 __all__ = ["main"]
 
 PROG = "vnav-demo"
+MAX_TICKS_DEFAULT = 20_000
+"""Longest run ``vnav-demo run`` accepts without ``--max-ticks`` (about 0.7 GB of recording)."""
 
 
 class _UsageError(Exception):
@@ -34,17 +38,24 @@ def _lecture(args: argparse.Namespace) -> int:
     from scenarios import lecture
 
     outcomes = [lecture.evaluate(e) for e in lecture.EXAMPLES]
-    print("MIT 16.485 VNAV lecture 1: every worked example and quiz answer, computed by vnav")
-    print(lecture.table(outcomes))
+    from scenarios.console import say
+
+    say("MIT 16.485 VNAV lecture 1: every worked example and quiz answer, computed by vnav")
+    say(lecture.table(outcomes))
     return 0 if all(o.agrees for o in outcomes) else 1
 
 
 def _list(args: argparse.Namespace) -> int:
     from scenarios import builtin
+    from scenarios.console import say
 
     width = max(len(n) for n in builtin.names())
-    for name in builtin.names():
-        print(f"{name:<{width}}  {builtin.REGISTRY[name]()['description']}")
+    say(
+        "\n".join(
+            f"{name:<{width}}  {builtin.REGISTRY[name]()['description']}"
+            for name in builtin.names()
+        )
+    )
     return 0
 
 
@@ -58,8 +69,12 @@ def _show(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 2
-    print(f"# {PROG} show {args.name}: save as FILE.toml, edit, run with `{PROG} run FILE.toml`")
-    print(toml_out.dumps(builtin.REGISTRY[args.name](), comments=True), end="")
+    from scenarios.console import say
+
+    say(
+        f"# {PROG} show {args.name}: save as FILE.toml, edit, run with `{PROG} run FILE.toml`\n"
+        + toml_out.dumps(builtin.REGISTRY[args.name](), comments=True).rstrip("\n")
+    )
     return 0
 
 
@@ -101,9 +116,11 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser(
         "run",
         help="run scenarios headless; write DIR/<name>.rrd and DIR/<name>.json",
-        description="Run built-in scenarios (by name) or scenario files (FILE.toml) headless. "
-        "Each writes DIR/<name>.rrd (open it with `rerun`) and DIR/<name>.json (error statistics "
-        "and checks). Exit status 0 if every check passed, 1 if one failed, 2 for bad input.",
+        description="Run built-in scenarios (by name) or scenario files (a path: FILE.toml or "
+        "DIR/FILE) headless. Each writes DIR/<name>.rrd (open it with `rerun`) and "
+        "DIR/<name>.json (error statistics and checks), both or neither. Exit status 0 if every "
+        "check passed, 1 if one failed, 2 for bad input, 3 if a run could not complete (I/O "
+        "error, diverging simulation, out of memory, internal error), 128+N on signal N.",
     )
     p.add_argument(
         "scenarios",
@@ -123,6 +140,13 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="S",
         help="stop each scenario after S simulated seconds",
     )
+    p.add_argument(
+        "--max-ticks",
+        type=int,
+        default=MAX_TICKS_DEFAULT,
+        metavar="N",
+        help=f"refuse runs of more than N camera ticks (default: {MAX_TICKS_DEFAULT})",
+    )
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
     p.set_defaults(func=_run)
     return parser
@@ -130,6 +154,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``vnav-demo`` with ``argv`` (default: ``sys.argv[1:]``); return the exit status."""
+    # Rerun's writer logs its own errors (a full disk) in several lines; the command reports
+    # every failure itself, in one line.
+    os.environ.setdefault("RUST_LOG", "off")
     parser = build_parser()
     try:
         args = parser.parse_args(argv)

@@ -10,12 +10,14 @@ scenario is run, judged and written the same way everywhere::
 
 from __future__ import annotations
 
+import uuid
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from scenarios import checks, report
+from scenarios.outputs import OutputPair
 from scenarios.recording import Recording
 from scenarios.records import RunResult
 from scenarios.runner import run_scenario
@@ -72,8 +74,9 @@ def run(
     seed : int
         Seeds the run (see ``scenarios.runner.run_scenario``).
     out_dir : Path, optional
-        If given, the recording and the report are written there (``output_paths``), each
-        whole or not at all.
+        If given, the recording and the report are written there (``output_paths``): both or
+        neither, checked complete (``scenarios.outputs``). The report names the recording's
+        id, unique to this run.
     progress : callable(done, total), optional
         Called after every camera tick.
 
@@ -81,15 +84,28 @@ def run(
     ------
     sim.world.SimulationError
         If the flight diverges; nothing is written then.
+    scenarios.outputs.OutputError
+        If the files cannot be written whole (a full disk...); the previous pair stays.
     """
-    rrd_path = json_path = None
-    recording = None
-    if out_dir is not None:
-        rrd_path, json_path = output_paths(spec, Path(out_dir))
-        recording = Recording(rrd_path)
-    result = run_scenario(spec, seed=seed, observer=recording, progress=progress)
-    judged = [checks.judge(c, result) for c in (spec.checks or checks.default_checks())]
-    rep = report.build(result, judged)
-    if json_path is not None:
-        report.write(json_path, rep)
+    recording_id = f"{spec.name}-seed{seed}-{uuid.uuid4().hex[:12]}"
+    if out_dir is None:
+        result = run_scenario(spec, seed=seed, progress=progress)
+        judged = _judge(spec, result)
+        return Outcome(result, judged, report.build(result, judged))
+    rrd_path, json_path = output_paths(spec, Path(out_dir))
+    pair = OutputPair(rrd_path, json_path)
+    try:
+        recording = Recording(pair.rrd_tmp, recording_id)
+        result = run_scenario(spec, seed=seed, observer=recording, progress=progress)
+        judged = _judge(spec, result)
+        rep = report.build(result, judged, recording={"file": rrd_path.name, "id": recording_id})
+        pair.write_json(report.dumps(rep))
+        pair.commit()
+    except BaseException:
+        pair.discard()
+        raise
     return Outcome(result, judged, rep, rrd_path, json_path)
+
+
+def _judge(spec: ScenarioSpec, result: RunResult) -> list[checks.CheckResult]:
+    return [checks.judge(c, result) for c in (spec.checks or checks.default_checks())]

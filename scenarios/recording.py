@@ -24,14 +24,13 @@ logged parent-from-child (Rerun's default relation), which is exactly vnav's
 ``T_parent_child``: ``world/body`` gets ``T_w_b``, ``world/body/camera`` gets ``T_b_c``.
 
 ``Recording`` is a ``scenarios.runner.TickObserver``: it is fed the run's records
-(``scenarios.records``) and images, as evo's Rerun bridge is fed its trajectory objects. The
-file is written to a temporary name beside the final one and renamed only when the run
-finishes, so an interrupted run never leaves a truncated ``.rrd`` under the final name.
+(``scenarios.records``) and images, as evo's Rerun bridge is fed its trajectory objects. It
+writes to a temporary name; ``scenarios.outputs`` checks the finished file and puts it in
+place together with the report.
 """
 
 from __future__ import annotations
 
-import os
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -152,17 +151,19 @@ def _depth_cloud_w(
 
 
 class Recording:
-    """A scenario's ``.rrd`` file, committed whole when the run finishes, or discarded.
+    """A scenario's ``.rrd`` file, finished when the run finishes or deleted if it fails.
 
     Parameters
     ----------
     path : Path
-        Final file name; nothing exists there until the run finishes.
+        Where the file is written (a temporary name: ``scenarios.outputs`` puts it in place).
+    recording_id : str
+        Rerun's recording id, unique per run; the JSON report names it.
     """
 
-    def __init__(self, path: str | Path) -> None:
+    def __init__(self, path: str | Path, recording_id: str) -> None:
         self.path = Path(path)
-        self._tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.partial")
+        self.recording_id = recording_id
         self.rec: rr.RecordingStream | None = None
         self._buffer: list[_Buffered] = []
         self._encoder: ThreadPoolExecutor | None = None
@@ -174,8 +175,8 @@ class Recording:
     # ------------------------------------------------------------------ TickObserver
     def start(self, spec: ScenarioSpec, seed: int, camera: PinholeCamera) -> None:
         """Open the file and log what does not change over the run."""
-        self.rec = rr.RecordingStream(APPLICATION_ID, recording_id=f"{spec.name}-seed{seed}")
-        self.rec.save(str(self._tmp))
+        self.rec = rr.RecordingStream(APPLICATION_ID, recording_id=self.recording_id)
+        self.rec.save(str(self.path))
         self._encoder = ThreadPoolExecutor(max_workers=1, thread_name_prefix="vnav-encode")
         self._camera, self._far_m = camera, spec.scene.zfar_m
         self._mount_moves = spec.flight.moves_camera
@@ -204,7 +205,7 @@ class Recording:
             self._flush()
 
     def finish(self, result: RunResult) -> None:
-        """Log the flown trajectory, finish the file and move it to its final name."""
+        """Log the flown trajectory and finish the file (its footer is written last)."""
         assert self.rec is not None, "start() first"
         self.rec.log(
             entity.TRAJECTORY,
@@ -212,12 +213,11 @@ class Recording:
             static=True,
         )
         self._close()
-        os.replace(self._tmp, self.path)
 
     def abort(self) -> None:
-        """Stop recording and delete the partial file."""
+        """Stop recording and delete the unfinished file."""
         self._close(flush=False)
-        self._tmp.unlink(missing_ok=True)
+        self.path.unlink(missing_ok=True)
 
     def _close(self, *, flush: bool = True) -> None:
         if self.rec is None:

@@ -11,8 +11,6 @@ from __future__ import annotations
 import itertools
 import json
 import math
-import os
-from pathlib import Path
 from typing import Any
 
 from scenarios.checks import CheckResult
@@ -21,7 +19,8 @@ from vnav import metrics
 from vnav.methods import METHOD_NAMES
 
 REPORT_VERSION = 2
-"""2: ``camera_ticks`` (was ``frames``): the word frame means a coordinate frame only."""
+"""2: ``camera_ticks`` (was ``frames``): the word frame means a coordinate frame only;
+``recording`` names the ``.rrd`` file and its Rerun recording id."""
 
 
 def _finite_or_none(value: float) -> float | int | None:
@@ -38,8 +37,14 @@ def _stats(errors) -> dict[str, float | int | None]:
     return {k: _finite_or_none(v) for k, v in metrics.error_stats(errors).items()}
 
 
-def build(run: RunResult, checks: list[CheckResult]) -> dict[str, Any]:
-    """The report as a JSON-ready dict."""
+def build(
+    run: RunResult, checks: list[CheckResult], recording: dict[str, str] | None = None
+) -> dict[str, Any]:
+    """The report as a JSON-ready dict.
+
+    ``recording`` (``{"file": ..., "id": ...}``) names the ``.rrd`` written with it and the
+    Rerun recording id inside that file, so a reader can check that the two belong together.
+    """
     spec = run.spec
     methods = {
         m: {"position_error_m": _stats(run.errors(m)), "by_range": _by_range(run, m)}
@@ -65,6 +70,7 @@ def build(run: RunResult, checks: list[CheckResult]) -> dict[str, Any]:
             {**c.as_dict(), "value": None if c.value is None else _finite_or_none(c.value)}
             for c in checks
         ],
+        "recording": recording,
         "timing_s": {k: round(v, 4) for k, v in run.timing_s.items()},
     }
 
@@ -86,16 +92,6 @@ def _by_range(run: RunResult, method: str) -> list[dict[str, Any]]:
     return out
 
 
-def write_atomic(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` whole or not at all (temporary file, then rename)."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.partial")
-    try:
-        tmp.write_text(text, encoding="utf-8")
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
-
-
-def write(path: Path, report: dict[str, Any]) -> None:
-    """Write the report as indented JSON, atomically."""
-    write_atomic(path, json.dumps(report, indent=2, allow_nan=False) + "\n")
+def dumps(report: dict[str, Any]) -> str:
+    """The report as indented JSON text (no NaN: missing values are null)."""
+    return json.dumps(report, indent=2, allow_nan=False) + "\n"

@@ -1,7 +1,12 @@
 """``vnav-demo run``: resolve, validate, run, judge, write, summarise.
 
 Everything that can be checked before running is checked first (every name and file, the
-duration, the output directory), so bad input exits with status 2 and writes nothing.
+seed, the duration, the run's length, the output directory and paths), so bad input exits
+with status 2 and writes nothing. Exit statuses (``EXIT_*``): 0 every check passed, 1 a check
+failed, 2 bad input, 3 a run could not complete (I/O error such as a full disk, a diverging
+simulation, out of memory, an internal error), 128 + N on signal N (SIGINT, SIGTERM, SIGHUP).
+Each scenario's ``.rrd`` and ``.json`` are written together or not at all
+(``scenarios.outputs``); whatever ends a run, the previous pair stays as it was.
 """
 
 from __future__ import annotations
@@ -10,21 +15,40 @@ import argparse
 import dataclasses
 import logging
 import math
+import os
+import signal
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-from scenarios import builtin, pipeline
+from scenarios import builtin, outputs, pipeline
+from scenarios.console import error as _error
+from scenarios.console import say
 from scenarios.spec import ScenarioError, ScenarioSpec, load_toml
 from sim.world import SimulationError
 from vnav.methods import METHOD_NAMES
 
 logger = logging.getLogger(__name__)
 
+EXIT_PASSED, EXIT_CHECK_FAILED, EXIT_BAD_INPUT, EXIT_INCOMPLETE = 0, 1, 2, 3
+MAX_SEED = 2**63 - 1
+
 
 class InputError(Exception):
     """Bad usage or bad input: one line for the user, exit status 2."""
+
+
+class Signalled(BaseException):
+    """SIGTERM or SIGHUP, raised in the main thread so that a run ends as on Ctrl-C."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum
+
+
+def _raise_signalled(signum: int, frame: object) -> None:
+    raise Signalled(signum)
 
 
 def resolve(targets: list[str], run_all: bool) -> list[ScenarioSpec]:
@@ -37,11 +61,11 @@ def resolve(targets: list[str], run_all: bool) -> list[ScenarioSpec]:
         )
     specs = []
     for item in items:
+        # A bare name is a built-in; a path (a "/" or a .toml suffix) is a file, even if a
+        # file named like a built-in lies in the current directory.
+        is_file = item.endswith(".toml") or "/" in item or os.sep in item
         try:
-            if item.endswith(".toml") or Path(item).is_file():
-                specs.append(load_toml(item))
-            else:
-                specs.append(builtin.load(item))
+            specs.append(load_toml(item) if is_file else builtin.load(item))
         except ScenarioError as exc:
             raise InputError(str(exc)) from None
     seen: dict[str, str] = {}
@@ -53,6 +77,25 @@ def resolve(targets: list[str], run_all: bool) -> list[ScenarioSpec]:
             )
         seen[spec.name] = item
     return specs
+
+
+def check_outputs(specs: list[ScenarioSpec], out_dir: Path) -> None:
+    """Refuse outputs that could not be written: an existing directory under a file's name."""
+    for spec in specs:
+        for path in pipeline.output_paths(spec, out_dir):
+            if path.is_dir():
+                raise InputError(f"{path} is a directory; the run would write a file there")
+
+
+def check_lengths(specs: list[ScenarioSpec], max_ticks: int) -> None:
+    """Refuse runs longer than ``max_ticks`` camera ticks (``--max-ticks``)."""
+    for spec in specs:
+        if spec.n_ticks > max_ticks:
+            raise InputError(
+                f"{spec.name}: {spec.n_ticks} camera ticks ({spec.end_s:g} s at "
+                f"{spec.camera_rate_hz:g} Hz) is more than --max-ticks {max_ticks}; raise it to "
+                f"run this long (about 35 KB of recording per tick)"
+            )
 
 
 def prepare_out_dir(out: str) -> Path:
@@ -116,8 +159,8 @@ def summary(rep: dict, wall_s: float, rrd: Path, json_path: Path) -> str:
     return "\n".join(lines)
 
 
-def run_one(spec: ScenarioSpec, args: argparse.Namespace, out_dir: Path) -> bool:
-    """Run one scenario, write its files, print its summary; return whether it passed."""
+def run_one(spec: ScenarioSpec, args: argparse.Namespace, out_dir: Path) -> int:
+    """Run one scenario, write its files, print its summary; return its exit status."""
     start = time.perf_counter()
     try:
         outcome = pipeline.run(
@@ -127,31 +170,67 @@ def run_one(spec: ScenarioSpec, args: argparse.Namespace, out_dir: Path) -> bool
             progress=Progress(spec.name, enabled=not args.quiet),
         )
     except SimulationError as exc:
-        print(f"{spec.name}: FAILED: the simulation diverged: {exc}", file=sys.stderr)
-        return False
+        _error(f"{spec.name}: could not complete: the simulation diverged: {exc}")
+        return EXIT_INCOMPLETE
+    except OSError as exc:
+        _error(
+            f"{spec.name}: could not complete: cannot write its files: {exc}; "
+            "the previous files were kept"
+        )
+        return EXIT_INCOMPLETE
+    except MemoryError:
+        _error(f"{spec.name}: could not complete: out of memory")
+        return EXIT_INCOMPLETE
+    except Exception as exc:  # an internal error: say it in one line, keep the others going
+        logger.debug("internal error", exc_info=True)
+        _error(f"{spec.name}: could not complete: internal error: {type(exc).__name__}: {exc}")
+        return EXIT_INCOMPLETE
     if not args.quiet:
         wall_s = time.perf_counter() - start
-        print(summary(outcome.report, wall_s, outcome.rrd_path, outcome.json_path), flush=True)
-    return outcome.passed
+        say(summary(outcome.report, wall_s, outcome.rrd_path, outcome.json_path))
+    return EXIT_PASSED if outcome.passed else EXIT_CHECK_FAILED
+
+
+def _validate(args: argparse.Namespace) -> tuple[list[ScenarioSpec], Path]:
+    """Every check that can be made before running; InputError on the first failure."""
+    if not 0 <= args.seed <= MAX_SEED:
+        raise InputError(f"--seed must be in [0, 2**63 - 1], got {args.seed}")
+    if args.max_ticks < 1:
+        raise InputError(f"--max-ticks must be a positive number of ticks, got {args.max_ticks}")
+    specs = resolve(args.scenarios, args.all)
+    if args.duration is not None:
+        if not (math.isfinite(args.duration) and args.duration > 0.0):
+            raise InputError(
+                f"--duration must be a positive number of seconds, got {args.duration}"
+            )
+        specs = [dataclasses.replace(s, duration_s=min(args.duration, s.end_s)) for s in specs]
+    check_lengths(specs, args.max_ticks)
+    out_dir = prepare_out_dir(args.out)
+    check_outputs(specs, out_dir)
+    return specs, out_dir
 
 
 def run(args: argparse.Namespace) -> int:
     """Entry point of ``vnav-demo run``; returns the exit status."""
     try:
-        specs = resolve(args.scenarios, args.all)
-        if args.duration is not None:
-            if not (math.isfinite(args.duration) and args.duration > 0.0):
-                raise InputError(
-                    f"--duration must be a positive number of seconds, got {args.duration}"
-                )
-            specs = [dataclasses.replace(s, duration_s=min(args.duration, s.end_s)) for s in specs]
-        out_dir = prepare_out_dir(args.out)
+        specs, out_dir = _validate(args)
     except InputError as exc:
-        print(f"vnav-demo: error: {exc}", file=sys.stderr)
-        return 2
+        _error(str(exc))
+        return EXIT_BAD_INPUT
+    previous = {s: signal.signal(s, _raise_signalled) for s in (signal.SIGTERM, signal.SIGHUP)}
     try:
-        results = [run_one(spec, args, out_dir) for spec in specs]
+        with outputs.directory_lock(out_dir):
+            statuses = [run_one(spec, args, out_dir) for spec in specs]
+    except BlockingIOError:
+        _error(f"another vnav-demo run is writing into {out_dir}; wait for it to finish")
+        return EXIT_BAD_INPUT
     except KeyboardInterrupt:
-        print("vnav-demo: interrupted; no partial file was kept", file=sys.stderr)
-        return 130
-    return 0 if all(results) else 1
+        _error("interrupted; no partial file was kept")
+        return 128 + signal.SIGINT
+    except Signalled as exc:
+        _error(f"stopped by {signal.Signals(exc.signum).name}; no partial file was kept")
+        return 128 + exc.signum
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+    return max(statuses, default=EXIT_PASSED)

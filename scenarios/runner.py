@@ -122,7 +122,7 @@ def _run_ticks(
     rng = np.random.default_rng(result.seed)
     timing = result.timing_s
     dt = float(world.model.opt.timestep)
-    n_ticks = math.floor(spec.end_s * spec.camera_rate_hz + 1e-9) + 1
+    n_ticks = spec.n_ticks
     driver = _driver(world, spec)
     camera_track = _camera_track(spec)
     cones_w = world.cones_w

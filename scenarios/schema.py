@@ -34,6 +34,17 @@ __all__ = [
 VIEW_NAMES: tuple[str, ...] = ("errors", "coordinates", "attitude")
 """Values of the optional ``view`` key: which tab the recording shows first."""
 
+MAX_M = 1000.0
+"""Largest distance from the origin of any position in a scenario, metres."""
+MAX_S = 3600.0
+"""Largest time in a scenario (and longest duration), seconds."""
+MAX_DEG = 3600.0
+"""Largest angle in a scenario, degrees (ten turns)."""
+MAX_NAME_CHARS = 100
+"""Longest scenario name: it names files, whose temporary names add about 20 characters."""
+MAX_LIMIT = 1.0e6
+"""Largest limit of a check."""
+
 REQUIRED = object()
 """The default of a key that must be given."""
 
@@ -76,8 +87,8 @@ class Key:
             return number(value, path, self.lo, self.hi, self.lo_open)
         if self.kind == "vector3":
             if not isinstance(value, list) or len(value) != 3:
-                raise SchemaError(f"{path}: must be a list of 3 numbers, got {value!r}")
-            return tuple(number(v, f"{path}[{i}]") for i, v in enumerate(value))
+                raise SchemaError(f"{path}: must be a list of 3 numbers, got {_short(value)}")
+            return tuple(number(v, f"{path}[{i}]", self.lo, self.hi) for i, v in enumerate(value))
         if self.kind == "string":
             if not isinstance(value, str) or not value.strip():
                 raise SchemaError(f"{path}: must be a non-empty string, got {value!r}")
@@ -91,15 +102,25 @@ def number(
     value: Any, path: str, lo: float | None = None, hi: float | None = None, lo_open: bool = False
 ) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float):
-        raise SchemaError(f"{path}: must be a number, got {value!r}")
-    x = float(value)
+        raise SchemaError(f"{path}: must be a number, got {_short(value)}")
+    try:
+        x = float(value)
+    except OverflowError:
+        raise SchemaError(
+            f"{path}: must be a finite number, got an integer of {value.bit_length()} bits"
+        ) from None
     if not math.isfinite(x):
         raise SchemaError(f"{path}: must be finite, got {value!r}")
     if lo is not None and (x <= lo if lo_open else x < lo):
-        raise SchemaError(f"{path}: must be {'>' if lo_open else '>='} {lo}, got {value!r}")
+        raise SchemaError(f"{path}: must be {'>' if lo_open else '>='} {lo:g}, got {_short(value)}")
     if hi is not None and x > hi:
-        raise SchemaError(f"{path}: must be <= {hi}, got {value!r}")
+        raise SchemaError(f"{path}: must be <= {hi:g}, got {_short(value)}")
     return x
+
+
+def _short(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
 
 
 def read(table: Any, keys: tuple[Key, ...], path: str) -> dict[str, Any]:
@@ -135,7 +156,9 @@ TOP: tuple[Key, ...] = (
     Key("name", "string", "letters, digits, '-' and '_'; names the output files"),
     Key("description", "string", "shown by vnav-demo list and in the recording", None),
     Key("lesson", "any", "longer text shown beside the recording", ""),
-    Key("duration_s", "number", "optional; default: the flight's last time", None, 0.0, None, True),
+    Key(
+        "duration_s", "number", "optional; default: the flight's last time", None, 0.0, MAX_S, True
+    ),
     Key("camera_rate_hz", "number", "camera ticks per second", 10.0, 0.0, 1000.0, True),
     Key("view", "choice", "first tab below the error plot", "errors", choices=VIEW_NAMES),
     Key("camera", "any", "table: the onboard camera", None),
@@ -154,45 +177,49 @@ _CAMERA_DOCS = {
 }
 CAMERA: tuple[Key, ...] = tuple(
     Key(f.name, "any", _CAMERA_DOCS[f.name], getattr(CameraConfig(), f.name))
+    if f.name != "position_b"
+    else Key(f.name, "vector3", _CAMERA_DOCS[f.name], CameraConfig().position_b, -10.0, 10.0)
     for f in fields(CameraConfig)
 )
-"""Validated by ``sim.config.CameraConfig``, whose defaults these are."""
+"""Validated by ``sim.config.CameraConfig``, whose defaults these are (the mount within 10 m)."""
 
-CONE: tuple[Key, ...] = (Key("position_w", "vector3", "base centre in the world, z = 0, m"),)
+CONE: tuple[Key, ...] = (
+    Key("position_w", "vector3", "base centre in the world, z = 0, m", REQUIRED, -MAX_M, MAX_M),
+)
 
+_RPY_DOC = "[roll, pitch, yaw], R = Rz(yaw) Ry(pitch) Rx(roll), deg"
 KEYFRAME: tuple[Key, ...] = (
-    Key("t", "number", "time, s", REQUIRED, 0.0),
-    Key("position_w", "vector3", "body origin in the world, m"),
-    Key("rpy_deg", "vector3", "[roll, pitch, yaw], R = Rz(yaw) Ry(pitch) Rx(roll), deg"),
-    Key("camera_position_b", "vector3", "slides the camera on the body, m", None),
+    Key("t", "number", "time, s", REQUIRED, 0.0, MAX_S),
+    Key("position_w", "vector3", "body origin in the world, m", REQUIRED, -MAX_M, MAX_M),
+    Key("rpy_deg", "vector3", _RPY_DOC, REQUIRED, -MAX_DEG, MAX_DEG),
+    Key("camera_position_b", "vector3", "slides the camera on the body, m", None, -10.0, 10.0),
 )
 WAYPOINT: tuple[Key, ...] = (
-    Key("t", "number", "time, s", REQUIRED, 0.0),
-    Key("position_w", "vector3", "body origin in the world, m"),
-    Key("yaw_deg", "number", "heading, deg", 0.0),
+    Key("t", "number", "time, s", REQUIRED, 0.0, MAX_S),
+    Key("position_w", "vector3", "body origin in the world, m", REQUIRED, -MAX_M, MAX_M),
+    Key("yaw_deg", "number", "heading, deg", 0.0, -MAX_DEG, MAX_DEG),
 )
+_PERIOD_DOC = "one turn, s; < 0: clockwise; |period| >= 1"
 FLIGHT_MODES: dict[str, tuple[Key, ...]] = {
     "kinematic": (Key("keyframes", "any", "timed poses: position linear, attitude slerp"),),
     "controlled": (
         Key("waypoints", "any", "timed positions and headings flown by the controller"),
     ),
     "orbit": (
-        Key("center_w", "vector3", "centre of the circle, m"),
-        Key("radius_m", "number", "radius, m", REQUIRED, 0.0, None, True),
-        Key("height_m", "number", "height above the ground, m", REQUIRED, 0.0, None, True),
-        Key("period_s", "number", "one turn, s; < 0: clockwise; |period| >= 1"),
-        Key("turns", "number", "how many turns", 1.0, 0.0, None, True),
-        Key("start_angle_deg", "number", "where on the circle it starts, deg", 180.0),
-        Key("ramp_s", "number", "speed-up time, s", 3.0, 0.0),
+        Key("center_w", "vector3", "centre of the circle, m", REQUIRED, -MAX_M, MAX_M),
+        Key("radius_m", "number", "radius, m", REQUIRED, 0.0, MAX_M, True),
+        Key("height_m", "number", "height above the ground, m", REQUIRED, 0.0, MAX_M, True),
+        Key("period_s", "number", _PERIOD_DOC, REQUIRED, -MAX_S, MAX_S),
+        Key("turns", "number", "how many turns", 1.0, 0.0, 100.0, True),
+        Key("start_angle_deg", "number", "start on the circle, deg", 180.0, -MAX_DEG, MAX_DEG),
+        Key("ramp_s", "number", "speed-up time, s", 3.0, 0.0, 600.0),
     ),
 }
 """The keys of ``[flight]`` per ``mode`` (besides ``mode`` itself)."""
 
 NOISE: tuple[Key, ...] = (
-    Key("position_std_m", "number", "error added to the body position, m", 0.0, 0.0),
-    Key(
-        "attitude_std_deg", "number", "error (rotation vector) added to the attitude, deg", 0.0, 0.0
-    ),
+    Key("position_std_m", "number", "error added to the body position, m", 0.0, 0.0, 100.0),
+    Key("attitude_std_deg", "number", "error added to the attitude, deg", 0.0, 0.0, 180.0),
 )
 CHECK: tuple[Key, ...] = (
     Key("kind", "any", "a check kind (scenarios.checks.KINDS)"),

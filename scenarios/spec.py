@@ -13,6 +13,8 @@ pitch = 90 deg is as good as any other.
 from __future__ import annotations
 
 import math
+import os
+import stat
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,7 +26,10 @@ from scenarios import schema
 from scenarios.checks import KINDS, Check
 from sim.config import CameraConfig, SceneConfig
 from vnav import quat, so3
-from vnav.methods import METHOD_NAMES
+from vnav.methods import METHOD_NAMES, METHODS, method
+
+MAX_FILE_BYTES = 1_000_000
+"""Largest scenario file read, bytes."""
 
 
 class ScenarioError(ValueError):
@@ -141,6 +146,11 @@ class ScenarioSpec:
         """Simulated time at which the run stops, seconds."""
         return self.duration_s if self.duration_s is not None else self.flight.end_s
 
+    @property
+    def n_ticks(self) -> int:
+        """Camera ticks of the run: at t = 0, 1 / rate, ... up to ``end_s``."""
+        return math.floor(self.end_s * self.camera_rate_hz + 1e-9) + 1
+
 
 # --------------------------------------------------------------------------------------------
 # Parsing: ``scenarios.schema`` reads and checks each table; here values become typed specs.
@@ -234,11 +244,18 @@ def _checks(raw: Any, where: str) -> tuple[Check, ...]:
                 f"{key}.method",
                 f"unknown method {c['method']!r}; valid: {list(METHOD_NAMES)}",
             )
+        if c["kind"] == "error_bound" and method(c["method"]).bound is None:
+            bounded = [m.name for m in METHODS if m.bound is not None]
+            raise _err(
+                where,
+                f"{key}.method",
+                f"{c['method']} has no accuracy bound to check; error_bound takes one of {bounded}",
+            )
         if (c["limit"] is None) == (c["limit_m"] is None):
             raise _err(where, key, "give exactly one of limit or limit_m")
         limit_key = "limit" if c["limit"] is not None else "limit_m"
         try:
-            limit = schema.number(c[limit_key], f"{key}.{limit_key}", lo=0.0)
+            limit = schema.number(c[limit_key], f"{key}.{limit_key}", 0.0, schema.MAX_LIMIT)
         except schema.SchemaError as exc:
             raise ScenarioError(f"{where}: {exc}") from None
         out.append(Check(kind=c["kind"], limit=limit, method=c["method"], name=c["name"] or ""))
@@ -282,8 +299,12 @@ def from_dict(data: dict[str, Any], where: str = "<scenario>") -> ScenarioSpec:
     """
     top = _read(data, schema.TOP, where, "")
     name = top["name"]
-    if not all(c.isalnum() or c in "-_" for c in name):
+    if not all(c.isascii() and (c.isalnum() or c in "-_") for c in name):
         raise _err(where, "name", f"may hold letters, digits, '-' and '_' only, got {name!r}")
+    if len(name) > schema.MAX_NAME_CHARS:
+        raise _err(
+            where, "name", f"must be at most {schema.MAX_NAME_CHARS} characters, got {len(name)}"
+        )
     camera_table = _read(top["camera"] or {}, schema.CAMERA, where, "camera")
     try:
         camera = CameraConfig.from_dict(camera_table)
@@ -302,6 +323,14 @@ def from_dict(data: dict[str, Any], where: str = "<scenario>") -> ScenarioSpec:
     except ValueError as exc:
         raise _err(where, "cones", str(exc)) from None
     noise = Noise(**_read(top["noise"] or {}, schema.NOISE, where, "noise"))
+    physics_hz = 1.0 / scene.timestep_s
+    if top["camera_rate_hz"] > physics_hz + 1e-9:
+        raise _err(
+            where,
+            "camera_rate_hz",
+            f"must be at most the physics rate, {physics_hz:g} Hz (one image per physics step), "
+            f"got {top['camera_rate_hz']:g}",
+        )
     if not isinstance(top["lesson"], str):
         raise _err(where, "lesson", f"must be a string, got {type(top['lesson']).__name__}")
     return ScenarioSpec(
@@ -319,23 +348,36 @@ def from_dict(data: dict[str, Any], where: str = "<scenario>") -> ScenarioSpec:
 
 
 def load_toml(path: str | Path) -> ScenarioSpec:
-    """Read a scenario file.
+    """Read a scenario file (a regular file of at most ``MAX_FILE_BYTES``).
 
     Raises
     ------
     ScenarioError
-        If the file is missing or unreadable, is not valid TOML (the message gives the line and
-        column), or holds an invalid value (the message gives the key).
+        If the file is missing, not a regular file (a FIFO, a device, a directory), too large
+        or unreadable, is not valid TOML (the message gives the line and column), or holds an
+        invalid value (the message gives the key).
     """
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        # Opened without blocking and checked before reading: a FIFO would wait for a writer,
+        # /dev/zero would never end.
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
+        with os.fdopen(fd, "rb") as f:
+            if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):
+                raise ScenarioError(f"{path}: not a regular file")
+            raw = f.read(MAX_FILE_BYTES + 1)
     except FileNotFoundError:
         raise ScenarioError(f"{path}: no such scenario file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ScenarioError(f"{path}: cannot read: {exc}") from None
+    except OSError as exc:
+        raise ScenarioError(f"{path}: cannot read: {exc.strerror}") from None
+    if len(raw) > MAX_FILE_BYTES:
+        raise ScenarioError(f"{path}: larger than {MAX_FILE_BYTES} bytes; not a scenario file")
     try:
-        data = tomllib.loads(text)
+        data = tomllib.loads(raw.decode("utf-8"))
+    except UnicodeDecodeError as exc:
+        raise ScenarioError(f"{path}: cannot read: not UTF-8 text ({exc.reason})") from None
     except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(f"{path}: invalid TOML: {exc}") from None
+    except ValueError as exc:  # e.g. an integer beyond Python's digit limit
         raise ScenarioError(f"{path}: invalid TOML: {exc}") from None
     return from_dict(data, where=str(path))

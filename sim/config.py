@@ -55,7 +55,7 @@ def _vector(value: Any, length: int, name: str) -> tuple[float, ...]:
     """Check ``value`` is ``length`` finite numbers; return them as a tuple of float."""
     try:
         items = tuple(float(v) for v in value)
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, OverflowError) as exc:
         raise ValueError(f"{name} must be {length} numbers, got {value!r}") from exc
     if len(items) != length:
         raise ValueError(f"{name} must have {length} elements, got {len(items)}: {value!r}")
@@ -67,6 +67,10 @@ def _vector(value: Any, length: int, name: str) -> tuple[float, ...]:
 def _finite(value: Any, name: str) -> float:
     try:
         out = float(value)
+    except OverflowError as exc:
+        raise ValueError(
+            f"{name} must be a finite number, got an integer of {value.bit_length()} bits"
+        ) from exc
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{name} must be a number, got {value!r}") from exc
     if not math.isfinite(out):

@@ -8,10 +8,12 @@ import re
 import subprocess
 import sys
 import textwrap
+from pathlib import Path
 
 import numpy as np
 import pytest
 from helpers import read_rows
+from rerun.chunk import RrdReader
 
 import scenarios.runner
 from scenarios import builtin, pipeline
@@ -77,12 +79,17 @@ def test_toml_scenario_with_pitch_90_keyframe(tmp_path, capsys):
     assert np.max(np.linalg.norm(p_w[:, :2] - [1.5, 0.5], axis=1)) < 0.05
 
 
+def recording_ids(rrd: Path) -> list[str]:
+    """The Rerun recording ids stored in an .rrd file."""
+    return [e.recording_id for e in RrdReader(str(rrd)).recordings()]
+
+
 def test_same_seed_same_json(tmp_path):
     scenario = tmp_path / "s.toml"
     scenario.write_text(
         PITCH_90_TOML.replace("[[checks]]", "[noise]\nposition_std_m = 0.05\n\n[[checks]]", 1)
     )
-    reports = []
+    reports, ids = [], []
     for run in ("a", "b", "c"):
         seed = "7" if run != "c" else "8"
         assert main(
@@ -100,7 +107,13 @@ def test_same_seed_same_json(tmp_path):
         ) in (0, 1)
         rep = json.loads((tmp_path / run / "pitch-ninety.json").read_text())
         rep.pop("timing_s")
+        # The report names the recording it was written with: the id inside the .rrd.
+        recording = rep.pop("recording")
+        assert recording["file"] == "pitch-ninety.rrd"
+        assert recording_ids(tmp_path / run / recording["file"]) == [recording["id"]]
         reports.append(rep)
+        ids.append(recording["id"])
+    assert len(set(ids)) == 3  # unique per run, so a pair from different runs shows
     assert reports[0] == reports[1]
     assert reports[0]["methods"] != reports[2]["methods"]  # the seed does drive the noise
 
@@ -290,3 +303,260 @@ def test_progress_bar_only_on_a_terminal(tmp_path):
         text=True,
     )
     assert piped.returncode == 0 and piped.stderr == ""
+
+
+# ---------------------------------------------------------------- outputs that never lie
+
+
+def _files(directory: Path) -> dict[str, bytes]:
+    return {p.name: p.read_bytes() for p in sorted(directory.iterdir()) if p.is_file()}
+
+
+def _first_pair(out: Path) -> dict[str, bytes]:
+    assert main(["run", "frame-problem", "--out", str(out), "--quiet", "--duration", "0.5"]) == 0
+    return {k: v for k, v in _files(out).items() if not k.startswith(".")}
+
+
+def test_disk_full_on_a_small_filesystem_exits_3_and_keeps_the_previous_pair(tmp_path, capsys):
+    out = tmp_path / "small"
+    out.mkdir()
+    mounted = subprocess.run(
+        ["mount", "-t", "tmpfs", "-o", "size=600k", "tmpfs", str(out)], capture_output=True
+    )
+    if mounted.returncode != 0:
+        pytest.skip(
+            "cannot mount a small tmpfs here (needs root and CAP_SYS_ADMIN); "
+            "test_injected_short_recording covers the same path"
+        )
+    try:
+        before = _first_pair(out)  # about 250 KB: fits once, not twice
+        status = main(["run", "frame-problem", "--out", str(out), "--quiet", "--seed", "2"])
+        err = capsys.readouterr().err
+        assert status == 3
+        assert err.count("\n") == 1 and "could not complete" in err and "kept" in err
+        after = {k: v for k, v in _files(out).items() if not k.startswith(".")}
+        assert after == before
+        assert not [p for p in out.iterdir() if p.name.endswith((".partial", ".old"))]
+    finally:
+        subprocess.run(["umount", str(out)], check=True)
+
+
+def test_injected_short_recording_exits_3_and_keeps_the_previous_pair(
+    tmp_path, capsys, monkeypatch
+):
+    """What the Rerun file sink leaves on a full disk (it only logs the error): a file that
+    stops short. Injected by cutting the finished file in half."""
+    from scenarios.recording import Recording
+
+    before = _first_pair(tmp_path)
+    real_finish = Recording.finish
+
+    def finish_short(self, result):
+        real_finish(self, result)
+        data = self.path.read_bytes()
+        self.path.write_bytes(data[: len(data) // 2])
+
+    monkeypatch.setattr(Recording, "finish", finish_short)
+    assert main(["run", "frame-problem", "--out", str(tmp_path), "--quiet", "--seed", "2"]) == 3
+    assert "frame-problem.rrd" in capsys.readouterr().err
+    assert {k: v for k, v in _files(tmp_path).items() if not k.startswith(".")} == before
+    assert not [p for p in tmp_path.iterdir() if p.name.endswith((".partial", ".old"))]
+
+
+@pytest.mark.parametrize("fail", [KeyboardInterrupt, RuntimeError])
+def test_failure_while_judging_keeps_the_previous_pair(tmp_path, capsys, monkeypatch, fail):
+    """No new .rrd beside the previous run's .json: a pair is never from two runs."""
+    from scenarios import checks
+
+    before = _first_pair(tmp_path)
+
+    def judge(check, run):
+        raise fail("injected")
+
+    monkeypatch.setattr(checks, "judge", judge)
+    status = main(["run", "frame-problem", "--out", str(tmp_path), "--quiet", "--seed", "5"])
+    assert status == (130 if fail is KeyboardInterrupt else 3)
+    assert capsys.readouterr().err.count("\n") == 1
+    assert {k: v for k, v in _files(tmp_path).items() if not k.startswith(".")} == before
+
+
+@pytest.mark.parametrize("which", ["rrd", "json"])
+def test_output_name_taken_by_a_directory_is_refused_before_running(tmp_path, capsys, which):
+    (tmp_path / f"frame-problem.{which}").mkdir()
+    assert main(["run", "frame-problem", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "is a directory" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == [f"frame-problem.{which}"]
+
+
+def test_diverging_simulation_exits_3(tmp_path, capsys, monkeypatch):
+    from sim.world import SimulationError
+
+    def diverge(*args, **kwargs):
+        raise SimulationError("t = 0.0100 s: qpos is not finite (injected)")
+
+    monkeypatch.setattr(scenarios.runner, "evaluate_tick", diverge)
+    assert main(["run", "frame-problem", "--out", str(tmp_path), "--quiet"]) == 3
+    assert "diverged" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".vnav-demo.lock"]
+
+
+def test_sigterm_ends_the_run_like_ctrl_c(tmp_path):
+    """SIGTERM mid-run: exit 128 + 15, nothing partial kept, the previous pair untouched."""
+    import signal
+    import time
+
+    before = _first_pair(tmp_path)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "scenarios.cli", "run", "orbit", "--out", str(tmp_path)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    deadline = time.monotonic() + 60
+    while not list(tmp_path.glob(".orbit.rrd.*.partial")) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert list(tmp_path.glob(".orbit.rrd.*.partial")), "the run never started writing"
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 128 + signal.SIGTERM
+    assert err.strip().splitlines() == [
+        "vnav-demo: error: stopped by SIGTERM; no partial file was kept"
+    ]
+    assert {k: v for k, v in _files(tmp_path).items() if not k.startswith(".")} == before
+
+
+def test_closed_pipe_ends_quietly_and_the_runs_still_write(tmp_path):
+    cmd = f"{sys.executable} -m scenarios.cli"
+    listing = subprocess.run(
+        f"{cmd} list | head -1", shell=True, capture_output=True, text=True, timeout=60
+    )
+    assert listing.stdout.startswith("frame-problem") and listing.stderr == ""
+    run = subprocess.run(
+        f"{cmd} run frame-problem yaw-sweep --duration 0.5 --out {tmp_path} | head -1; "
+        "exit ${PIPESTATUS[0]}",
+        shell=True,
+        executable="/bin/bash",
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert run.returncode == 0 and run.stderr == "", run.stderr
+    assert {"yaw-sweep.rrd", "yaw-sweep.json"} <= {p.name for p in tmp_path.iterdir()}
+
+
+# ---------------------------------------------------------------- bad input, refused first
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--seed", "-5"], r"--seed must be in \[0, 2\*\*63 - 1\], got -5"),
+        (["--max-ticks", "10"], r"frame-problem: 51 camera ticks .* more than --max-ticks 10"),
+    ],
+)
+def test_bad_run_options_exit_2_before_anything_is_made(tmp_path, capsys, args, message):
+    out = tmp_path / "not-made"
+    assert main(["run", "frame-problem", "--out", str(out), *args]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and re.search(message, err), err
+    assert not out.exists()
+
+
+def _file_with(tmp_path: Path, old: str, new: str) -> Path:
+    assert old in PITCH_90_TOML
+    path = tmp_path / "s.toml"
+    path.write_text(PITCH_90_TOML.replace(old, new, 1))
+    return path
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "message"),
+    [
+        (
+            "camera_rate_hz = 5.0",
+            "camera_rate_hz = 1" + "0" * 400,
+            r"camera_rate_hz: must be a finite number",
+        ),
+        (
+            "pitch_down_deg = 0.0",
+            "pitch_down_deg = 1" + "0" * 400,
+            r"camera: .*pitch_down_deg must be a finite number",
+        ),
+        (
+            "camera_rate_hz = 5.0",
+            "camera_rate_hz = 150.0",
+            r"camera_rate_hz: must be at most the physics rate, 100 Hz",
+        ),
+        (
+            "[[checks]]",
+            "[noise]\nattitude_std_deg = 1e160\n\n[[checks]]",
+            r"noise\.attitude_std_deg: must be <= 180",
+        ),
+        (
+            "[[checks]]",
+            "[noise]\nposition_std_m = 1e200\n\n[[checks]]",
+            r"noise\.position_std_m: must be <= 100",
+        ),
+        (
+            "position_w = [1.5, 0.5, 0.0]",
+            "position_w = [1e300, 0.5, 0.0]",
+            r"cones\[0\]\.position_w\[0\]: must be <= 1000",
+        ),
+        (
+            "[0.0, 0.0, 4.0], rpy_deg = [0.0, 45.0, 0.0]",
+            "[0.0, 0.0, 4e300], rpy_deg = [0.0, 45.0, 0.0]",
+            r"keyframes\[0\]\.position_w\[2\]: must be <= 1000",
+        ),
+        (
+            'name = "pitch-ninety"',
+            f'name = "{"n" * 236}"',
+            r"name: must be at most 100 characters, got 236",
+        ),
+    ],
+)
+def test_absurd_numbers_and_names_exit_2_one_line(tmp_path, capsys, old, new, message):
+    out = tmp_path / "out"
+    assert main(["run", str(_file_with(tmp_path, old, new)), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and re.search(message, err), err
+    assert not out.exists()
+
+
+def test_error_bound_on_a_method_without_a_bound_is_refused(tmp_path, capsys):
+    path = _file_with(
+        tmp_path,
+        'kind = "max_error"\nmethod = "depth_image"',
+        'kind = "error_bound"\nmethod = "naive"',
+    )
+    assert main(["run", str(path), "--out", str(tmp_path / "out")]) == 2
+    assert "naive has no accuracy bound to check" in capsys.readouterr().err
+
+
+def test_scenario_files_that_are_not_regular_files_are_refused(tmp_path, capsys):
+    fifo = tmp_path / "fifo.toml"
+    os.mkfifo(fifo)
+    for path, message in ((fifo, "not a regular file"), ("/dev/zero", "not a regular file")):
+        assert main(["run", str(path), "--out", str(tmp_path / "out")]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and message in err, err
+    big = tmp_path / "big.toml"
+    big.write_text("# " + "x" * 1_000_001 + "\n")
+    assert main(["run", str(big), "--out", str(tmp_path / "out")]) == 2
+    assert "larger than 1000000 bytes" in capsys.readouterr().err
+
+
+def test_a_bare_name_is_the_builtin_even_beside_a_file_of_that_name(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    Path("frame-problem").write_text("not toml at all [")
+    assert main(["run", "frame-problem", "--out", "out", "--quiet", "--duration", "0.5"]) == 0
+    assert main(["run", "./frame-problem", "--out", "out"]) == 2
+    assert "invalid TOML" in capsys.readouterr().err
+
+
+def test_a_second_run_into_the_same_directory_is_refused(tmp_path, capsys):
+    from scenarios import outputs
+
+    with outputs.directory_lock(tmp_path):  # another run holds it (flock is per open file)
+        assert main(["run", "frame-problem", "--out", str(tmp_path), "--duration", "0.5"]) == 2
+    assert "another vnav-demo run is writing into" in capsys.readouterr().err
