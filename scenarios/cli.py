@@ -113,6 +113,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("name", metavar="NAME", help="a built-in scenario (see `vnav-demo list`)")
     p.set_defaults(func=_show)
 
+    _add_run_parser(sub)
+    return parser
+
+
+def _add_run_parser(sub) -> None:
+    """``vnav-demo run`` and its options."""
     p = sub.add_parser(
         "run",
         help="run scenarios headless; write DIR/<name>.rrd and DIR/<name>.json",
@@ -149,7 +155,6 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
     p.set_defaults(func=_run)
-    return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
