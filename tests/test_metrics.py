@@ -85,3 +85,11 @@ def test_match_nearest_greedy_for_many() -> None:
     pairs = match_nearest(ref, est)
     assert len(pairs) == 20
     assert all(abs(ref[i, 0] + 0.1 - est[j, 0]) < 1e-9 for i, j in pairs)
+
+
+def test_negative_errors_and_non_finite_points_are_refused() -> None:
+    with pytest.raises(ValueError, match="errors are distances and must be >= 0; got 1 negative"):
+        error_stats([-1.0])
+    for fn in (position_error, horizontal_error):
+        with pytest.raises(ValueError, match="p_est must be finite; got 1 NaN/inf"):
+            fn([0.0, 0.0, 0.0], [np.nan, 0.0, 0.0])

@@ -253,3 +253,45 @@ def test_non_unit_quaternion_with_opt_in():
     # Within the tolerance (1e-6) a quaternion is accepted and still gives an exact rotation.
     R = quat.to_matrix(np.array([0.0, 0.0, 0.0, 1.0 + 5e-7]))
     np.testing.assert_allclose(R, np.eye(3), atol=1e-15)
+
+
+# ---------------------------------------------------------------- garbage in: an error, not garbage
+
+
+def test_from_rotvec_too_long_raises_like_so3_exp():
+    for fn in (quat.from_rotvec, so3.exp):
+        with pytest.raises(ValueError, match="rotvec is too long"):
+            fn([1e155, 0.0, 0.0])
+
+
+def test_from_axis_angle_huge_and_tiny_axes_give_unit_quaternions():
+
+    for axis in ([1e200, 1e200, 0.0], [1e-200, 0.0, 1e-200], [3e307, -3e307, 1e307]):
+        q = quat.from_axis_angle(axis, 1.0)
+        assert abs(np.linalg.norm(q) - 1.0) < 1e-15
+        direction = np.array(axis) / np.max(np.abs(axis))
+        expected = Rotation.from_rotvec(direction / np.linalg.norm(direction)).as_quat()
+        np.testing.assert_allclose(q, expected, atol=1e-15)
+
+
+def test_multiply_stays_unit_over_repeated_products_scipy_stability_test():
+    """SciPy's stability test: ``rs = rs * q * rs`` repeated 50 times. The product is
+    renormalised, so its norm stays 1 (unrenormalised it drifts past 6e-8 by step 27 and the
+    next product is refused), and each step agrees with SciPy's composition of the same inputs
+    (the map squares ``rs``, so trajectories of two implementations part; steps do not)."""
+    q = Rotation.random(1000, random_state=1).as_quat()
+    rs = Rotation.random(1000, random_state=2).as_quat()
+    for _ in range(50):
+        expected = (
+            Rotation.from_quat(rs) * Rotation.from_quat(q) * Rotation.from_quat(rs)
+        ).as_quat()
+        rs = quat.multiply(quat.multiply(rs, q), rs)
+        assert np.max(np.abs(np.linalg.norm(rs, axis=1) - 1.0)) < 1e-12
+        same_sign = np.where(np.sum(rs * expected, axis=1, keepdims=True) < 0.0, -1.0, 1.0)
+        np.testing.assert_allclose(rs, same_sign * expected, atol=1e-12)
+
+
+@pytest.mark.parametrize("atol", [float("nan"), -1e-9, float("inf")])
+def test_quaternion_tolerance_must_be_a_finite_non_negative_number(atol):
+    with pytest.raises(ValueError, match="atol must be a finite number >= 0"):
+        quat.check_quaternion([0.0, 0.0, 0.0, 2.0], atol=atol)

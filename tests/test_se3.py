@@ -132,3 +132,14 @@ def test_bottom_row_not_0001():
         se3.invert(T)
     with pytest.raises(ValueError, match=r"T_w_b must have bottom row"):
         se3.check_transform(T, name="T_w_b")
+
+
+def test_float32_transform_is_accepted_and_nan_tolerance_refused():
+    from scipy.spatial.transform import Rotation
+
+    T = np.eye(4, dtype=np.float32)
+    T[:3, :3] = Rotation.random(random_state=5).as_matrix().astype(np.float32)
+    T[:3, 3] = [1.0, 2.0, 3.0]
+    assert se3.check_transform(T).dtype == np.float64
+    with pytest.raises(ValueError, match="atol must be a finite number >= 0"):
+        se3.check_transform(np.eye(4), atol=float("nan"))

@@ -278,3 +278,29 @@ def test_gimbal_lock_is_reported_and_can_be_silenced(recwarn):
     assert not [w for w in recwarn if issubclass(w.category, so3.GimbalLockWarning)]
     assert so3.gimbal_locked(R)
     assert not so3.gimbal_locked(so3.from_rpy(0.2, 1.0, -0.4))
+
+
+# ---------------------------------------------------------------- tolerances and dtypes
+
+
+@pytest.mark.parametrize("atol", [float("nan"), -1.0, float("inf")])
+def test_rotation_tolerance_must_be_a_finite_non_negative_number(atol):
+    shear = np.array([[1.0, 0.5, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    with pytest.raises(ValueError, match="atol must be a finite number >= 0"):
+        so3.check_rotation(shear, atol=atol)
+    with pytest.raises(ValueError, match="atol must be a finite number >= 0"):
+        so3.check_rotation(np.eye(3), atol=atol)
+
+
+def test_float32_rotation_is_accepted_and_a_float32_shear_names_its_tolerance():
+
+    R32 = Rotation.random(20, random_state=3).as_matrix().astype(np.float32)
+    R = so3.check_rotation(R32)
+    assert R.dtype == np.float64
+    np.testing.assert_array_equal(R, R32.astype(np.float64))
+    shear32 = np.array([[1.0, 1e-4, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], dtype=np.float32)
+    with pytest.raises(ValueError, match=r"tolerance 1\.9\d*e-06 for float32 input"):
+        so3.check_rotation(shear32)
+    # float64 keeps its own tolerance: a 1e-7 shear is refused there.
+    with pytest.raises(ValueError, match=r"tolerance 1e-09\)"):
+        so3.check_rotation(np.array([[1.0, 1e-7, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]))

@@ -7,6 +7,7 @@ received (docs/CONVENTIONS.md, "Errors").
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -61,6 +62,30 @@ def check_shape(
             f"{name} must have shape {shape_text(trailing, batched)}; got shape {a.shape}"
         )
     return a
+
+
+def tolerance(atol: object, name: str = "atol") -> float:
+    """A validated tolerance: a finite number >= 0 (NaN would accept anything).
+
+    Raises
+    ------
+    ValueError
+        Naming ``name`` and the value received.
+    """
+    if isinstance(atol, bool) or not isinstance(atol, int | float | np.floating | np.integer):
+        raise ValueError(f"{name} must be a number, got {_describe(atol)}")
+    if not (math.isfinite(atol) and atol >= 0.0):
+        raise ValueError(f"{name} must be a finite number >= 0, got {atol!r}")
+    return float(atol)
+
+
+def widened_for(atol: float, source_dtype: object) -> float:
+    """``atol``, or at least 16 machine epsilons of a lower-precision float input (float32,
+    float16): its rounding alone exceeds a float64 tolerance such as 1e-9."""
+    if source_dtype is None or not np.issubdtype(source_dtype, np.floating):
+        return atol
+    eps = float(np.finfo(source_dtype).eps)
+    return max(atol, 16.0 * eps) if eps > float(np.finfo(np.float64).eps) else atol
 
 
 _SMALL = 64

@@ -36,6 +36,8 @@ def _points(x: np.ndarray, name: str) -> np.ndarray:
         a = a[None, :]
     if a.ndim != 2 or a.shape[1] not in (2, 3):
         raise ValueError(f"{name} must have shape (3,), (N, 3), (2,) or (N, 2); got {a.shape}")
+    if not np.isfinite(a).all():
+        raise ValueError(f"{name} must be finite; got {int((~np.isfinite(a)).sum())} NaN/inf")
     return a
 
 
@@ -57,13 +59,18 @@ def error_stats(errors: np.ndarray) -> dict[str, float]:
     Raises
     ------
     ValueError
-        If ``errors`` is not one-dimensional or holds NaN/inf.
+        If ``errors`` is not one-dimensional, holds NaN/inf or a negative value.
     """
     e = np.asarray(errors, dtype=np.float64)
     if e.ndim != 1:
         raise ValueError(f"errors must be one-dimensional, got shape {e.shape}")
     if not np.isfinite(e).all():
         raise ValueError(f"errors must be finite; got {int((~np.isfinite(e)).sum())} NaN/inf")
+    if (e < 0.0).any():
+        raise ValueError(
+            f"errors are distances and must be >= 0; got {int((e < 0.0).sum())} negative "
+            f"(smallest {float(e.min()):g})"
+        )
     if e.size == 0:
         stats: dict[str, float] = {key: math.nan for key in STATS}
         stats["count"] = 0

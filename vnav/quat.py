@@ -57,6 +57,7 @@ def _check_norm(n2: FloatArray, name: str, atol: float, *, allow_non_unit: bool 
         )
     if allow_non_unit:
         return
+    atol = _v.tolerance(atol)
     # | |q| - 1 | <= atol, tested on the squared norm: |q|^2 - 1 = (|q| - 1)(|q| + 1).
     dev = np.abs(n2 - 1.0)
     if np.any(dev > atol * (2.0 + atol)):
@@ -191,10 +192,13 @@ def from_axis_angle(axis: ArrayLike, angle: ArrayLike) -> FloatArray:
     """
     axis = _v.vector(axis, "axis")
     angle = _v.scalar_or_array(angle, "angle")
-    n = np.sqrt(np.sum(axis * axis, axis=-1))
-    if np.any(n == 0.0):
+    # Scaled by its largest component first, so that a huge (or tiny) axis neither overflows
+    # nor underflows when squared.
+    scale = np.max(np.abs(axis), axis=-1)
+    if np.any(scale == 0.0):
         raise ValueError("axis must be non-zero: a zero vector has no direction to rotate about")
-    u = axis / n[..., None]
+    axis = axis / scale[..., None]
+    u = axis / np.sqrt(np.sum(axis * axis, axis=-1))[..., None]
     half = 0.5 * angle
     s = np.sin(half)
     c = np.cos(half)
@@ -262,10 +266,17 @@ def from_rotvec(rotvec: ArrayLike) -> FloatArray:
     Raises
     ------
     ValueError
-        If ``rotvec`` is not (..., 3) or holds NaN or inf.
+        If ``rotvec`` is not (..., 3), holds NaN or inf, or is so long that its squared length
+        overflows (as ``so3.exp``).
     """
     v = _v.vector(rotvec, "rotvec")
-    t2 = np.sum(v * v, axis=-1)
+    with np.errstate(over="ignore"):
+        t2 = np.sum(v * v, axis=-1)
+    if not np.all(np.isfinite(t2)):
+        raise ValueError(
+            "rotvec is too long: |rotvec|^2 overflows float64 (an angle beyond 1e154 rad has "
+            "no meaningful value)"
+        )
     t = np.sqrt(t2)
     small = t < _SMALL_ANGLE
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -447,6 +458,8 @@ def multiply(a: ArrayLike, b: ArrayLike) -> FloatArray:
     Returns
     -------
     ndarray, shape (..., 4)
+        Renormalised to unit length (as SciPy and Sophus do): without it the rounding of
+        repeated products grows until the result is no longer a unit quaternion.
 
     Raises
     ------
@@ -457,7 +470,7 @@ def multiply(a: ArrayLike, b: ArrayLike) -> FloatArray:
     b = check_quaternion(b, "b")
     ax, ay, az, aw = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
     bx, by, bz, bw = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
-    return np.stack(
+    q = np.stack(
         [
             aw * bx + bw * ax + ay * bz - az * by,
             aw * by + bw * ay + az * bx - ax * bz,
@@ -466,6 +479,7 @@ def multiply(a: ArrayLike, b: ArrayLike) -> FloatArray:
         ],
         axis=-1,
     )
+    return q / np.sqrt(_squared_norm(q))[..., None]
 
 
 def conjugate(q: ArrayLike) -> FloatArray:

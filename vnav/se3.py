@@ -103,8 +103,10 @@ def check_transform(T: ArrayLike, name: str = "T", atol: float = 1e-9) -> FloatA
         or inf, the bottom row is not ``[0, 0, 0, 1]`` (the message gives the row received), or
         the rotation block is not a rotation.
     """
+    atol = _v.tolerance(atol)
     if _clearly_rigid(T, atol):
         return T
+    source_dtype = getattr(T, "dtype", None)
     T = _v.matrix(T, name, 4)
     bottom = T[..., 3, :]
     if np.any(bottom != _BOTTOM):
@@ -113,7 +115,7 @@ def check_transform(T: ArrayLike, name: str = "T", atol: float = 1e-9) -> FloatA
             f"{name} must have bottom row [0, 0, 0, 1] (a homogeneous rigid transform); "
             f"got bottom row {np.array2string(bad, separator=', ')}"
         )
-    so3.check_rotation(T[..., :3, :3], f"the rotation block {name}[:3, :3]", atol)
+    so3._check_rotation(T[..., :3, :3], f"the rotation block {name}[:3, :3]", atol, source_dtype)
     return T
 
 

@@ -236,7 +236,9 @@ def check_rotation(R: ArrayLike, name: str = "R", atol: float = 1e-9) -> FloatAr
     name : str
         The argument's name, used in error messages.
     atol : float
-        Largest accepted entry of ``|R^T R - I|``.
+        Largest accepted entry of ``|R^T R - I|`` (finite, >= 0). A float32 (or float16)
+        input is allowed 16 of its machine epsilons at least (1.9e-6 for float32), as its
+        own rounding exceeds the float64 default.
 
     Returns
     -------
@@ -250,8 +252,15 @@ def check_rotation(R: ArrayLike, name: str = "R", atol: float = 1e-9) -> FloatAr
         NaN or inf, if ``det R < 0`` (a reflection, not a rotation), or if ``R^T R`` differs
         from I by more than ``atol`` (the message gives max |R^T R - I| and det R).
     """
+    atol = _v.tolerance(atol)
     if _clearly_rotation(R, atol):
         return R
+    return _check_rotation(R, name, atol, getattr(R, "dtype", None))
+
+
+def _check_rotation(R: ArrayLike, name: str, atol: float, source_dtype: object) -> FloatArray:
+    """The full check of ``check_rotation``; ``atol`` widened for a float32 source."""
+    tol = _v.widened_for(atol, source_dtype)
     R = _v.matrix(R, name)
     if R.size == 0:
         return R
@@ -264,11 +273,12 @@ def check_rotation(R: ArrayLike, name: str = "R", atol: float = 1e-9) -> FloatAr
             f"{name} is a reflection, not a rotation: det = {float(det[i]):.6g} < 0{where}; "
             "a rotation has det = +1 (right-handed axes)"
         )
-    if np.any(err > atol):
+    if np.any(err > tol):
         i = np.unravel_index(np.argmax(err), err.shape) if err.ndim else ()
+        source = f" for {np.dtype(source_dtype)} input" if tol != atol else ""
         raise ValueError(
             f"{name} is not a rotation matrix: max |R^T R - I| = {float(err[i]):.3g} "
-            f"(tolerance {atol:g}), det = {float(det[i]):.9g}{where}; "
+            f"(tolerance {tol:g}{source}), det = {float(det[i]):.9g}{where}; "
             "so3.nearest_rotation projects a nearly orthogonal matrix onto SO(3)"
         )
     return R
