@@ -401,11 +401,13 @@ def test_diverging_simulation_exits_3(tmp_path, capsys, monkeypatch):
     assert sorted(p.name for p in tmp_path.iterdir()) == [".vnav-demo.lock"]
 
 
-def test_sigterm_ends_the_run_like_ctrl_c(tmp_path):
-    """SIGTERM mid-run: exit 128 + 15, nothing partial kept, the previous pair untouched."""
+@pytest.mark.parametrize("signame", ["SIGTERM", "SIGHUP"])
+def test_sigterm_and_sighup_end_the_run_like_ctrl_c(tmp_path, signame):
+    """A signal mid-run: exit 128 + N, nothing partial kept, the previous pair untouched."""
     import signal
     import time
 
+    signum = getattr(signal, signame)
     before = _first_pair(tmp_path)
     proc = subprocess.Popen(
         [sys.executable, "-m", "scenarios.cli", "run", "orbit", "--out", str(tmp_path)],
@@ -417,9 +419,9 @@ def test_sigterm_ends_the_run_like_ctrl_c(tmp_path):
     while not list(tmp_path.glob(".orbit.rrd.*.partial")) and time.monotonic() < deadline:
         time.sleep(0.05)
     assert list(tmp_path.glob(".orbit.rrd.*.partial")), "the run never started writing"
-    proc.send_signal(signal.SIGTERM)
+    proc.send_signal(signum)
     _, err = proc.communicate(timeout=60)
-    assert proc.returncode == 128 + signal.SIGTERM
+    assert proc.returncode == 128 + signum
     assert err.strip().splitlines() == [
         "vnav-demo: error: stopped by SIGTERM; no partial file was kept"
     ]
