@@ -423,7 +423,7 @@ def test_sigterm_and_sighup_end_the_run_like_ctrl_c(tmp_path, signame):
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 128 + signum
     assert err.strip().splitlines() == [
-        "vnav-demo: error: stopped by SIGTERM; no partial file was kept"
+        f"vnav-demo: error: stopped by {signame}; no partial file was kept"
     ]
     assert {k: v for k, v in _files(tmp_path).items() if not k.startswith(".")} == before
 
