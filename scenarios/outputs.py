@@ -1,13 +1,13 @@
 """A run's output files: both or neither, complete, from the same run, never half-written.
 
 A run writes its recording and its report under hidden temporary names beside the final
-ones (``.<name>.rrd.<pid>.partial``). :meth:`OutputPair.commit` then checks the recording
+ones (``.<name>.rrd.<pid>.partial``). ``OutputPair.commit`` then checks the recording
 reads back whole (Rerun writes its footer last; a full disk or a killed writer leaves none),
 flushes both files to the disk (``fsync``), moves the previous pair aside, puts the new pair in
 place and syncs the directory; if any step fails, the previous pair is put back and the error
 is raised. Without ``commit`` (an exception, an interrupt) the temporary files are removed.
 
-One run at a time writes into a directory (:func:`directory_lock`); the next run into it
+One run at a time writes into a directory (``directory_lock``); the next run into it
 removes the temporary files of runs whose process no longer exists.
 """
 
@@ -67,7 +67,7 @@ class OutputPair:
     Parameters
     ----------
     rrd_path, json_path : Path
-        Final names; nothing changes there before :meth:`commit`.
+        Final names; nothing changes there before ``commit``.
     """
 
     def __init__(self, rrd_path: Path, json_path: Path) -> None:

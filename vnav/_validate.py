@@ -64,15 +64,25 @@ def check_shape(
     return a
 
 
+_REAL_TYPES = (int, float, np.floating, np.integer)
+
+
 def tolerance(atol: object, name: str = "atol") -> float:
     """A validated tolerance: a finite number >= 0 (NaN would accept anything).
+
+    A plain float in range returns at once (every pose check passes through here); a numpy
+    scalar or 0-d array is read as the number it holds.
 
     Raises
     ------
     ValueError
         Naming ``name`` and the value received.
     """
-    if isinstance(atol, bool) or not isinstance(atol, int | float | np.floating | np.integer):
+    if type(atol) is float and 0.0 <= atol < math.inf:
+        return atol
+    if isinstance(atol, np.ndarray) and atol.ndim == 0:
+        atol = atol[()]
+    if isinstance(atol, bool | np.bool_) or not isinstance(atol, _REAL_TYPES):
         raise ValueError(f"{name} must be a number, got {_describe(atol)}")
     if not (math.isfinite(atol) and atol >= 0.0):
         raise ValueError(f"{name} must be a finite number >= 0, got {atol!r}")

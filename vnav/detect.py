@@ -97,9 +97,9 @@ class ConeDetection:
     area_px : int
         Number of pixels in the mask.
     mask : ndarray, shape (h, w), bool
-        The blob, **cropped to bbox**: ``mask[r, c]`` is image pixel `(row, col) = (y + r,
-        x + c)``. Use ``full_mask(shape)`` for an image-sized mask and ``pixels_uv()` for the
-        pixel centres.
+        The blob, **cropped to bbox**: ``mask[r, c]`` is image pixel
+        ``(row, col) = (y + r, x + c)``. Use ``full_mask(shape)`` for an image-sized mask and
+        ``pixels_uv()`` for the pixel centres.
     apex_uv : ndarray, shape (2,), float64
         Estimated image of the cone's apex (sub-pixel, see the module docstring).
     base_uv : ndarray, shape (2,), float64

@@ -416,10 +416,10 @@ def estimate_from_known_height(
 
     Conditioning. The estimate is refused (None) when the triangle cannot be measured well:
 
-    - the apex must be clear of the base plate's image: `triangle_fraction(e) >=
-      MIN_TRIANGLE_FRACTION`` at the line of sight's elevation ``e` (up to about 69 deg for the
-      standard cone; looking down more steeply the apex projects inside the cone's outline
-      and its height is foreshortened onto the plate);
+    - the apex must be clear of the base plate's image:
+      ``triangle_fraction(e) >= MIN_TRIANGLE_FRACTION`` at the line of sight's elevation ``e``
+      (up to about 69 deg for the standard cone; looking down more steeply the apex projects
+      inside the cone's outline and its height is foreshortened onto the plate);
     - one pixel of error in the apex or the bottom pixel, along the image vertical, may move
       the estimate by at most ``MAX_RANGE_ERROR_PER_PX`` of its range (the sensitivity of the
       least-squares solution, by finite differences): a cone only a few pixels tall gives no

@@ -46,8 +46,19 @@ def _squared_norm(q: FloatArray) -> FloatArray:
         return x * x + y * y + z * z + w * w
 
 
-def _check_norm(n2: FloatArray, name: str, atol: float, *, allow_non_unit: bool = False) -> None:
-    """Raise for a zero quaternion, or for a non-unit one unless ``allow_non_unit``."""
+def _check_norm(
+    n2: FloatArray,
+    name: str,
+    atol: float,
+    *,
+    allow_non_unit: bool = False,
+    source_dtype: object = None,
+) -> None:
+    """Raise for a zero quaternion, or for a non-unit one unless ``allow_non_unit``.
+
+    ``atol`` is widened for a lower-precision ``source_dtype`` (float32), which the message
+    then names.
+    """
     if n2.size == 0:
         return
     if np.any(n2 == 0.0):
@@ -57,16 +68,17 @@ def _check_norm(n2: FloatArray, name: str, atol: float, *, allow_non_unit: bool 
         )
     if allow_non_unit:
         return
-    atol = _v.tolerance(atol)
-    # | |q| - 1 | <= atol, tested on the squared norm: |q|^2 - 1 = (|q| - 1)(|q| + 1).
+    tol = _v.widened_for(atol, source_dtype)
+    # | |q| - 1 | <= tol, tested on the squared norm: |q|^2 - 1 = (|q| - 1)(|q| + 1).
     dev = np.abs(n2 - 1.0)
-    if np.any(dev > atol * (2.0 + atol)):
+    if np.any(dev > tol * (2.0 + tol)):
         norm = np.sqrt(n2.flat[int(np.argmax(dev))])
         where = "" if n2.ndim == 0 else " (worst of the stack)"
+        source = f" (the tolerance for {np.dtype(source_dtype)} input)" if tol != atol else ""
         raise ValueError(
             f"{name} must be a unit quaternion [x, y, z, w]; got norm {norm:.9g}{where}, "
-            f"|norm - 1| > {atol:g}; normalise explicitly with quat.normalize({name}) or pass "
-            "normalize=True where the function offers it"
+            f"|norm - 1| > {tol:g}{source}; normalise explicitly with quat.normalize({name}) "
+            "or pass normalize=True where the function offers it"
         )
 
 
@@ -79,7 +91,9 @@ def check_quaternion(q: ArrayLike, name: str = "q", atol: float = _NORM_ATOL) ->
     name : str
         The argument's name, used in error messages.
     atol : float
-        Largest accepted ``| |q| - 1 |``.
+        Largest accepted ``| |q| - 1 |`` (finite, >= 0). A float32 (or float16) input is
+        allowed 16 of its machine epsilons at least (1.9e-6 for float32), as for rotation
+        matrices in ``vnav.so3.check_rotation``.
 
     Returns
     -------
@@ -90,11 +104,14 @@ def check_quaternion(q: ArrayLike, name: str = "q", atol: float = _NORM_ATOL) ->
     ------
     ValueError
         If the shape is not (..., 4), an entry is NaN or inf, ``q`` is zero, or its norm
-        differs from 1 by more than ``atol`` (the message gives the norm received and points
-        at ``normalize=True``).
+        differs from 1 by more than the tolerance (the message gives the norm received, the
+        tolerance, naming the dtype when it was widened, and points at ``normalize=True``);
+        or if ``atol`` is not a finite number >= 0.
     """
+    atol = _v.tolerance(atol)
+    source_dtype = getattr(q, "dtype", None)
     q = _v.vector(q, name, 4)
-    _check_norm(_squared_norm(q), name, atol)
+    _check_norm(_squared_norm(q), name, atol, source_dtype=source_dtype)
     return q
 
 
@@ -376,8 +393,10 @@ def to_matrix(q: ArrayLike, *, normalize: bool = False) -> FloatArray:
     ------
     ValueError
         If the shape is not (..., 4), an entry is NaN or inf, ``q`` is zero, or (unless
-        ``normalize``) its norm is not 1 within 1e-6.
+        ``normalize``) its norm is not 1 within 1e-6 (widened for float32 input as in
+        ``check_quaternion``).
     """
+    source_dtype = getattr(q, "dtype", None)
     q = _v.vector(q, "q", 4, finite=False)
     flat = q.reshape(-1, 4)
     out = np.empty((flat.shape[0], 3, 3))
@@ -396,7 +415,8 @@ def to_matrix(q: ArrayLike, *, normalize: bool = False) -> FloatArray:
         _v.check_finite(q, "q")
         if normalize:
             return to_matrix(_normalized(q))  # |q|^2 over- or underflowed in the blocks
-        _check_norm(_squared_norm(q), "q", _NORM_ATOL)
+        # Raises unless a float32 input is within its widened tolerance (then `out` stands).
+        _check_norm(_squared_norm(q), "q", _NORM_ATOL, source_dtype=source_dtype)
     return out.reshape(*q.shape[:-1], 3, 3)
 
 

@@ -89,8 +89,8 @@ def check_transform(T: ArrayLike, name: str = "T", atol: float = 1e-9) -> FloatA
     name : str
         The argument's name, used in error messages.
     atol : float
-        Tolerance on the rotation block (see ``vnav.so3.check_rotation``); the bottom row must be
-        exactly ``[0, 0, 0, 1]``.
+        Tolerance on the rotation block (see ``vnav.so3.check_rotation``: finite, >= 0, widened
+        for float32 input); the bottom row must be exactly ``[0, 0, 0, 1]``.
 
     Returns
     -------
@@ -101,7 +101,7 @@ def check_transform(T: ArrayLike, name: str = "T", atol: float = 1e-9) -> FloatA
     ValueError
         If the shape is not (..., 4, 4) (the message gives the shape received), an entry is NaN
         or inf, the bottom row is not ``[0, 0, 0, 1]`` (the message gives the row received), or
-        the rotation block is not a rotation.
+        the rotation block is not a rotation; or if ``atol`` is not a finite number >= 0.
     """
     atol = _v.tolerance(atol)
     if _clearly_rigid(T, atol):

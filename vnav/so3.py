@@ -250,7 +250,9 @@ def check_rotation(R: ArrayLike, name: str = "R", atol: float = 1e-9) -> FloatAr
     ValueError
         If the shape is not (..., 3, 3) (the message gives the shape received), if an entry is
         NaN or inf, if ``det R < 0`` (a reflection, not a rotation), or if ``R^T R`` differs
-        from I by more than ``atol`` (the message gives max |R^T R - I| and det R).
+        from I by more than ``atol`` (the message gives max |R^T R - I|, det R and, for a
+        float32 input, the widened tolerance and its dtype); or if ``atol`` is not a finite
+        number >= 0.
     """
     atol = _v.tolerance(atol)
     if _clearly_rotation(R, atol):
@@ -291,13 +293,21 @@ def is_rotation(R: ArrayLike, atol: float = 1e-9) -> bool:
     ----------
     R : array_like, shape (..., 3, 3)
     atol : float
-        Largest accepted entry of ``|R^T R - I|``.
+        Largest accepted entry of ``|R^T R - I|`` (finite, >= 0; widened for float32 input as
+        in ``check_rotation``).
 
     Returns
     -------
     bool
         False for a wrong shape, NaN or inf, a reflection or a non-orthogonal matrix.
+
+    Raises
+    ------
+    ValueError
+        If ``atol`` is not a finite number >= 0 (a bad tolerance is the caller's error, not an
+        answer about ``R``).
     """
+    atol = _v.tolerance(atol)
     try:
         check_rotation(R, atol=atol)
     except ValueError:
@@ -560,7 +570,7 @@ def gimbal_locked(R: ArrayLike, atol: float = 1e-9) -> bool | np.ndarray:
         Rotation matrices (validated with ``check_rotation``).
     atol : float
         Largest ``cos(pitch) = hypot(R[0, 0], R[1, 0])`` counted as locked (about the distance
-        of the pitch from +-90 deg, radians).
+        of the pitch from +-90 deg, radians); finite, >= 0.
 
     Returns
     -------
@@ -569,8 +579,10 @@ def gimbal_locked(R: ArrayLike, atol: float = 1e-9) -> bool | np.ndarray:
     Raises
     ------
     ValueError
-        If ``R`` is not a rotation (see ``check_rotation``).
+        If ``R`` is not a rotation (see ``check_rotation``), or ``atol`` is not a finite
+        number >= 0.
     """
+    atol = _v.tolerance(atol)
     R = check_rotation(R)
     locked = np.hypot(R[..., 0, 0], R[..., 1, 0]) <= atol
     return bool(locked) if locked.ndim == 0 else locked
@@ -596,7 +608,7 @@ def to_rpy(R: ArrayLike, *, warn: bool = True, atol: float = 1e-9) -> FloatArray
     warn : bool
         Emit ``GimbalLockWarning`` when some matrix is at gimbal lock.
     atol : float
-        Gimbal-lock tolerance, as in ``gimbal_locked``.
+        Gimbal-lock tolerance, as in ``gimbal_locked`` (finite, >= 0).
 
     Returns
     -------
@@ -606,13 +618,15 @@ def to_rpy(R: ArrayLike, *, warn: bool = True, atol: float = 1e-9) -> FloatArray
     Raises
     ------
     ValueError
-        If ``R`` is not a rotation (see ``check_rotation``).
+        If ``R`` is not a rotation (see ``check_rotation``), or ``atol`` is not a finite
+        number >= 0.
 
     Warns
     -----
     GimbalLockWarning
         If some matrix is at gimbal lock and ``warn`` is true.
     """
+    atol = _v.tolerance(atol)
     R = check_rotation(R)
     R00, R01, R02 = R[..., 0, 0], R[..., 0, 1], R[..., 0, 2]
     R10, R11, R12 = R[..., 1, 0], R[..., 1, 1], R[..., 1, 2]
