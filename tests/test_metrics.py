@@ -93,3 +93,29 @@ def test_negative_errors_and_non_finite_points_are_refused() -> None:
     for fn in (position_error, horizontal_error):
         with pytest.raises(ValueError, match="p_est must be finite; got 1 NaN/inf"):
             fn([0.0, 0.0, 0.0], [np.nan, 0.0, 0.0])
+
+
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda: error_stats([0.5, -1e-12]), r"errors are distances .*got 1 negative"),
+        (lambda: error_stats([0.5, np.nan]), r"errors must be finite"),
+        (lambda: position_error([np.inf, 0.0, 0.0], [0.0, 0.0, 0.0]), r"^p_ref must be finite"),
+        (lambda: horizontal_error([[0.0, 0.0, 0.0]], [[0.0, 0.0, np.nan]]), r"^p_est must be"),
+        (lambda: match_nearest([[0.0, 0.0]], [[np.nan, 0.0]]), r"^p_est must be finite"),
+        (lambda: match_nearest(np.zeros((0, 2)), [[np.nan, 0.0]]), r"^p_est must be finite"),
+        (lambda: match_nearest([[0.0, 0.0]], [[1.0, 0.0]], max_distance=np.nan), "max_distance"),
+        (lambda: match_nearest([[0.0, 0.0]], [[1.0, 0.0]], max_distance=-1.0), "max_distance"),
+    ],
+)
+def test_garbage_in_raises_naming_the_argument(call, match) -> None:
+    with pytest.raises(ValueError, match=match):
+        call()
+
+
+def test_zero_errors_and_an_infinite_gate_are_fine() -> None:
+    stats = error_stats([0.0, 0.0, 3.0, 4.0])
+    assert stats["min"] == 0.0 and stats["mean"] == 1.75 and stats["count"] == 4
+    assert stats["rmse"] == 2.5  # sqrt((9 + 16) / 4), by hand
+    assert match_nearest([[0.0, 0.0]], [[1e6, 0.0]], max_distance=math.inf) == [(0, 0)]
+    assert match_nearest([[0.0, 0.0]], [[1.0, 0.0]], max_distance=0) == []

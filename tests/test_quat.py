@@ -295,3 +295,61 @@ def test_multiply_stays_unit_over_repeated_products_scipy_stability_test():
 def test_quaternion_tolerance_must_be_a_finite_non_negative_number(atol):
     with pytest.raises(ValueError, match="atol must be a finite number >= 0"):
         quat.check_quaternion([0.0, 0.0, 0.0, 2.0], atol=atol)
+
+
+def test_from_rotvec_at_the_limit_agrees_with_so3_exp():
+    """Just below the overflow limit both still answer, and with the same rotation."""
+    v = np.array([1e150, -2e150, 3e149])
+    np.testing.assert_allclose(quat.to_matrix(quat.from_rotvec(v)), so3.exp(v), atol=1e-12)
+    for bad in ([1e155, 0.0, 0.0], [[0.1, 0.0, 0.0], [0.0, -2e154, 1.5e154]]):
+        with pytest.raises(ValueError, match=r"^rotvec is too long"):
+            quat.from_rotvec(bad)
+    for bad in (np.nan, np.inf):
+        with pytest.raises(ValueError, match=r"^rotvec must be finite"):
+            quat.from_rotvec([bad, 0.0, 0.0])
+
+
+@pytest.mark.parametrize("axis", [[np.nan, 0.0, 1.0], [np.inf, 0.0, 0.0], [1e-320, 0.0, 0.0]])
+def test_from_axis_angle_non_finite_axes_raise_and_subnormal_axes_work(axis):
+    if np.isfinite(axis).all():
+        np.testing.assert_allclose(
+            quat.from_axis_angle(axis, 0.5), Rotation.from_rotvec([0.5, 0.0, 0.0]).as_quat()
+        )
+    else:
+        with pytest.raises(ValueError, match=r"^axis must be finite"):
+            quat.from_axis_angle(axis, 0.5)
+
+
+def test_float32_quaternions_use_a_dtype_aware_norm_tolerance():
+    """A float32 unit quaternion from SciPy passes every check (results float64, equal to
+    SciPy's); a float32 quaternion off by more than 16 float32 eps is refused, and the message
+    names the widened tolerance and the dtype."""
+    rot = Rotation.random(200, random_state=7)
+    q32 = rot.as_quat().astype(np.float32)
+    q64 = q32.astype(np.float64)
+    assert quat.check_quaternion(q32, atol=1e-12).dtype == np.float64  # widened to 1.9e-6
+    R = quat.to_matrix(q32)
+    assert R.dtype == np.float64
+    np.testing.assert_allclose(R, Rotation.from_quat(q64).as_matrix(), atol=1e-15)
+    same_rotation_quat(quat.multiply(q32, q32), (rot * rot).as_quat(), atol=1e-6)
+    # |q| - 1 = 1.43e-6: above the float64 default (1e-6), inside the float32 one (1.9e-6).
+    q = np.array([0.0, 0.0, 0.0, 1.0 + 1.5e-6], dtype=np.float32)
+    np.testing.assert_allclose(quat.to_matrix(q), np.eye(3), atol=1e-15)
+    assert quat.check_quaternion(q).dtype == np.float64
+    with pytest.raises(ValueError, match=r"got norm 1\.0000015"):
+        quat.to_matrix(q.astype(np.float64))
+    off = np.array([0.0, 0.0, 0.0, 1.0 + 1e-5], dtype=np.float32)
+    for call in (quat.check_quaternion, quat.to_matrix, quat.to_rotvec):
+        with pytest.raises(
+            ValueError,
+            match=r"\|norm - 1\| > 1\.9\d*e-06 \(the tolerance for "
+            r"float32 input\)",
+        ):
+            call(off)
+
+
+@pytest.mark.parametrize("atol", [float("nan"), -1.0, float("inf"), "x"])
+def test_quaternion_tolerance_is_checked_before_anything_else(atol):
+    for q in ([0.0, 0.0, 0.0, 1.0], np.zeros((0, 4))):
+        with pytest.raises(ValueError, match=r"^atol must be a (finite )?number"):
+            quat.check_quaternion(q, atol=atol)

@@ -143,3 +143,19 @@ def test_float32_transform_is_accepted_and_nan_tolerance_refused():
     assert se3.check_transform(T).dtype == np.float64
     with pytest.raises(ValueError, match="atol must be a finite number >= 0"):
         se3.check_transform(np.eye(4), atol=float("nan"))
+
+
+def test_float32_transform_shear_names_the_float32_tolerance():
+    T = np.eye(4, dtype=np.float32)
+    T[0, 1] = 1e-4
+    with pytest.raises(
+        ValueError,
+        match=r"rotation block T_w_b\[:3, :3\] is not .*tolerance 1\.9\d*e-06 for float32",
+    ):
+        se3.check_transform(T, name="T_w_b")
+    for atol in (float("nan"), -1.0, float("inf")):
+        with pytest.raises(ValueError, match=r"^atol must be a finite number >= 0"):
+            se3.check_transform(T_OK, atol=atol)
+    # The plain-float fast path and the full check agree on a float64 pose.
+    assert se3.check_transform(T_OK) is T_OK
+    np.testing.assert_array_equal(se3.check_pose(T_OK.astype(np.float32)), T_OK.astype(np.float32))

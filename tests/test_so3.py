@@ -304,3 +304,61 @@ def test_float32_rotation_is_accepted_and_a_float32_shear_names_its_tolerance():
     # float64 keeps its own tolerance: a 1e-7 shear is refused there.
     with pytest.raises(ValueError, match=r"tolerance 1e-09\)"):
         so3.check_rotation(np.array([[1.0, 1e-7, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]))
+
+
+@pytest.mark.parametrize("atol", [float("nan"), -1e-9, float("inf"), "1e-9", None])
+def test_every_rotation_tolerance_is_validated(atol):
+    """A NaN tolerance would accept anything (or never detect gimbal lock): every function
+    taking ``atol`` refuses it, naming ``atol``, rather than answering about ``R``."""
+    shear = np.array([[1.0, 0.5, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    locked = so3.from_rpy(0.0, np.pi / 2, 0.3)
+    calls = [
+        lambda: so3.check_rotation(shear, atol=atol),
+        lambda: so3.is_rotation(shear, atol=atol),
+        lambda: so3.is_rotation(np.eye(3), atol=atol),
+        lambda: so3.gimbal_locked(locked, atol=atol),
+        lambda: so3.to_rpy(locked, atol=atol, warn=False),
+    ]
+    for call in calls:
+        with pytest.raises(ValueError, match=r"^atol must be a (finite )?number"):
+            call()
+
+
+def test_rotation_tolerance_accepts_numpy_scalars():
+    shear = np.array([[1.0, 1e-4, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    for atol in (np.float64(1e-3), np.float32(1e-3), np.array(1e-3), 1):
+        assert so3.is_rotation(shear, atol=atol)
+    assert not so3.is_rotation(shear, atol=np.array(1e-9))
+    assert so3.gimbal_locked(so3.from_rpy(0.0, np.pi / 2 - 1e-6, 0.3), atol=np.float32(1e-5))
+
+
+def test_float32_shear_and_reflection_are_still_refused():
+    """The float32 tolerance (16 eps = 1.9e-6) is wide enough for float32 rounding only."""
+    # A float32 rotation that differs from orthogonal by 1e-5, five times the tolerance.
+    R32 = Rotation.from_rotvec([0.1, 0.2, 0.3]).as_matrix() @ np.diag([1.0, 1.0, 1.0 + 1e-5])
+    with pytest.raises(ValueError, match=r"R is not a rotation matrix.*tolerance 1\.9\d*e-06 for "):
+        so3.check_rotation(R32.astype(np.float32))
+    assert not so3.is_rotation(R32.astype(np.float32))
+    with pytest.raises(ValueError, match=r"reflection"):
+        so3.check_rotation(np.diag([1.0, 1.0, -1.0]).astype(np.float32))
+    # An explicit atol wider than the float32 floor is used as given (and named without dtype).
+    with pytest.raises(ValueError, match=r"tolerance 1e-06\)"):
+        so3.check_rotation(
+            np.array([[1.0, 1e-4, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]), atol=1e-6
+        )
+
+
+def test_float32_rotations_go_through_every_rotation_function():
+    """float32 rotations from SciPy: results are float64 and match SciPy (to float32 input)."""
+    rot = Rotation.random(50, random_state=11)
+    R32 = rot.as_matrix().astype(np.float32)
+    R64 = R32.astype(np.float64)  # exactly the values received
+    assert so3.log(R32).dtype == np.float64
+    for ours, theirs in zip(so3.log(R32), rot.as_rotvec(), strict=True):
+        assert_same_rotvec(ours, theirs, atol=1e-6)
+    # The same values as float64 are judged at the float64 tolerance, and refused.
+    assert not so3.is_rotation(R64)
+    np.testing.assert_allclose(so3.from_rpy(*so3.to_rpy(R32, warn=False).T), R64, atol=1e-6)
+    q = quat.from_matrix(R32)
+    assert q.dtype == np.float64
+    np.testing.assert_allclose(np.linalg.norm(q, axis=-1), 1.0, atol=1e-15)

@@ -89,10 +89,15 @@ def tolerance(atol: object, name: str = "atol") -> float:
     return float(atol)
 
 
+_FLOAT64 = np.dtype(np.float64)
+
+
 def widened_for(atol: float, source_dtype: object) -> float:
     """``atol``, or at least 16 machine epsilons of a lower-precision float input (float32,
     float16): its rounding alone exceeds a float64 tolerance such as 1e-9."""
-    if source_dtype is None or not np.issubdtype(source_dtype, np.floating):
+    if source_dtype is None or source_dtype is _FLOAT64:
+        return atol  # the common case, without the costlier dtype queries below
+    if not np.issubdtype(source_dtype, np.floating):
         return atol
     eps = float(np.finfo(source_dtype).eps)
     return max(atol, 16.0 * eps) if eps > float(np.finfo(np.float64).eps) else atol

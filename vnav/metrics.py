@@ -92,7 +92,8 @@ def position_error(p_ref: np.ndarray, p_est: np.ndarray) -> np.ndarray:
     Raises
     ------
     ValueError
-        If the shapes differ or are not (3,) / (N, 3).
+        If the shapes differ or are not (3,) / (N, 3), or a point holds NaN or inf (the
+        message names the argument).
     """
     a, b = _points(p_ref, "p_ref"), _points(p_est, "p_est")
     if a.shape != b.shape or a.shape[1] != 3:
@@ -106,7 +107,8 @@ def horizontal_error(p_ref: np.ndarray, p_est: np.ndarray) -> np.ndarray:
     Raises
     ------
     ValueError
-        If the shapes differ or are not (3,) / (N, 3).
+        If the shapes differ or are not (3,) / (N, 3), or a point holds NaN or inf (the
+        message names the argument).
     """
     a, b = _points(p_ref, "p_ref"), _points(p_est, "p_est")
     if a.shape != b.shape or a.shape[1] != 3:
@@ -130,7 +132,7 @@ def match_nearest(
     p_est : array_like, shape (M, D)
         Estimates.
     max_distance : float
-        Largest distance of a pair, same unit as the points.
+        Largest distance of a pair, same unit as the points: a number >= 0 or ``inf``.
 
     Returns
     -------
@@ -140,15 +142,20 @@ def match_nearest(
     Raises
     ------
     ValueError
-        On mismatched dimensions or non-finite points.
+        On mismatched dimensions, non-finite points (even when the other set is empty), or a
+        ``max_distance`` that is NaN or negative (a NaN would silently match nothing).
     """
+    real = isinstance(max_distance, int | float | np.floating | np.integer)
+    if isinstance(max_distance, bool) or not real or not max_distance >= 0.0:
+        raise ValueError(f"max_distance must be a number >= 0 or inf; got {max_distance!r}")
     if np.size(p_ref) == 0 or np.size(p_est) == 0:
+        for x, name in ((p_ref, "p_ref"), (p_est, "p_est")):
+            if np.size(x) != 0:
+                _points(x, name)
         return []
     a, b = _points(p_ref, "p_ref"), _points(p_est, "p_est")
     if a.shape[1] != b.shape[1]:
         raise ValueError(f"p_ref and p_est must have the same dimension; got {a.shape}, {b.shape}")
-    if not (np.isfinite(a).all() and np.isfinite(b).all()):
-        raise ValueError("p_ref and p_est must be finite")
     dist = np.linalg.norm(a[:, None, :] - b[None, :, :], axis=2)
     allowed = dist <= max_distance
     pairs: list[tuple[int, int]]

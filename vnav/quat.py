@@ -298,7 +298,8 @@ def from_rotvec(rotvec: ArrayLike) -> FloatArray:
     small = t < _SMALL_ANGLE
     with np.errstate(invalid="ignore", divide="ignore"):
         k = np.sin(0.5 * t) / t
-    k = np.where(small, 0.5 - t2 / 48.0 * (1.0 - t2 / 80.0), k)
+    ts = np.where(small, t2, 0.0)  # the series only where it is used (no overflow elsewhere)
+    k = np.where(small, 0.5 - ts / 48.0 * (1.0 - ts / 80.0), k)
     q = np.empty((*v.shape[:-1], 4))
     q[..., :3] = k[..., None] * v
     q[..., 3] = np.cos(0.5 * t)

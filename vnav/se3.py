@@ -103,7 +103,8 @@ def check_transform(T: ArrayLike, name: str = "T", atol: float = 1e-9) -> FloatA
         or inf, the bottom row is not ``[0, 0, 0, 1]`` (the message gives the row received), or
         the rotation block is not a rotation; or if ``atol`` is not a finite number >= 0.
     """
-    atol = _v.tolerance(atol)
+    if type(atol) is not float or not 0.0 <= atol < math.inf:  # inline: the fast path's cost
+        atol = _v.tolerance(atol)
     if _clearly_rigid(T, atol):
         return T
     source_dtype = getattr(T, "dtype", None)

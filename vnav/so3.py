@@ -254,7 +254,8 @@ def check_rotation(R: ArrayLike, name: str = "R", atol: float = 1e-9) -> FloatAr
         float32 input, the widened tolerance and its dtype); or if ``atol`` is not a finite
         number >= 0.
     """
-    atol = _v.tolerance(atol)
+    if type(atol) is not float or not 0.0 <= atol < math.inf:  # inline: the fast path's cost
+        atol = _v.tolerance(atol)
     if _clearly_rotation(R, atol):
         return R
     return _check_rotation(R, name, atol, getattr(R, "dtype", None))
