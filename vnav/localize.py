@@ -73,7 +73,11 @@ class ConeEstimates(Mapping[str, "np.ndarray | None"]):
     @property
     def best(self) -> np.ndarray | None:
         """The first available estimate in ``vnav.methods.PREFERENCE`` order, or None."""
-        return next((p for m in PREFERENCE if (p := self.p_w_by_method[m]) is not None), None)
+        return _best(self.p_w_by_method)
+
+
+def _best(p_w_by_method: Mapping[str, np.ndarray | None]) -> np.ndarray | None:
+    return next((p for m in PREFERENCE if (p := p_w_by_method.get(m)) is not None), None)
 
 
 def localize(
@@ -130,15 +134,13 @@ def localize(
     if detection.touches_border:
         return ConeEstimates({})
     view = SilhouetteView(detection, camera, T_w_c)
-    estimates = ConeEstimates(
-        {
-            "depth_image": None if z_c is None else _from_depth(view, z_c, cone, far_m),
-            "ground_plane": _ground_plane(view, cone),
-            "known_height": _known_height(view, cone),
-        }
-    )
-    best = estimates.best
-    if best is None:
-        return estimates
-    p_c = np.array(view.camera_coordinates(best))
-    return ConeEstimates({**estimates, "naive": naive(p_c, T_w_b[:3, 3])})
+    p_w_by_method = {
+        "depth_image": None if z_c is None else _from_depth(view, z_c, cone, far_m),
+        "ground_plane": _ground_plane(view, cone),
+        "known_height": _known_height(view, cone),
+    }
+    best = _best(p_w_by_method)
+    if best is not None:
+        p_c = np.array(view.camera_coordinates(best))
+        p_w_by_method["naive"] = naive(p_c, T_w_b[:3, 3])
+    return ConeEstimates(p_w_by_method)
