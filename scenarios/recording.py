@@ -1,27 +1,40 @@
-"""Rerun recording of a scenario: the entity tree is the frame tree.
+"""Rerun recording of a scenario: the frames, the drone, what the camera saw and why each
+estimate lands where it does.
 
-Entity tree (paths declared in ``scenarios.viewer.entity``; frames in docs/CONVENTIONS.md)::
+Entity tree (paths declared in ``scenarios.viewer.entity``, frames in ``viewer.FRAME`` and
+docs/CONVENTIONS.md; "in F" is the named transform frame an entity is drawn in)::
 
-    world                          ViewCoordinates RIGHT_HAND_Z_UP (static)
-    world/body                     Transform3D T_w_b, every camera tick
-    world/body/camera              Transform3D T_b_c + Pinhole (true intrinsics, RDF) (static;
-                                   T_b_c every tick in a scenario that slides the camera)
-    world/body/camera/image        JPEG-compressed RGB
-    world/body/camera/depth        planar z-depth, PNG-encoded 16-bit millimetres, every 5th
-    world/body/camera/detections   Boxes2D + Points2D (apex, base keypoints)
-    world/cones/truth              Points3D of the true base centres (static)
-    world/cones/estimate/<method>  Points3D per method, every camera tick
-    world/depth_cloud              decimated depth image in world coordinates
-    world/trajectory               LineStrips3D of the flown path (static, at the end)
-    metrics/error/<method>         Scalars, metres
+    world                          in world; ViewCoordinates Z up; world axes (static)
+    world/body                     Transform3D T_w_b (world <- body) every tick; body axes
+    world/body/drone               the quadrotor's MuJoCo geoms as one mesh, in body (static)
+    world/body/camera              Transform3D T_b_c (body <- camera), camera axes, Pinhole
+                                   (image -> camera, true intrinsics, RDF) (static; T_b_c
+                                   every tick in a scenario that slides the camera)
+    world/body/camera/image        in image: JPEG-compressed RGB
+    world/body/camera/depth        in image: planar z-depth, PNG 16-bit mm, every 5th tick
+    world/body/camera/detections   in image: Boxes2D + Points2D (apex, base keypoints)
+    world/cones/mesh, truth        in world: the cones' MuJoCo geoms; true base centres
+    world/cones/estimate/<method>  in world: Points3D per method, every tick
+    world/cones/error/<method>     in world: segment from the true cone to each estimate
+    world/rays, rays/ground_hits   in world: camera centre -> base pixel's ray -> z = 0
+    world/naive_offset             in world: the drone's position + p_c (the naive mistake)
+    world/depth_cloud, trajectory  in world: depth image back-projected; the flown path
+    metrics/error/<method>         Scalars, metres (NaN, a gap, where a method gave nothing)
+    metrics/allowed/<method>       Scalars: the contract's bound at the matched ranges
     metrics/range_m                Scalars, metres
-    attitude/rpy_deg, quat_xyzw    roll/pitch/yaw (deg) and quaternion of R_w_b; gimbal_locked
+    attitude/rpy_deg, quat_xyzw    roll/pitch/yaw (deg), sign-continuous quaternion of R_w_b
+    attitude/gimbal_lock, quat_sign  StateChange lanes
     coordinates/cone0_<frame>      cone 0 in world, body, camera (truth) and its estimate
+    state                          TextDocument every tick: poses, p_c -> p_b -> p_w, attitude
+    plots/error_vs_range           image (matplotlib), logged at the end (static)
+    plots/depth_scale              the depth colour scale, logged at the end (static)
     description                    TextDocument (markdown)
 
 Timelines: ``tick`` (camera tick index) and ``sim_time`` (simulated seconds). Transforms are
 logged parent-from-child (Rerun's default relation), which is exactly vnav's
-``T_parent_child``: ``world/body`` gets ``T_w_b``, ``world/body/camera`` gets ``T_b_c``.
+``T_parent_child``, between named frames: ``world/body`` carries ``T_w_b`` from ``body`` to
+``world``, ``world/body/camera`` ``T_b_c`` from ``camera`` to ``body`` (the same graph as
+``vnav.frames.FrameTree``).
 
 ``Recording`` is a ``scenarios.runner.TickObserver``: it is fed the run's records
 (``scenarios.records``) and images, as evo's Rerun bridge is fed its trajectory objects. It
@@ -34,16 +47,23 @@ from __future__ import annotations
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
 import rerun as rr
 
+from scenarios.panel import state_text
+from scenarios.plots import depth_scale_png, error_against_range_png
 from scenarios.records import RunResult, TickRecord
 from scenarios.spec import ScenarioSpec
 from scenarios.viewer import (
     AXIS_COLORS,
+    AXIS_LENGTH_M,
     CONE0_SERIES,
+    FRAME,
+    IMAGE_PLANE_M,
+    RAY_COLOR,
     TRUTH_COLOR,
     blueprint,
     describe,
@@ -52,9 +72,18 @@ from scenarios.viewer import (
 )
 from vnav import quat
 from vnav.camera import PinholeCamera, depth_to_world_points
-from vnav.methods import METHOD_NAMES, METHODS
+from vnav.methods import METHOD_NAMES, METHODS, method
 
-__all__ = ["Recording", "depth_for_display_mm", "rerun_image_from_camera", "rerun_uv"]
+if TYPE_CHECKING:
+    from sim.mesh import Scenery, TriangleMesh
+
+__all__ = [
+    "Recording",
+    "continuous_sign",
+    "depth_for_display_mm",
+    "rerun_image_from_camera",
+    "rerun_uv",
+]
 
 APPLICATION_ID = "vnav-sim"
 DEPTH_LOG_EVERY = 5
@@ -66,6 +95,13 @@ the full float depth)."""
 JPEG_QUALITY = 80
 DEPTH_MM_MAX = np.iinfo(np.uint16).max
 
+
+DEPTH_COLORMAP = "viridis"
+"""The depth image's colour map (the same in Rerun and in matplotlib's colour bar)."""
+DEPTH_SCALE_STEP_M = 5.0
+"""The depth colour scale's top is rounded up to a multiple of this (see ``_depth_scale_m``)."""
+RAY_NO_HIT_M = 5.0
+"""A viewing ray that never meets the ground (it points up) is drawn this long."""
 
 CLOUD_STRIDE_PX = 16
 """Every 16th row and column of the depth image goes into the logged world cloud."""
@@ -120,14 +156,43 @@ def rerun_image_from_camera(camera: PinholeCamera) -> np.ndarray:
     return K
 
 
-def _pose_transform(T_parent_child: np.ndarray) -> rr.Transform3D:
+def _pose_transform(T_parent_child: np.ndarray, parent: str, child: str) -> rr.Transform3D:
+    """``T_parent_child`` between two named frames (Rerun's parent-from-child relation)."""
     # vnav and Rerun both order quaternions x, y, z, w: no reordering at this border.
     quat_xyzw = quat.from_matrix(T_parent_child[:3, :3])
     return rr.Transform3D(
         translation=T_parent_child[:3, 3],
         quaternion=rr.Quaternion(xyzw=quat_xyzw),
         relation=rr.TransformRelation.ParentFromChild,
+        child_frame=child,
+        parent_frame=parent,
     )
+
+
+def continuous_sign(quat_xyzw: np.ndarray, previous_xyzw: np.ndarray | None) -> np.ndarray:
+    """Each quaternion of a sequence with the sign that keeps the sequence continuous.
+
+    ``q`` and ``-q`` are the same rotation; a canonical form (``w >= 0``) jumps from ``q`` to
+    ``-q`` when ``w`` crosses zero. Plotted, that jump looks like a sudden rotation; choosing
+    each sign to agree with the previous one (positive dot product) removes it.
+
+    Parameters
+    ----------
+    quat_xyzw : ndarray, shape (N, 4)
+    previous_xyzw : ndarray, shape (4,), or None
+        The quaternion just before the first (from an earlier batch), if any.
+
+    Returns
+    -------
+    ndarray, shape (N, 4)
+    """
+    out = np.array(quat_xyzw, dtype=np.float64).reshape(-1, 4)
+    previous = previous_xyzw
+    for i in range(len(out)):
+        if previous is not None and float(out[i] @ previous) < 0.0:
+            out[i] = -out[i]
+        previous = out[i]
+    return out
 
 
 @dataclass
@@ -168,20 +233,23 @@ class Recording:
         self._buffer: list[_Buffered] = []
         self._encoder: ThreadPoolExecutor | None = None
         self._camera: PinholeCamera | None = None
+        self._spec: ScenarioSpec | None = None
         self._far_m = np.inf
         self._mount_moves = False
-        self._cone0_w = np.zeros(3)
+        self._cones_w = np.zeros((0, 3))
+        self._last_quat: np.ndarray | None = None
+        self._depth_p95_m: list[float] = []
 
     # ------------------------------------------------------------------ TickObserver
-    def start(self, spec: ScenarioSpec, seed: int, camera: PinholeCamera) -> None:
+    def start(self, spec: ScenarioSpec, seed: int, camera: PinholeCamera, scenery: Scenery) -> None:
         """Open the file and log what does not change over the run."""
         self.rec = rr.RecordingStream(APPLICATION_ID, recording_id=self.recording_id)
         self.rec.save(str(self.path))
         self._encoder = ThreadPoolExecutor(max_workers=1, thread_name_prefix="vnav-encode")
-        self._camera, self._far_m = camera, spec.scene.zfar_m
+        self._spec, self._camera, self._far_m = spec, camera, spec.scene.zfar_m
         self._mount_moves = spec.flight.moves_camera
-        self._cone0_w = np.array(spec.scene.cones_w[0], dtype=np.float64)
-        _log_static(self.rec, spec, seed, camera)
+        self._cones_w = np.array(spec.scene.cones_w, dtype=np.float64).reshape(-1, 3)
+        _log_static(self.rec, spec, seed, camera, scenery)
 
     def on_tick(self, record: TickRecord, rgb: np.ndarray, depth_m: np.ndarray | None) -> None:
         """Queue one camera tick; send the queue as columns every ``FLUSH_EVERY_TICKS``.
@@ -200,17 +268,56 @@ class Recording:
             cloud_w = _depth_cloud_w(
                 depth_m, self._camera, record.T_w_b_est @ record.T_b_c, self._far_m
             )
+        if logged_depth is not None:
+            sample = logged_depth[::CLOUD_STRIDE_PX, ::CLOUD_STRIDE_PX]
+            sample = sample[np.isfinite(sample) & (sample < self._far_m)]
+            if sample.size:
+                self._depth_p95_m.append(float(np.percentile(sample, 95.0)))
         self._buffer.append(_Buffered(record, encoded, cloud_w))
         if len(self._buffer) >= FLUSH_EVERY_TICKS:
             self._flush()
 
     def finish(self, result: RunResult) -> None:
-        """Log the flown trajectory and finish the file (its footer is written last)."""
-        assert self.rec is not None, "start() first"
-        self.rec.log(
+        """Log the flown path, the plots, the depth scale and the layout; finish the file."""
+        assert self.rec is not None and self._spec is not None, "start() first"
+        self._flush()
+        rec = self.rec
+        _in_frame(rec, entity.TRAJECTORY, FRAME.WORLD)
+        rec.log(
             entity.TRAJECTORY,
-            rr.LineStrips3D([result.trajectory_w], colors=[(255, 200, 0)], radii=0.03),
+            rr.LineStrips3D([result.trajectory_w], colors=[(170, 170, 185)], radii=0.03),
             static=True,
+        )
+        rec.log(
+            entity.ERROR_VS_RANGE,
+            rr.EncodedImage(contents=error_against_range_png(result), media_type="image/png"),
+            static=True,
+        )
+        depth_max_m = _depth_scale_m(result, self._depth_p95_m)
+        rec.log(
+            entity.DEPTH,
+            rr.EncodedDepthImage.from_fields(
+                colormap=DEPTH_COLORMAP, depth_range=[0.0, float(depth_max_m)]
+            ),
+            static=True,
+        )
+        rec.log(
+            entity.DEPTH_SCALE,
+            rr.EncodedImage(
+                contents=depth_scale_png(float(depth_max_m), DEPTH_COLORMAP),
+                media_type="image/png",
+            ),
+            static=True,
+        )
+        eye_w, look_target_w = eye_for(self._spec, result)
+        rec.send_blueprint(
+            blueprint(
+                eye_w,
+                look_target_w,
+                self._spec.view,
+                T_w_b=result.ticks[-1].T_w_b if result.ticks else None,
+                error_top_m=_error_tops_m(result),
+            )
         )
         self._close()
 
@@ -236,15 +343,30 @@ class Recording:
         rows, self._buffer = self._buffer, []
         if not rows:
             return
-        assert self.rec is not None
+        assert self.rec is not None and self._camera is not None
         send = _Sender(self.rec)
         images = [r.encoded.result() for r in rows]
+        quats = continuous_sign(np.array([r.record.quat_xyzw for r in rows]), self._last_quat)
+        self._last_quat = quats[-1]
         _send_poses(send, rows, self._mount_moves)
         _send_images(send, rows, images)
         _send_detections(send, rows)
-        _send_estimates_and_errors(send, rows)
-        _send_attitude(send, rows)
-        _send_cone0(send, rows, self._cone0_w)
+        _send_estimates(send, rows, self._cones_w)
+        _send_errors(send, rows)
+        _send_rays(send, rows, self._camera, self._far_m)
+        _send_attitude(send, rows, quats)
+        _send_cone0(send, rows, self._cones_w[0])
+        send(
+            entity.STATE,
+            rows,
+            rr.TextDocument.columns(
+                text=[
+                    state_text(r.record, q, self._cones_w[0])
+                    for r, q in zip(rows, quats, strict=True)
+                ],
+                media_type=["text/markdown"] * len(rows),
+            ),
+        )
         with_cloud = [r for r in rows if r.cloud_w is not None]
         clouds = [r.cloud_w for r in with_cloud]
         send(
@@ -256,31 +378,112 @@ class Recording:
         )
 
 
+def _depth_scale_m(result: RunResult, depth_p95_m: list[float]) -> float:
+    """Top of the depth colour scale: 1.5 times the 90th percentile of the cones' ranges, so
+    the colours resolve the cones and their surroundings (the far ground saturates); without
+    a matched cone, the 95th percentile of the logged depths. Rounded up to 5 m."""
+    ranges = [d.range_m for t in result.ticks for d in t.detections if d.range_m is not None]
+    if ranges:
+        top_m = 1.5 * float(np.percentile(ranges, 90.0))
+    else:
+        top_m = max(depth_p95_m, default=DEPTH_SCALE_STEP_M)
+    return DEPTH_SCALE_STEP_M * float(np.ceil(top_m / DEPTH_SCALE_STEP_M))
+
+
+def _error_tops_m(result: RunResult) -> dict[str, float | None]:
+    """Top of each checked method's error plot: a little above its largest error or bound
+    (so the grey bound stays in view), or None if the method gave no estimate."""
+    tops: dict[str, float | None] = {}
+    for m in METHODS:
+        if m.bound is None:
+            continue
+        errors = result.errors(m.name)
+        if not errors.size:
+            tops[m.name] = None
+            continue
+        allowed = m.bound.allowed_m(result.ranges_for(m.name))
+        tops[m.name] = 1.15 * float(max(errors.max(), allowed.max()))
+    return tops
+
+
 # ---------------------------------------------------------------------- static content
 
 
-def _log_static(rec: rr.RecordingStream, spec: ScenarioSpec, seed: int, camera) -> None:
-    """Axes, mount, intrinsics, truth, description, series styles and the layout."""
-    rec.log(entity.WORLD, rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+def _in_frame(rec: rr.RecordingStream, path: str, frame: str) -> None:
+    """Draw the entity at ``path`` in the named transform frame ``frame``."""
+    rec.log(path, rr.CoordinateFrame(frame), static=True)
+
+
+def _mesh(mesh: TriangleMesh) -> rr.Mesh3D:
+    return rr.Mesh3D(
+        vertex_positions=mesh.vertices.astype(np.float32),
+        triangle_indices=mesh.triangles,
+        vertex_normals=mesh.normals.astype(np.float32),
+        vertex_colors=mesh.colors_rgba,
+    )
+
+
+def _log_static(
+    rec: rr.RecordingStream,
+    spec: ScenarioSpec,
+    seed: int,
+    camera: PinholeCamera,
+    scenery: Scenery,
+) -> None:
+    """Frames and their axes, the meshes, mount, intrinsics, truth, description, styles."""
+    rec.log(
+        entity.WORLD,
+        rr.ViewCoordinates.RIGHT_HAND_Z_UP,
+        rr.CoordinateFrame(FRAME.WORLD),
+        rr.TransformAxes3D(AXIS_LENGTH_M[FRAME.WORLD], show_frame=True),
+        static=True,
+    )
+    rec.log(
+        entity.BODY, rr.TransformAxes3D(AXIS_LENGTH_M[FRAME.BODY], show_frame=True), static=True
+    )
+    _in_frame(rec, entity.DRONE, FRAME.BODY)
+    rec.log(entity.DRONE, _mesh(scenery.drone_b), static=True)
     if not spec.flight.moves_camera:  # a sliding mount is logged every tick instead
-        rec.log(entity.CAMERA, _pose_transform(spec.scene.camera.T_b_c), static=True)
+        rec.log(
+            entity.CAMERA,
+            _pose_transform(spec.scene.camera.T_b_c, FRAME.BODY, FRAME.CAMERA),
+            static=True,
+        )
     rec.log(
         entity.CAMERA,
+        rr.TransformAxes3D(AXIS_LENGTH_M[FRAME.CAMERA], show_frame=True),
         rr.Pinhole(
             image_from_camera=rerun_image_from_camera(camera),
             resolution=[camera.width, camera.height],
             camera_xyz=rr.ViewCoordinates.RDF,
-            image_plane_distance=1.0,
+            image_plane_distance=IMAGE_PLANE_M,
+            child_frame=FRAME.IMAGE,
+            parent_frame=FRAME.CAMERA,
         ),
         static=True,
     )
+    for path in (entity.IMAGE, entity.DEPTH, entity.DETECTIONS, entity.KEYPOINTS):
+        _in_frame(rec, path, FRAME.IMAGE)
+    world_paths = [
+        entity.CONES,
+        entity.TRUTH,
+        entity.RAYS,
+        entity.GROUND_HITS,
+        entity.NAIVE_OFFSET,
+        entity.DEPTH_CLOUD,
+    ]
+    world_paths += [entity.estimate(m) for m in METHOD_NAMES]
+    world_paths += [entity.error_segment(m) for m in METHOD_NAMES]
+    for path in world_paths:
+        _in_frame(rec, path, FRAME.WORLD)
+    rec.log(entity.CONES, _mesh(scenery.cones_w), static=True)
     cones_w = np.array(spec.scene.cones_w, dtype=np.float64).reshape(-1, 3)
     rec.log(
         entity.TRUTH,
         rr.Points3D(
             cones_w,
             colors=[TRUTH_COLOR],
-            radii=0.2,
+            radii=0.05,
             labels=[f"cone {i}" for i in range(len(cones_w))],
         ),
         static=True,
@@ -291,34 +494,76 @@ def _log_static(rec: rr.RecordingStream, spec: ScenarioSpec, seed: int, camera) 
         static=True,
     )
     _log_styles(rec)
-    eye_w, look_target_w = eye_for(spec)
-    rec.send_blueprint(blueprint(eye_w, look_target_w, spec.view))
 
 
 def _log_styles(rec: rr.RecordingStream) -> None:
-    """Colours and names, logged once: per-tick rows carry only positions and values."""
+    """Colours, names and sizes, logged once: per-tick rows carry only positions and values."""
     for m in METHODS:
         rec.log(
-            entity.error(m.name), rr.SeriesLines(colors=[m.color_rgb], names=[m.name]), static=True
+            entity.error(m.name),
+            rr.SeriesLines(colors=[m.color_rgb], names=[f"{m.name} error"]),
+            static=True,
+        )
+        rec.log(
+            entity.allowed(m.name),
+            rr.SeriesLines(colors=[(150, 150, 150)], names=["contract's bound"]),
+            static=True,
         )
         rec.log(
             entity.estimate(m.name),
-            rr.Points3D.from_fields(colors=[m.color_rgb], radii=0.12),
+            rr.Points3D.from_fields(colors=[m.color_rgb], radii=0.08),
+            static=True,
+        )
+        rec.log(
+            entity.error_segment(m.name),
+            rr.LineStrips3D.from_fields(colors=[m.color_rgb], radii=0.015),
             static=True,
         )
     series = {
         entity.RANGE: ([(200, 200, 200)], ["range"]),
         entity.RPY: (AXIS_COLORS, ["roll", "pitch", "yaw"]),
         entity.QUAT: ([*AXIS_COLORS, (220, 220, 220)], ["x", "y", "z", "w"]),
-        entity.GIMBAL_LOCK: ([(255, 200, 0)], ["gimbal lock"]),
     }
     for name in CONE0_SERIES:
         series[entity.cone0(name)] = (AXIS_COLORS, [f"{a} ({name})" for a in "xyz"])
     for path, (colors, names) in series.items():
         rec.log(path, rr.SeriesLines(colors=colors, names=names), static=True)
     rec.log(
+        entity.GIMBAL_LOCK,
+        rr.StateConfiguration(
+            values=["free", "locked"],
+            labels=["roll, pitch, yaw all defined", "gimbal lock: only yaw - roll defined"],
+            colors=[0x3A7D44FF, 0xD04040FF],
+        ),
+        static=True,
+    )
+    rec.log(
+        entity.QUAT_SIGN,
+        rr.StateConfiguration(
+            values=["w>=0", "w<0"],
+            labels=["q plotted as is (w >= 0)", "q plotted as -q (w < 0): same rotation"],
+            colors=[0x4060A0FF, 0x8050A0FF],
+        ),
+        static=True,
+    )
+    rec.log(
         entity.DEPTH_CLOUD,
         rr.Points3D.from_fields(colors=[(150, 150, 200)], radii=0.04),
+        static=True,
+    )
+    rec.log(
+        entity.RAYS,
+        rr.LineStrips3D.from_fields(colors=[RAY_COLOR], radii=0.012),
+        static=True,
+    )
+    rec.log(
+        entity.GROUND_HITS,
+        rr.Points3D.from_fields(colors=[RAY_COLOR], radii=0.06),
+        static=True,
+    )
+    rec.log(
+        entity.NAIVE_OFFSET,
+        rr.LineStrips3D.from_fields(colors=[method("naive").color_rgb], radii=0.02),
         static=True,
     )
     rec.log(entity.DETECTIONS, rr.Boxes2D.from_fields(colors=[(255, 220, 0)]), static=True)
@@ -346,15 +591,17 @@ class _Sender:
 
 def _send_poses(send: _Sender, rows: list[_Buffered], mount_moves: bool) -> None:
     """``T_w_b`` on ``world/body`` and, if it moves, ``T_b_c`` on the camera."""
-    poses = {entity.BODY: [r.record.T_w_b for r in rows]}
+    poses = {entity.BODY: ([r.record.T_w_b for r in rows], FRAME.WORLD, FRAME.BODY)}
     if mount_moves:
-        poses[entity.CAMERA] = [r.record.T_b_c for r in rows]
-    for path, T in poses.items():
+        poses[entity.CAMERA] = ([r.record.T_b_c for r in rows], FRAME.BODY, FRAME.CAMERA)
+    for path, (T, parent, child) in poses.items():
         T_parent_child = np.array(T)
         # vnav and Rerun both order quaternions x, y, z, w: no reordering here.
         columns = rr.Transform3D.columns(
             translation=T_parent_child[:, :3, 3],
             quaternion=quat.from_matrix(T_parent_child[:, :3, :3]),
+            child_frame=[child] * len(rows),
+            parent_frame=[parent] * len(rows),
         )
         send(path, rows, columns)
 
@@ -408,39 +655,113 @@ def _send_detections(send: _Sender, rows: list[_Buffered]) -> None:
     )
 
 
-def _send_estimates_and_errors(send: _Sender, rows: list[_Buffered]) -> None:
-    """Per method: its estimates in 3D and its mean error; the mean range of matched cones."""
-    for method in METHOD_NAMES:
-        points = [r.record.estimates_w(method) for r in rows]
+def _strips(segments: list[list[np.ndarray]]) -> rr.ComponentColumnList:
+    """LineStrips3D columns: one list of (2, 3) segments per tick."""
+    flat = [s for tick in segments for s in tick]
+    return rr.LineStrips3D.columns(strips=flat).partition([len(t) for t in segments])
+
+
+def _send_estimates(send: _Sender, rows: list[_Buffered], cones_w: np.ndarray) -> None:
+    """Per method: its estimates, and a segment from the matched true cone to each."""
+    for name in METHOD_NAMES:
+        points = [r.record.estimates_w(name) for r in rows]
         send(
-            entity.estimate(method),
+            entity.estimate(name),
             rows,
             rr.Points3D.columns(positions=np.concatenate(points)).partition(
                 [len(p) for p in points]
             ),
         )
-        errors = [(r, r.record.mean_error_m(method)) for r in rows]
-        errors = [(r, e) for r, e in errors if e is not None]
-        send(
-            entity.error(method),
-            [r for r, _ in errors],
-            rr.Scalars.columns(scalars=[e for _, e in errors]),
-        )
-    ranges = [(r, r.record.mean_range_m()) for r in rows]
-    ranges = [(r, x) for r, x in ranges if x is not None]
-    send(entity.RANGE, [r for r, _ in ranges], rr.Scalars.columns(scalars=[x for _, x in ranges]))
+        segments = [
+            [
+                np.array([cones_w[d.cone_index], d.estimates_w[name]])
+                for d in r.record.detections
+                if d.cone_index is not None and name in d.estimates_w
+            ]
+            for r in rows
+        ]
+        send(entity.error_segment(name), rows, _strips(segments))
 
 
-def _send_attitude(send: _Sender, rows: list[_Buffered]) -> None:
-    """Roll, pitch, yaw in degrees, the quaternion and the gimbal-lock flag of ``R_w_b``."""
+def _send_errors(send: _Sender, rows: list[_Buffered]) -> None:
+    """Per method its mean error and the contract's bound at the matched ranges (NaN, drawn
+    as a gap, at a tick where the method matched nothing); the mean range of matched cones."""
+    for m in METHODS:
+        errors, allowed = [], []
+        for r in rows:
+            scored = [d for d in r.record.detections if m.name in d.errors_m]
+            errors.append(np.mean([d.errors_m[m.name] for d in scored]) if scored else np.nan)
+            if m.bound is not None:
+                ranges = np.array([d.range_m for d in scored], dtype=np.float64)
+                allowed.append(np.mean(m.bound.allowed_m(ranges)) if scored else np.nan)
+        send(entity.error(m.name), rows, rr.Scalars.columns(scalars=errors))
+        if m.bound is not None:
+            send(entity.allowed(m.name), rows, rr.Scalars.columns(scalars=allowed))
+    ranges = [r.record.mean_range_m() for r in rows]
+    send(
+        entity.RANGE,
+        rows,
+        rr.Scalars.columns(scalars=[np.nan if x is None else x for x in ranges]),
+    )
+
+
+def _ray_segments(
+    record: TickRecord, camera: PinholeCamera, far_m: float
+) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """The ray from the (estimated) camera centre through each detection's base pixel, to
+    where it meets the ground z = 0; and those ground points."""
+    if not record.detections:
+        return [], []
+    T_w_c = record.T_w_b_est @ record.T_b_c
+    o_w = T_w_c[:3, 3]
+    uv = np.array([d.detection.base_uv for d in record.detections])
+    d_w = camera.rays(uv) @ T_w_c[:3, :3].T
+    strips, hits = [], []
+    for d in d_w:
+        # o + s d meets z = 0 at s = -o_z / d_z, in front of the camera and before the far plane.
+        s = -o_w[2] / d[2] if d[2] < 0.0 else np.inf
+        if 0.0 < s <= far_m:
+            hit = o_w + s * d
+            hits.append(hit)
+            strips.append(np.array([o_w, hit]))
+        else:
+            strips.append(np.array([o_w, o_w + RAY_NO_HIT_M * d]))
+    return strips, hits
+
+
+def _send_rays(send: _Sender, rows: list[_Buffered], camera: PinholeCamera, far_m: float) -> None:
+    """Viewing rays and ground hits; the naive estimate's offset drawn from the drone."""
+    rays = [_ray_segments(r.record, camera, far_m) for r in rows]
+    send(entity.RAYS, rows, _strips([strips for strips, _ in rays]))
+    hits = [np.array(h).reshape(-1, 3) for _, h in rays]
+    send(
+        entity.GROUND_HITS,
+        rows,
+        rr.Points3D.columns(positions=np.concatenate(hits)).partition([len(h) for h in hits]),
+    )
+    # naive = t_w_b + p_c: the segment from the drone to it is p_c, taken as a world offset.
+    offsets = [
+        [np.array([r.record.T_w_b_est[:3, 3], p]) for p in r.record.estimates_w("naive")]
+        for r in rows
+    ]
+    send(entity.NAIVE_OFFSET, rows, _strips(offsets))
+
+
+def _send_attitude(send: _Sender, rows: list[_Buffered], quats: np.ndarray) -> None:
+    """Roll, pitch, yaw in degrees, the sign-continuous quaternion and the state lanes."""
     records = [r.record for r in rows]
     rpy_deg = np.degrees(np.array([t.rpy_rad for t in records]))
     send(entity.RPY, rows, rr.Scalars.columns(scalars=rpy_deg))
-    send(entity.QUAT, rows, rr.Scalars.columns(scalars=np.array([t.quat_xyzw for t in records])))
+    send(entity.QUAT, rows, rr.Scalars.columns(scalars=quats))
     send(
         entity.GIMBAL_LOCK,
         rows,
-        rr.Scalars.columns(scalars=[float(t.gimbal_locked) for t in records]),
+        rr.StateChange.columns(state=["locked" if t.gimbal_locked else "free" for t in records]),
+    )
+    send(
+        entity.QUAT_SIGN,
+        rows,
+        rr.StateChange.columns(state=["w<0" if q[3] < 0.0 else "w>=0" for q in quats]),
     )
 
 

@@ -34,6 +34,7 @@ from sim.flight import (
     MinimumJerkTrajectory,
     OrbitTrajectory,
 )
+from sim.mesh import Scenery, scenery
 from sim.render import Renderer
 from sim.world import World
 from vnav import quat, se3, so3
@@ -51,11 +52,14 @@ STAGES = ("physics", "render", "detect", "localize", "log")
 class TickObserver(Protocol):
     """Receives a run as it happens (``scenarios.recording.Recording`` is one).
 
-    ``start`` before the first tick, ``on_tick`` after each, then ``finish`` with the whole
-    result, or ``abort`` if the run fails.
+    ``start`` before the first tick (with the camera and the drone and cones as meshes built
+    from the MuJoCo model, ``sim.mesh``), ``on_tick`` after each, then ``finish`` with the
+    whole result, or ``abort`` if the run fails.
     """
 
-    def start(self, spec: ScenarioSpec, seed: int, camera: PinholeCamera) -> None: ...
+    def start(
+        self, spec: ScenarioSpec, seed: int, camera: PinholeCamera, scenery: Scenery
+    ) -> None: ...
 
     def on_tick(self, record: TickRecord, rgb: np.ndarray, depth_m: np.ndarray | None) -> None: ...
 
@@ -94,7 +98,9 @@ def run_scenario(
     world = World.from_config(spec.scene)
     try:
         if observer:
-            observer.start(spec, seed, world.camera)
+            observer.start(
+                spec, seed, world.camera, scenery(world.model, world.data, len(spec.scene.cones_w))
+            )
         with Renderer(world) as renderer:
             setup_s = time.perf_counter() - setup_start
             _run_ticks(spec, world, renderer, result, observer, progress)

@@ -1,28 +1,40 @@
-"""What the viewer shows and how: entity paths, colours, the layout, the eye and the text.
+"""What the viewer shows and how: entity paths, frames, sizes, colours, the layout and the eye.
 
 Everything here is a viewer concern, declared once and shared by the recording
 (``scenarios.recording``) and the tests that read a recording back:
 
-- ``entity``: every Rerun entity path (the entity tree is the frame tree, docs/CONVENTIONS.md);
-- colours: each method's from ``vnav.methods``, the truth's, the x/y/z axes';
-- ``blueprint``: the default layout; ``eye_for``: where the 3D view starts;
+- ``entity``: every Rerun entity path;
+- ``FRAME``: the named transform frames (the same names as ``vnav.frames`` and
+  docs/CONVENTIONS.md: world, body, camera, and the image plane);
+- ``AXIS_LENGTH_M``: how long each frame's drawn axes are (world > body > camera);
+- colours: each method's from ``vnav.methods``, the truth's, the rays', the x/y/z axes';
+- ``blueprint``: the default layout; ``eye_for``: where the 3D view looks from;
 - ``describe``: the markdown shown beside the recording.
 """
 
 from __future__ import annotations
 
 from types import SimpleNamespace
+from typing import TYPE_CHECKING
 
 import numpy as np
 import rerun.blueprint as rrb
 
 from scenarios.schema import VIEW_NAMES
 from scenarios.spec import ScenarioSpec
+from vnav import so3
 from vnav.methods import METHODS, PREFERENCE
+
+if TYPE_CHECKING:
+    from scenarios.records import RunResult
 
 __all__ = [
     "AXIS_COLORS",
+    "AXIS_LENGTH_M",
     "CONE0_SERIES",
+    "FRAME",
+    "IMAGE_PLANE_M",
+    "RAY_COLOR",
     "TRUTH_COLOR",
     "VIEWS",
     "blueprint",
@@ -36,8 +48,16 @@ def _error(method: str) -> str:
     return f"metrics/error/{method}"
 
 
+def _allowed(method: str) -> str:
+    return f"metrics/allowed/{method}"
+
+
 def _estimate(method: str) -> str:
     return f"world/cones/estimate/{method}"
+
+
+def _error_segment(method: str) -> str:
+    return f"world/cones/error/{method}"
 
 
 def _cone0(frame_name: str) -> str:
@@ -47,140 +67,280 @@ def _cone0(frame_name: str) -> str:
 entity = SimpleNamespace(
     WORLD="world",
     BODY="world/body",
+    DRONE="world/body/drone",
     CAMERA="world/body/camera",
     IMAGE="world/body/camera/image",
     DEPTH="world/body/camera/depth",
     DETECTIONS="world/body/camera/detections",
     KEYPOINTS="world/body/camera/detections/keypoints",
+    CONES="world/cones/mesh",
     TRUTH="world/cones/truth",
+    RAYS="world/rays",
+    GROUND_HITS="world/rays/ground_hits",
+    NAIVE_OFFSET="world/naive_offset",
     DEPTH_CLOUD="world/depth_cloud",
     TRAJECTORY="world/trajectory",
     RANGE="metrics/range_m",
     RPY="attitude/rpy_deg",
     QUAT="attitude/quat_xyzw",
-    GIMBAL_LOCK="attitude/gimbal_locked",
+    GIMBAL_LOCK="attitude/gimbal_lock",
+    QUAT_SIGN="attitude/quat_sign",
+    STATE="state",
+    ERROR_VS_RANGE="plots/error_vs_range",
+    DEPTH_SCALE="plots/depth_scale",
     DESCRIPTION="description",
     error=_error,
+    allowed=_allowed,
     estimate=_estimate,
+    error_segment=_error_segment,
     cone0=_cone0,
 )
 """Every entity path of a recording (``entity.error(method)`` and the like for families)."""
 
+FRAME = SimpleNamespace(WORLD="world", BODY="body", CAMERA="camera", IMAGE="image")
+"""Named transform frames: ``T_w_b`` maps body into world, ``T_b_c`` camera into body, and the
+pinhole maps the image plane into the camera (docs/CONVENTIONS.md)."""
+
+AXIS_LENGTH_M = {FRAME.WORLD: 2.0, FRAME.BODY: 1.0, FRAME.CAMERA: 0.5}
+"""Drawn axis length per frame: the lengths tell the three frames apart where they overlap."""
+IMAGE_PLANE_M = 0.4
+"""Distance of the drawn image plane from the camera centre (the frustum's depth)."""
+
 CONE0_SERIES: tuple[str, ...] = ("world", "body", "camera", "estimate_world")
 """Cone 0's coordinate series: its truth in three frames and its depth-image estimate."""
 TRUTH_COLOR = (255, 255, 255)
+RAY_COLOR = (255, 210, 60)
+"""The viewing ray through each detection and its ground hit."""
 AXIS_COLORS = [(230, 80, 80), (80, 200, 80), (80, 120, 240)]
 """x, y, z (and roll, pitch, yaw) in every plot."""
 
 
 VIEWS: dict[str, int] = {name: i for i, name in enumerate(VIEW_NAMES)}
-"""Tabs of the lower left panel, by the name a scenario's ``view`` key uses."""
+"""Tabs of the lower left panel, by the name a scenario's ``view`` key uses (further tabs
+follow these)."""
 
 
-def blueprint(eye_w=None, look_target_w=None, view: str = "errors") -> rrb.Blueprint:
-    """The default layout: plots on the left, the 3D world and the description on the right.
+def blueprint(
+    eye_w=None,
+    look_target_w=None,
+    view: str = "errors",
+    *,
+    T_w_b=None,
+    error_top_m: dict[str, float | None] | None = None,
+) -> rrb.Blueprint:
+    """The default layout: images and plots on the left; the world, a close-up of the drone
+    and the state panel on the right.
+
+    The time panel starts "following": the viewer opens at the last tick, where the lesson
+    has played out, and any tick can be picked on the timeline.
 
     Parameters
     ----------
     eye_w, look_target_w : array_like, shape (3,), optional
         Where the 3D view's eye starts and what it looks at, world frame (z up).
     view : {"errors", "coordinates", "attitude"}
-        The tab shown first below the error plot (see ``VIEWS``).
+        The tab shown first in the lower left panel (see ``VIEWS``).
+    T_w_b : array_like, shape (4, 4), optional
+        The drone's pose at the last tick: the close-up view starts behind it, to its left
+        and above (``CLOSE_UP_EYE_B``), and then follows the drone.
+    error_top_m : dict of str to float or None, optional
+        Top of each checked method's error plot, metres (None: the method gave no estimate).
     """
     if view not in VIEWS:
         raise ValueError(f"view must be one of {list(VIEWS)}, got {view!r}")
     eye = None
     if eye_w is not None and look_target_w is not None:
         eye = rrb.EyeControls3D(position=eye_w, look_target=look_target_w, eye_up=[0, 0, 1])
-    checked = [f"+ /{entity.error(m)}" for m in PREFERENCE]
+    world = rrb.Spatial3DView(
+        name="world",
+        origin=entity.WORLD,
+        # The depth image would also be drawn back-projected in 3D; the world-frame cloud
+        # computed by vnav (world/depth_cloud) is the one to look at here.
+        contents=["+ $origin/**", f"- /{entity.DEPTH}"],
+        eye_controls=eye,
+    )
     return rrb.Blueprint(
         rrb.Horizontal(
+            rrb.Vertical(_image_tabs(), _lower_tabs(view, error_top_m or {}), row_shares=[4, 5]),
             rrb.Vertical(
-                _image_tabs(),
-                rrb.TimeSeriesView(name="position error (m)", origin="metrics", contents=checked),
-                _lower_tabs(view),
-                row_shares=[3, 2, 3],
-            ),
-            rrb.Vertical(
-                rrb.Spatial3DView(
-                    name="world",
-                    origin=entity.WORLD,
-                    # The depth image would also be drawn back-projected in 3D; the world-frame
-                    # cloud computed by vnav (world/depth_cloud) is the one to look at here.
-                    contents=["+ $origin/**", f"- /{entity.DEPTH}"],
-                    eye_controls=eye,
+                rrb.Horizontal(world, _close_up(T_w_b), column_shares=[3, 2]),
+                rrb.Tabs(
+                    rrb.TextDocumentView(name="state at the time cursor", origin=entity.STATE),
+                    rrb.TextDocumentView(name="scenario", origin=entity.DESCRIPTION),
                 ),
-                rrb.TextDocumentView(name="scenario", origin=entity.DESCRIPTION),
-                row_shares=[4, 1],
+                row_shares=[3, 2],
             ),
-            # Plots left, world right: the viewer's start-up notices (top right) then
-            # cover a corner of the large 3D view rather than the camera image.
             column_shares=[2, 3],
         ),
+        rrb.TimePanel(state="collapsed", play_state="following"),
         collapse_panels=True,
     )
 
 
-def _image_tabs() -> rrb.Tabs:
-    """The camera image and the depth image, each with the detections drawn on it."""
-    return rrb.Tabs(
-        *[
-            rrb.Spatial2DView(
-                name=name,
-                origin=entity.CAMERA,
-                contents=[f"+ /{image}", f"+ /{entity.DETECTIONS}/**"],
-            )
-            for name, image in (("camera", entity.IMAGE), ("depth", entity.DEPTH))
-        ]
+CLOSE_UP_EYE_B = np.array([-2.0, 1.2, 1.2])
+"""Where the close-up's eye starts in the drone's yaw frame: behind, to the left, above (m)."""
+
+
+def _close_up(T_w_b) -> rrb.Spatial3DView:
+    """The drone at the last tick, its three frames and the start of each ray, from 2.6 m.
+
+    The eye does not track the drone (Rerun 0.41's ``tracking_entity`` misplaces an entity
+    drawn in a named frame): scrubbing back in a flight, the drone leaves this view; the
+    world view shows it everywhere.
+    """
+    eye = None
+    if T_w_b is not None:
+        T_w_b = np.asarray(T_w_b, dtype=np.float64)
+        drone_w = T_w_b[:3, 3]
+        # Turned by the drone's heading only, so the eye stays above whatever the attitude.
+        yaw = float(np.arctan2(T_w_b[1, 0], T_w_b[0, 0]))
+        offset_w = so3.rot_z(yaw) @ CLOSE_UP_EYE_B
+        eye = rrb.EyeControls3D(
+            position=drone_w + offset_w,
+            look_target=drone_w,
+            eye_up=[0, 0, 1],
+        )
+    return rrb.Spatial3DView(
+        name="drone close-up",
+        origin=entity.WORLD,
+        contents=[
+            "+ $origin/**",
+            f"- /{entity.DEPTH}",
+            f"- /{entity.DEPTH_CLOUD}",
+            f"- /{entity.TRAJECTORY}",
+        ],
+        eye_controls=eye,
     )
 
 
-def _lower_tabs(view: str) -> rrb.Tabs:
-    """The tabs below the error plot, in ``VIEWS`` order, ``view`` shown first."""
+def _image_tabs() -> rrb.Tabs:
+    """The camera image, and the depth image beside its colour scale."""
+    camera = rrb.Spatial2DView(
+        name="camera",
+        origin=entity.CAMERA,
+        contents=[f"+ /{entity.IMAGE}", f"+ /{entity.DETECTIONS}/**"],
+    )
+    depth = rrb.Horizontal(
+        rrb.Spatial2DView(
+            name="depth (m)",
+            origin=entity.CAMERA,
+            contents=[f"+ /{entity.DEPTH}", f"+ /{entity.DETECTIONS}/**"],
+        ),
+        rrb.Spatial2DView(name="z (m)", origin=entity.DEPTH_SCALE),
+        column_shares=[6, 1],
+        name="depth",
+    )
+    return rrb.Tabs(camera, depth)
+
+
+def _series(name: str, paths: list[str], y_range=None) -> rrb.TimeSeriesView:
+    """A time-series plot whose title names its curves (a legend would cover the data)."""
+    return rrb.TimeSeriesView(
+        name=name,
+        origin="/",
+        contents=[f"+ /{p}" for p in paths],
+        axis_y=rrb.ScalarAxis(range=y_range) if y_range is not None else None,
+        plot_legend=rrb.PlotLegend(visible=False),
+    )
+
+
+def _error_plot(name: str, tops_m: dict[str, float | None]) -> rrb.TimeSeriesView:
+    """One checked method's mean error per tick, with the contract's bound in grey."""
+    top_m = tops_m.get(name)
+    if name in tops_m and top_m is None:
+        title = f"{name} error (m): no estimate in this run"
+    else:
+        title = f"{name} error (m), grey: the contract's bound"
+    return _series(
+        title,
+        [entity.error(name), entity.allowed(name)],
+        y_range=(0.0, top_m) if top_m is not None else None,
+    )
+
+
+_XYZ = "x (red), y (green), z (blue)"
+_CONE0_TITLES = {
+    "world": f"cone 0 in world, p_w (m): {_XYZ}",
+    "body": f"cone 0 in body, p_b (m): {_XYZ}",
+    "camera": f"cone 0 in camera, p_c (m): {_XYZ}",
+    "estimate_world": f"depth_image estimate of p_w (m): {_XYZ}",
+}
+
+
+def _lower_tabs(view: str, error_top_m: dict[str, float | None]) -> rrb.Tabs:
+    """The tabs below the images: ``VIEWS`` first (in order), then the other plots."""
+    errors = rrb.Vertical(
+        *[_error_plot(name, error_top_m) for name in PREFERENCE],
+        name="position error",
+    )
+    coordinates = rrb.Grid(
+        *[_series(_CONE0_TITLES[f], [entity.cone0(f)]) for f in CONE0_SERIES],
+        name="cone 0 in each frame",
+    )
+    attitude = rrb.Vertical(
+        _series(
+            "R_w_b: roll (red), pitch (green), yaw (blue), deg",
+            [entity.RPY],
+            y_range=(-180.0, 180.0),
+        ),
+        _series(
+            "R_w_b as a quaternion: x (red), y (green), z (blue), w (white)",
+            [entity.QUAT],
+            y_range=(-1.05, 1.05),
+        ),
+        rrb.StateTimelineView(
+            name="gimbal lock; quaternion sign",
+            origin="/",
+            contents=[f"+ /{entity.GIMBAL_LOCK}", f"+ /{entity.QUAT_SIGN}"],
+        ),
+        row_shares=[3, 3, 3],
+        name="attitude",
+    )
+    tabs = {"errors": errors, "coordinates": coordinates, "attitude": attitude}
     return rrb.Tabs(
-        rrb.TimeSeriesView(
-            name="naive error and range (m)",
-            origin="metrics",
-            contents=[f"+ /{entity.error('naive')}", f"+ /{entity.RANGE}"],
-        ),
-        rrb.Grid(
-            *[
-                rrb.TimeSeriesView(name=f"cone 0 in {f} (m)", origin=entity.cone0(f))
-                for f in CONE0_SERIES
-            ],
-            name="cone 0 in each frame",
-        ),
+        *[tabs[name] for name in VIEW_NAMES],
+        rrb.Spatial2DView(name="error against range", origin=entity.ERROR_VS_RANGE),
         rrb.Vertical(
-            rrb.TimeSeriesView(name="roll, pitch, yaw (deg)", origin=entity.RPY),
-            rrb.TimeSeriesView(name="quaternion xyzw", origin=entity.QUAT),
-            rrb.TimeSeriesView(name="gimbal lock", origin=entity.GIMBAL_LOCK),
-            name="attitude",
+            _series("naive error (m)", [entity.error("naive")]),
+            _series("range to the matched cones (m)", [entity.RANGE]),
+            name="naive, range",
         ),
         active_tab=VIEWS[view],
     )
 
 
-def eye_for(spec: ScenarioSpec) -> tuple[np.ndarray, np.ndarray]:
+def eye_for(spec: ScenarioSpec, result: RunResult | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Where the 3D view's eye starts and what it looks at, world frame, each (3,).
 
-    Behind and above the start, looking at the point between the drone and the cones.
+    The eye frames the lesson at the last tick (where the viewer opens): the cones, the drone
+    and, if ``result`` is given, every estimate of that tick, the naive one included, seen
+    from behind the drone's heading, to the side and above.
     """
     cones_w = np.array(spec.scene.cones_w, dtype=np.float64).reshape(-1, 3)
-    start_w = np.asarray(spec.scene.start_position_w)
-    target_w = 0.5 * (start_w + cones_w.mean(axis=0))
-    heading_w = cones_w.mean(axis=0) - start_w
+    drone_w = np.asarray(spec.scene.start_position_w, dtype=np.float64)
+    points = [cones_w]
+    if result is not None and result.ticks:
+        last = result.ticks[-1]
+        drone_w = last.T_w_b[:3, 3]
+        points += [last.estimates_w(m.name) for m in METHODS]
+    points.append(drone_w[None, :])
+    points_w = np.concatenate(points)
+    low, high = points_w.min(axis=0), points_w.max(axis=0)
+    target_w = 0.5 * (low + high)
+    radius_m = max(4.0, 0.5 * float(np.linalg.norm(high - low)))
+    heading_w = cones_w.mean(axis=0) - drone_w
     heading_w[2] = 0.0
     norm = np.linalg.norm(heading_w)
     heading_w = heading_w / norm if norm > 1e-6 else np.array([1.0, 0.0, 0.0])
-    distance_m = max(8.0, 1.5 * float(np.linalg.norm(cones_w.mean(axis=0) - start_w)))
     side_w = np.array([-heading_w[1], heading_w[0], 0.0])
-    eye_w = target_w - distance_m * heading_w + 0.6 * distance_m * side_w
-    eye_w[2] = target_w[2] + 0.7 * distance_m
+    # About 2.2 radii away the bounding sphere fills most of the viewer's default field of view.
+    direction_w = -heading_w + 0.8 * side_w + np.array([0.0, 0.0, 0.7])
+    eye_w = target_w + 2.2 * radius_m * direction_w / np.linalg.norm(direction_w)
     return eye_w, target_w
 
 
 def describe(spec: ScenarioSpec, seed: int) -> str:
-    """Markdown shown beside the recording: what the scenario is and teaches."""
+    """Markdown shown beside the recording: what the scenario is, teaches, and what is drawn."""
     cam = spec.scene.camera
     lines = [f"# {spec.name}", "", spec.description, ""]
     if spec.lesson:
@@ -195,6 +355,11 @@ def describe(spec: ScenarioSpec, seed: int) -> str:
         f"- camera: {cam.width}x{cam.height}, fovy {cam.fovy_deg:g} deg, pitched "
         f"{cam.pitch_down_deg:g} deg down at {list(cam.position_b)} m in the body frame",
         f"- cones (base centres, world): {[list(c) for c in spec.scene.cones_w]}",
+        "",
+        "Drawn: the world, body and camera frames (axes 2 m, 1 m, 0.5 m; x red, y green, "
+        "z blue), the drone and cones as built in MuJoCo, the ray from the camera through "
+        "each detection's base pixel to the ground (yellow), each method's estimate with a "
+        "segment from the true cone, and a line from the drone to the naive estimate.",
         "",
         f"Estimates: {estimates}. Truth: white.",
     ]

@@ -31,7 +31,10 @@ else
 fi
 
 display=":$((90 + RANDOM % 100))"
-Xvfb "$display" -screen 0 3000x2000x24 >/dev/null 2>&1 &
+# The viewer draws at 2 physical pixels per point and Xvfb's pointer rests at the screen's
+# centre: at 6000x4000 that centre is (1500, 1000) points, outside the 1400x900 window, so
+# no hover tooltip is drawn over the picture.
+Xvfb "$display" -screen 0 6000x4000x24 >/dev/null 2>&1 &
 xvfb_pid=$!
 trap 'kill $xvfb_pid 2>/dev/null; rm -rf "$rec_dir"' EXIT
 sleep 1
@@ -44,7 +47,9 @@ for name in "${scenarios[@]}"; do
     echo "screenshots.sh: vnav-demo run $name failed (exit $rc)" >&2
     exit 1
   fi
-  DISPLAY="$display" timeout 300 .venv/bin/rerun --port auto --window-size 1400x900 \
+  # RUST_LOG=error: the viewer's start-up notices (software rasteriser, container) are
+  # warnings shown as toasts over the views; errors still show.
+  DISPLAY="$display" RUST_LOG=error timeout 300 .venv/bin/rerun --port auto --window-size 1400x900 \
     --screenshot-to "$out_dir/$name.png" "$rec_dir/$name.rrd" >/dev/null 2>&1
   # The viewer writes at twice the window size; half of that reads as well and weighs less.
   .venv/bin/python -c 'import cv2, sys; img = cv2.imread(sys.argv[1]); \

@@ -20,6 +20,10 @@ import pytest
         ("scenarios.report", ("mujoco", "rerun")),
         ("scenarios.spec", ("mujoco", "rerun")),
         ("scenarios.runner", ("rerun",)),
+        ("sim.mesh", ("rerun",)),
+        ("scenarios.panel", ("mujoco", "rerun")),
+        ("scenarios.plots", ("mujoco", "rerun", "matplotlib")),
+        ("scenarios.viewer", ("mujoco",)),
     ],
 )
 def test_module_does_not_load(module, absent):

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import re
+import warnings
 
 import mujoco
 import numpy as np
@@ -78,8 +80,8 @@ def test_camera_mount_and_pinhole_match_mujoco(recorded):
 
 def test_truth_points_and_estimates_agree_with_report(recorded):
     spec, _result, rrd, rep = recorded
-    truth = read_rows(rrd, "world/cones/truth")
-    assert np.allclose(truth[0]["Points3D:positions"], spec.scene.cones_w, atol=1e-6)
+    truth = _static(rrd, "world/cones/truth", "Points3D:positions")
+    assert np.allclose(truth, spec.scene.cones_w, atol=1e-6)
     cones_w = np.array(spec.scene.cones_w)
 
     for method in ("depth_image", "ground_plane", "known_height"):
@@ -103,8 +105,15 @@ def test_truth_points_and_estimates_agree_with_report(recorded):
 
 
 def test_error_series_logged_per_frame(recorded):
+    """Every tick has a value: the mean error where depth_image scored a detection, NaN (a
+    gap in the plot, not a line drawn across it) where it scored none."""
     _, result, rrd, _ = recorded
-    rows = [r for r in read_rows(rrd, "metrics/error/depth_image") if "tick" in r]
+    rows = {
+        r["tick"]: r["Scalars:scalars"][0]
+        for r in read_rows(rrd, "metrics/error/depth_image")
+        if "tick" in r
+    }
+    assert sorted(rows) == [f.tick for f in result.ticks]
     expected = {
         f.tick: np.mean(
             [d.errors_m["depth_image"] for d in f.detections if "depth_image" in d.errors_m]
@@ -112,7 +121,8 @@ def test_error_series_logged_per_frame(recorded):
         for f in result.ticks
         if any("depth_image" in d.errors_m for d in f.detections)
     }
-    assert {r["tick"]: r["Scalars:scalars"][0] for r in rows} == pytest.approx(expected)
+    assert {k: v for k, v in rows.items() if k in expected} == pytest.approx(expected)
+    assert all(np.isnan(v) for k, v in rows.items() if k not in expected)
 
 
 def test_detections_logged_in_rerun_pixel_convention(recorded):
@@ -195,3 +205,253 @@ def test_sliding_camera_mount_logged_every_frame(builtin_runs):
         assert np.allclose(quat.to_matrix(q_xyzw, normalize=True), R_b_c, atol=1e-6)
     moved = np.ptp(np.array([r["Transform3D:translation"][0] for r in rows]), axis=0)
     assert np.linalg.norm(moved) > 0.3
+
+
+# ------------------------------------------------------------ what the viewer draws
+
+
+def _static(rrd, path: str, column: str):
+    """The value of a static column logged at ``path`` (static rows have no timeline)."""
+    return next(r[column] for r in read_rows(rrd, path) if column in r and "tick" not in r)
+
+
+def _world_at(spec, f) -> World:
+    """A fresh world placed as the run was at tick record ``f`` (pose and camera mount)."""
+    world = World.from_config(spec.scene)
+    world.set_pose(f.T_w_b)
+    if getattr(spec.flight, "moves_camera", False):
+        world.set_camera_position_b(_camera_offset_b(spec, f.t_s))
+    return world
+
+
+def _sampled_ticks(result, n: int = 3) -> list:
+    """Up to n ticks spread over the run, preferring ticks with detections."""
+    seen = [f for f in result.ticks if f.detections] or list(result.ticks)
+    return seen[:: max(1, len(seen) // n)][:n]
+
+
+def test_frames_named_with_axes_that_tell_them_apart(recorded):
+    """world -> body -> camera -> image, as vnav.frames names them, each with its axes."""
+    _, result, rrd, _ = recorded
+    assert _static(rrd, "world", "CoordinateFrame:frame") == ["world"]
+    lengths = {
+        path: _static(rrd, path, "TransformAxes3D:axis_length")[0]
+        for path in ("world", "world/body", "world/body/camera")
+    }
+    assert lengths["world"] > lengths["world/body"] > lengths["world/body/camera"] > 0.0
+    for path in lengths:
+        assert _static(rrd, path, "TransformAxes3D:show_frame") == [True]  # labelled
+
+    body = [r for r in read_rows(rrd, "world/body") if "tick" in r]
+    assert len(body) == len(result.ticks)
+    assert all(r["Transform3D:child_frame"] == ["body"] for r in body)
+    assert all(r["Transform3D:parent_frame"] == ["world"] for r in body)
+    mount = [r for r in read_rows(rrd, "world/body/camera") if "Transform3D:translation" in r]
+    assert mount and all(r["Transform3D:child_frame"] == ["camera"] for r in mount)
+    assert all(r["Transform3D:parent_frame"] == ["body"] for r in mount)
+    assert _static(rrd, "world/body/camera", "Pinhole:parent_frame") == ["camera"]
+    assert _static(rrd, "world/body/camera", "Pinhole:child_frame") == ["image"]
+    # Everything else is placed by naming its frame, not by where its path hangs.
+    for path, frame in [
+        ("world/body/drone", "body"),
+        ("world/body/camera/image", "image"),
+        ("world/body/camera/detections", "image"),
+        ("world/cones/mesh", "world"),
+        ("world/cones/truth", "world"),
+        ("world/rays", "world"),
+        ("world/rays/ground_hits", "world"),
+        ("world/naive_offset", "world"),
+        ("world/cones/estimate/depth_image", "world"),
+        ("world/cones/error/ground_plane", "world"),
+    ]:
+        assert _static(rrd, path, "CoordinateFrame:frame") == [frame], path
+
+
+def test_drone_mesh_is_mujocos_geoms_in_the_body_frame(recorded):
+    spec, _, rrd, _ = recorded
+    world = World.from_config(spec.scene)
+    model = world.model
+    vertices_b = np.array(_static(rrd, "world/body/drone", "Mesh3D:vertex_positions"))
+    triangles = np.array(_static(rrd, "world/body/drone", "Mesh3D:triangle_indices"))
+    assert triangles.max() < len(vertices_b)
+    # Its extent is the union of MuJoCo's own bounding boxes of the drone's geoms, each placed
+    # by its geom_pos / geom_quat in the body (the meshes reach every box's extreme points).
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    for g in np.flatnonzero(model.geom_bodyid == world.body_id):
+        centre, half = model.geom_aabb[g][:3], model.geom_aabb[g][3:]
+        signs = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)])
+        corners = centre + half * signs
+        R_b_g = np.zeros(9)
+        mujoco.mju_quat2Mat(R_b_g, model.geom_quat[g])
+        corners_b = corners @ R_b_g.reshape(3, 3).T + model.geom_pos[g]
+        lo, hi = np.minimum(lo, corners_b.min(0)), np.maximum(hi, corners_b.max(0))
+    # The rotated boxes of the capsule arms are looser than the arms themselves: the mesh is
+    # inside the union and touches its extremes along the axes the boxes are aligned with.
+    assert np.all(vertices_b.min(0) >= lo - FLOAT32_ATOL_M)
+    assert np.all(vertices_b.max(0) <= hi + FLOAT32_ATOL_M)
+    hull = model.geom("drone_hull").id
+    hull_hi = model.geom_pos[hull] + model.geom_size[hull]
+    assert np.any(np.all(np.abs(vertices_b - hull_hi) < FLOAT32_ATOL_M, axis=1))
+    # Cones: the base plate and shell of every cone, at the scene's cone positions.
+    cones = np.array(_static(rrd, "world/cones/mesh", "Mesh3D:vertex_positions"))
+    near = np.linalg.norm(cones[:, None, :2] - np.array(spec.scene.cones_w)[None, :, :2], axis=2)
+    assert np.all(near.min(axis=1) < 0.3)  # every vertex belongs to some cone
+    assert np.all(near.min(axis=0) < 1e-5)  # every cone has its apex (on its axis)
+
+
+def test_rays_pass_from_the_camera_through_each_detection(recorded):
+    """At sampled ticks, with MuJoCo's camera as the oracle: each ray starts at the camera
+    centre (cam_xpos), projects onto its detection's logged base pixel, and its ground hit is
+    on the ray at z = 0."""
+    spec, result, rrd, _ = recorded
+    rays = {r["tick"]: r for r in read_rows(rrd, "world/rays") if "tick" in r}
+    hits = {r["tick"]: r for r in read_rows(rrd, "world/rays/ground_hits") if "tick" in r}
+    keypoints = {
+        r["tick"]: np.array(r["Points2D:positions"])
+        for r in read_rows(rrd, "world/body/camera/detections/keypoints")
+        if "tick" in r
+    }
+    W, H = spec.scene.camera.width, spec.scene.camera.height
+    for f in _sampled_ticks(result):
+        strips = np.array(rays[f.tick]["LineStrips3D:strips"]).reshape(-1, 2, 3)
+        assert len(strips) == len(f.detections)
+        if not len(strips):
+            continue
+        world = _world_at(spec, f)
+        T_w_c = mujoco_T_w_c(world)
+        fy = (H / 2) / np.tan(np.radians(world.model.cam_fovy[world.camera_id]) / 2)
+        assert np.allclose(strips[:, 0], T_w_c[:3, 3], atol=FLOAT32_ATOL_M)
+        p_c = se3.apply(se3.invert(T_w_c), strips[:, 1].astype(np.float64))
+        uv = fy * p_c[:, :2] / p_c[:, 2:] + [W / 2, H / 2]
+        assert np.allclose(uv, keypoints[f.tick][1::2], atol=1e-3)  # apex, base, apex, ...
+        ground = np.array(hits[f.tick]["Points3D:positions"]).reshape(-1, 3)
+        assert np.allclose(ground[:, 2], 0.0, atol=FLOAT32_ATOL_M)
+        ends_on_ground = strips[np.abs(strips[:, 1, 2]) < FLOAT32_ATOL_M, 1]
+        assert np.allclose(ends_on_ground, ground, atol=FLOAT32_ATOL_M)
+
+
+def test_error_segments_join_each_truth_to_its_estimate(recorded):
+    spec, result, rrd, _ = recorded
+    cones_w = np.array(spec.scene.cones_w)
+    for method in ("depth_image", "ground_plane", "known_height", "naive"):
+        rows = {
+            r["tick"]: np.array(r["LineStrips3D:strips"]).reshape(-1, 2, 3)
+            for r in read_rows(rrd, f"world/cones/error/{method}")
+            if "tick" in r
+        }
+        points = {
+            r["tick"]: np.array(r["Points3D:positions"]).reshape(-1, 3)
+            for r in read_rows(rrd, f"world/cones/estimate/{method}")
+            if "tick" in r
+        }
+        for f in _sampled_ticks(result):
+            segments = rows[f.tick]
+            scored = [d for d in f.detections if method in d.errors_m]
+            assert len(segments) == len(scored)
+            for s, d in zip(segments, scored, strict=True):
+                assert np.allclose(s[0], cones_w[d.cone_index], atol=FLOAT32_ATOL_M)
+                assert np.min(np.linalg.norm(points[f.tick] - s[1], axis=1)) < FLOAT32_ATOL_M
+                assert np.linalg.norm(s[1] - s[0]) == pytest.approx(
+                    d.errors_m[method], abs=FLOAT32_ATOL_M
+                )
+
+
+def test_naive_estimate_drawn_from_the_drone(recorded):
+    """The naive estimate t_w_b + p_c hangs off the drone (where the estimator believes it
+    is), so it can always be found from the drone, however far off it is."""
+    _, result, rrd, _ = recorded
+    rows = {
+        r["tick"]: np.array(r["LineStrips3D:strips"]).reshape(-1, 2, 3)
+        for r in read_rows(rrd, "world/naive_offset")
+        if "tick" in r
+    }
+    for f in _sampled_ticks(result):
+        segments = rows[f.tick]
+        assert len(segments) == len(f.estimates_w("naive"))
+        assert np.allclose(segments[:, 0], f.T_w_b_est[:3, 3], atol=FLOAT32_ATOL_M)
+        assert np.allclose(segments[:, 1], f.estimates_w("naive"), atol=FLOAT32_ATOL_M)
+
+
+_NUMBER = r"-?\d+\.\d+"
+
+
+def _panel_vector(text: str, label: str) -> np.ndarray:
+    """The bracketed vector that follows ``label`` in the state panel."""
+    match = re.search(re.escape(label) + r"[^\[]*\[([^\]]*)\]", text)
+    assert match, f"{label!r} not in the state panel"
+    return np.array([float(x) for x in match.group(1).split()])
+
+
+def test_state_panel_shows_the_chain_at_each_tick(recorded):
+    """Parse the panel's numbers back and hold them against MuJoCo at sampled ticks and SciPy
+    (test-only oracle) for the attitude: T_w_b, T_b_c, T_w_c; cone 0 in camera, body and
+    world; roll/pitch/yaw, the quaternion and the axis-angle."""
+    from scipy.spatial.transform import Rotation
+
+    spec, result, rrd, _ = recorded
+    panels = {r["tick"]: r["TextDocument:text"][0] for r in read_rows(rrd, "state") if "tick" in r}
+    assert sorted(panels) == [f.tick for f in result.ticks]
+    cone0_w = np.array(spec.scene.cones_w[0], dtype=np.float64)
+    for f in _sampled_ticks(result):
+        text = panels[f.tick]
+        world = _world_at(spec, f)
+        T_w_c = mujoco_T_w_c(world)
+        T_w_b = world.T_w_b
+        lines = text.split("```")[1].strip("\n").splitlines()
+        numbers = np.array([[float(x) for x in re.findall(_NUMBER, ln)] for ln in lines[1:5]])
+        assert numbers.shape == (4, 12)
+        for k, T in enumerate((T_w_b, se3.invert(T_w_b) @ T_w_c, T_w_c)):
+            shown = numbers[:, 4 * k : 4 * k + 4]
+            assert np.allclose(shown[:, :3], T[:, :3], atol=5e-4 + 1e-9)  # 3 decimals
+            assert np.allclose(shown[:, 3], T[:, 3], atol=5e-3 + 1e-9)  # centimetres
+
+        p_c = se3.apply(se3.invert(T_w_c), cone0_w)
+        assert np.allclose(_panel_vector(text, "p_c "), p_c, atol=5e-3 + 1e-9)
+        assert np.allclose(
+            _panel_vector(text, "p_b = T_b_c p_c"),
+            se3.apply(se3.invert(T_w_b), cone0_w),
+            atol=5e-3 + 1e-9,
+        )
+        assert np.allclose(_panel_vector(text, "p_w = T_w_b p_b"), cone0_w, atol=5e-3 + 1e-9)
+        assert np.allclose(_panel_vector(text, "t_w_b + p_c"), T_w_b[:3, 3] + p_c, atol=5e-3 + 1e-9)
+
+        rotation = Rotation.from_matrix(T_w_b[:3, :3])
+        with warnings.catch_warnings():  # SciPy warns at the lock; the branch below handles it
+            warnings.simplefilter("ignore", UserWarning)
+            yaw, pitch, roll = rotation.as_euler("ZYX", degrees=True)
+        shown_rpy = np.array(
+            [float(re.search(rf"{n}\s+({_NUMBER})", text).group(1)) for n in ("roll", "pitch")]
+            + [float(re.search(rf"yaw\s+({_NUMBER})", text).group(1))]
+        )
+        wrapped_deg = (shown_rpy - [roll, pitch, yaw] + 180.0) % 360.0 - 180.0  # -180 is 180
+        if "gimbal lock: no" in text:
+            assert np.all(np.abs(wrapped_deg) < 0.05 + 1e-9)
+        else:  # at the lock only the pitch and one combination of roll and yaw are defined
+            assert abs(wrapped_deg[1]) < 0.05 + 1e-9
+        q = _panel_vector(text, "quaternion xyzw")
+        q_true = rotation.as_quat()
+        assert min(np.abs(q - q_true).max(), np.abs(q + q_true).max()) < 5e-4 + 1e-9
+        axis = _panel_vector(text, "axis-angle  axis")
+        angle_deg = float(re.search(rf"angle\s+({_NUMBER}) deg", text).group(1))
+        shown_R = Rotation.from_rotvec(np.radians(angle_deg) * axis / np.linalg.norm(axis))
+        assert (shown_R.inv() * rotation).magnitude() < np.radians(0.15)
+
+
+def test_quaternion_plotted_with_a_continuous_sign(recorded):
+    """q and -q are one rotation: the plotted quaternion never jumps between them, and each
+    value is the body's attitude (SciPy's, up to that sign)."""
+    from scipy.spatial.transform import Rotation
+
+    _, result, rrd, _ = recorded
+    rows = [r for r in read_rows(rrd, "attitude/quat_xyzw") if "tick" in r]
+    q = np.array([r["Scalars:scalars"] for r in rows])
+    assert len(q) == len(result.ticks)
+    assert np.all(np.einsum("ij,ij->i", q[1:], q[:-1]) > 0.0)
+    q_true = Rotation.from_matrix(np.array([f.T_w_b[:3, :3] for f in result.ticks])).as_quat()
+    assert np.allclose(np.abs(np.einsum("ij,ij->i", q, q_true)), 1.0, atol=1e-9)
+    signs = [r["StateChange:state"][0] for r in read_rows(rrd, "attitude/quat_sign") if "tick" in r]
+    assert signs == ["w<0" if x[3] < 0.0 else "w>=0" for x in q]
+    locks = [
+        r["StateChange:state"][0] for r in read_rows(rrd, "attitude/gimbal_lock") if "tick" in r
+    ]
+    assert locks == ["locked" if f.gimbal_locked else "free" for f in result.ticks]

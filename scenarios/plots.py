@@ -1,0 +1,107 @@
+"""Static plots as PNG (matplotlib): error against range, and the depth image's colour scale.
+
+Rerun's time-series views plot against time only; "how does each method's error grow with
+range" needs range on the x axis, so it is drawn here once per run and logged as an image.
+matplotlib is imported on first use (it costs about half a second), with the Agg backend so
+no display is needed.
+"""
+
+from __future__ import annotations
+
+import io
+
+import numpy as np
+
+from scenarios.records import RunResult
+from vnav.methods import CONTRACT_DOMAIN, METHODS
+
+__all__ = ["depth_scale_png", "error_against_range_png"]
+
+_BACKGROUND = "#1b1b1f"
+_FOREGROUND = "#d0d0d0"
+
+
+def _figure(width_in: float, height_in: float):
+    from matplotlib.figure import Figure  # no pyplot: no global state, no GUI backend
+
+    fig = Figure(figsize=(width_in, height_in), dpi=100, facecolor=_BACKGROUND)
+    return fig
+
+
+def _style(ax) -> None:
+    ax.set_facecolor(_BACKGROUND)
+    ax.tick_params(colors=_FOREGROUND, labelsize=8)
+    for spine in ax.spines.values():
+        spine.set_color("#555555")
+    ax.grid(True, color="#3a3a3a", linewidth=0.6)
+    ax.xaxis.label.set_color(_FOREGROUND)
+    ax.yaxis.label.set_color(_FOREGROUND)
+    ax.title.set_color(_FOREGROUND)
+
+
+def _png(fig) -> bytes:
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", facecolor=fig.get_facecolor())
+    return buffer.getvalue()
+
+
+def error_against_range_png(result: RunResult) -> bytes:
+    """One panel per method: each matched detection's error against its range, own y scale.
+
+    Filled dots are detections inside the accuracy contract's domain, hollow ones outside it;
+    the grey line is the method's bound ``max(floor, fraction * range)`` and the shaded band
+    the contract's range domain.
+    """
+    fig = _figure(7.2, 5.6)
+    axes = fig.subplots(2, 2).ravel()
+    for ax, m in zip(axes, METHODS, strict=True):
+        _style(ax)
+        color = np.array(m.color_rgb) / 255.0
+        inside_r = result.ranges_for(m.name, contract_only=True)
+        inside_e = result.errors(m.name, contract_only=True)
+        all_r, all_e = result.ranges_for(m.name), result.errors(m.name)
+        ax.scatter(all_r, all_e, s=10, facecolors="none", edgecolors=[color], linewidths=0.7)
+        ax.scatter(inside_r, inside_e, s=10, color=[color])
+        domain = (CONTRACT_DOMAIN.min_range_m, CONTRACT_DOMAIN.max_range_m)
+        ax.axvspan(*domain, color="#ffffff", alpha=0.04, linewidth=0)
+        top_r = max(float(all_r.max()) if all_r.size else 0.0, 1.0) * 1.1
+        if m.bound is not None:
+            r = np.linspace(0.0, top_r, 200)
+            ax.plot(r, m.bound.allowed_m(r), color="#9a9a9a", linewidth=1.0)
+        ax.set_xlim(0.0, top_r)
+        ax.set_ylim(bottom=0.0)
+        promise = m.bound.text if m.bound is not None else "never checked"
+        ax.set_title(f"{m.name}: {promise}", fontsize=8.5)
+        ax.set_xlabel("range (m)", fontsize=8)
+        ax.set_ylabel("error (m)", fontsize=8)
+        if not all_e.size:
+            ax.text(
+                0.5,
+                0.5,
+                "no matched estimate",
+                transform=ax.transAxes,
+                ha="center",
+                color=_FOREGROUND,
+                fontsize=9,
+            )
+    fig.suptitle(
+        "error against range (filled: inside the contract's domain; grey: the bound)",
+        color=_FOREGROUND,
+        fontsize=9.5,
+    )
+    fig.tight_layout()
+    return _png(fig)
+
+
+def depth_scale_png(depth_max_m: float, colormap: str = "viridis") -> bytes:
+    """A vertical colour bar from 0 (bottom) to ``depth_max_m`` metres (top)."""
+    from matplotlib import colormaps
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import Normalize
+
+    fig = _figure(0.9, 4.0)
+    ax = fig.add_axes((0.15, 0.05, 0.25, 0.9))
+    bar = fig.colorbar(ScalarMappable(Normalize(0.0, depth_max_m), colormaps[colormap]), cax=ax)
+    bar.set_label("planar depth z (m)", color=_FOREGROUND, fontsize=8)
+    bar.ax.tick_params(colors=_FOREGROUND, labelsize=8)
+    return _png(fig)
