@@ -94,6 +94,9 @@ DEPTH_MANTISSA_BITS = 6
 the full float depth)."""
 JPEG_QUALITY = 80
 DEPTH_MM_MAX = np.iinfo(np.uint16).max
+DEPTH_METER = 1000.0
+"""The logged depth's unit: 1000 per metre (millimetres). Rerun's ``depth_range`` is given in
+these raw units, not in metres."""
 
 
 DEPTH_COLORMAP = "viridis"
@@ -102,6 +105,10 @@ DEPTH_SCALE_STEP_M = 5.0
 """The depth colour scale's top is rounded up to a multiple of this (see ``_depth_scale_m``)."""
 RAY_NO_HIT_M = 5.0
 """A viewing ray that never meets the ground (it points up) is drawn this long."""
+LINE_UI_POINTS = rr.Radius.ui_points(0.9)
+"""Error segments and the naive offset: a width on screen, not in metres, so that they stay
+thin in the close-up and visible in the wide view."""
+RAY_UI_POINTS = rr.Radius.ui_points(0.7)
 
 CLOUD_STRIDE_PX = 16
 """Every 16th row and column of the depth image goes into the logged world cloud."""
@@ -110,18 +117,22 @@ FLUSH_EVERY_TICKS = 50
 
 
 def depth_for_display_mm(depth_m: np.ndarray) -> np.ndarray:
-    """Planar depth in metres -> uint16 millimetres for a PNG, 0 where there is no return.
+    """Planar depth in metres -> uint16 millimetres for a PNG.
 
     Rounded to ``DEPTH_MANTISSA_BITS`` significant bits (steps of 2**k mm, at most 1/64 of
-    the depth), so the far ground compresses; beyond 65.535 m (and the sky) it becomes 0.
+    the depth), so the far ground compresses. Depth beyond 65.535 m and pixels with no return
+    (the sky: infinite or NaN) saturate at ``DEPTH_MM_MAX``: drawn as far, not as 0 m, which
+    the colour scale would show as nearest.
     """
-    depth_mm = np.nan_to_num(depth_m, nan=0.0, posinf=0.0).astype(np.float32) * 1000.0
+    depth_mm = np.nan_to_num(depth_m, nan=np.inf, posinf=np.inf).astype(np.float32) * 1000.0
+    far = ~(depth_mm <= DEPTH_MM_MAX)
+    depth_mm[far] = 0.0
     # Round the float32 mantissa (23 bits) to its top bits: integer ops on the bit pattern.
     drop = 23 - DEPTH_MANTISSA_BITS
     bits = depth_mm.view(np.uint32)
     bits += np.uint32(1 << (drop - 1))
     bits &= np.uint32(~((1 << drop) - 1) & 0xFFFFFFFF)
-    depth_mm[depth_mm > DEPTH_MM_MAX] = 0.0
+    depth_mm[far | (depth_mm > DEPTH_MM_MAX)] = DEPTH_MM_MAX
     return np.rint(depth_mm).astype(np.uint16)
 
 
@@ -297,7 +308,7 @@ class Recording:
         rec.log(
             entity.DEPTH,
             rr.EncodedDepthImage.from_fields(
-                colormap=DEPTH_COLORMAP, depth_range=[0.0, float(depth_max_m)]
+                colormap=DEPTH_COLORMAP, depth_range=[0.0, DEPTH_METER * float(depth_max_m)]
             ),
             static=True,
         )
@@ -391,18 +402,21 @@ def _depth_scale_m(result: RunResult, depth_p95_m: list[float]) -> float:
 
 
 def _error_tops_m(result: RunResult) -> dict[str, float | None]:
-    """Top of each checked method's error plot: a little above its largest error or bound
-    (so the grey bound stays in view), or None if the method gave no estimate."""
+    """Top of each method's error plot: a little above its largest error or bound (so the
+    grey bound stays in view), or None if the method gave no estimate; and of the range plot
+    (key ``entity.RANGE``)."""
     tops: dict[str, float | None] = {}
     for m in METHODS:
-        if m.bound is None:
-            continue
         errors = result.errors(m.name)
         if not errors.size:
             tops[m.name] = None
             continue
-        allowed = m.bound.allowed_m(result.ranges_for(m.name))
-        tops[m.name] = 1.15 * float(max(errors.max(), allowed.max()))
+        top = float(errors.max())
+        if m.bound is not None:
+            top = max(top, float(m.bound.allowed_m(result.ranges_for(m.name)).max()))
+        tops[m.name] = 1.15 * top
+    ranges = [d.range_m for t in result.ticks for d in t.detections if d.range_m is not None]
+    tops[entity.RANGE] = 1.15 * max(ranges) if ranges else None
     return tops
 
 
@@ -516,7 +530,7 @@ def _log_styles(rec: rr.RecordingStream) -> None:
         )
         rec.log(
             entity.error_segment(m.name),
-            rr.LineStrips3D.from_fields(colors=[m.color_rgb], radii=0.015),
+            rr.LineStrips3D.from_fields(colors=[m.color_rgb], radii=LINE_UI_POINTS),
             static=True,
         )
     series = {
@@ -553,7 +567,7 @@ def _log_styles(rec: rr.RecordingStream) -> None:
     )
     rec.log(
         entity.RAYS,
-        rr.LineStrips3D.from_fields(colors=[RAY_COLOR], radii=0.012),
+        rr.LineStrips3D.from_fields(colors=[RAY_COLOR], radii=RAY_UI_POINTS),
         static=True,
     )
     rec.log(
@@ -563,7 +577,7 @@ def _log_styles(rec: rr.RecordingStream) -> None:
     )
     rec.log(
         entity.NAIVE_OFFSET,
-        rr.LineStrips3D.from_fields(colors=[method("naive").color_rgb], radii=0.02),
+        rr.LineStrips3D.from_fields(colors=[method("naive").color_rgb], radii=LINE_UI_POINTS),
         static=True,
     )
     rec.log(entity.DETECTIONS, rr.Boxes2D.from_fields(colors=[(255, 220, 0)]), static=True)
@@ -622,7 +636,7 @@ def _send_images(send: _Sender, rows: list[_Buffered], images: list) -> None:
         rr.EncodedDepthImage.columns(
             blob=[png for _, png in with_depth],
             media_type=["image/png"] * len(with_depth),
-            meter=[1000.0] * len(with_depth),
+            meter=[DEPTH_METER] * len(with_depth),
         ),
     )
 

@@ -144,7 +144,8 @@ def blueprint(
         The drone's pose at the last tick: the close-up view starts behind it, to its left
         and above (``CLOSE_UP_EYE_B``), and then follows the drone.
     error_top_m : dict of str to float or None, optional
-        Top of each checked method's error plot, metres (None: the method gave no estimate).
+        Top of each method's error plot, metres (None: the method gave no estimate), and of
+        the range plot under the key ``entity.RANGE``.
     """
     if view not in VIEWS:
         raise ValueError(f"view must be one of {list(VIEWS)}, got {view!r}")
@@ -267,6 +268,12 @@ _CONE0_TITLES = {
 }
 
 
+def _from_zero(tops: dict[str, float | None], key: str) -> tuple[float, float] | None:
+    """A y range from 0 (small changes of a large value are not drawn as large ones)."""
+    top = tops.get(key)
+    return (0.0, top) if top is not None else None
+
+
 def _lower_tabs(view: str, error_top_m: dict[str, float | None]) -> rrb.Tabs:
     """The tabs below the images: ``VIEWS`` first (in order), then the other plots."""
     errors = rrb.Vertical(
@@ -301,8 +308,12 @@ def _lower_tabs(view: str, error_top_m: dict[str, float | None]) -> rrb.Tabs:
         *[tabs[name] for name in VIEW_NAMES],
         rrb.Spatial2DView(name="error against range", origin=entity.ERROR_VS_RANGE),
         rrb.Vertical(
-            _series("naive error (m)", [entity.error("naive")]),
-            _series("range to the matched cones (m)", [entity.RANGE]),
+            _series("naive error (m)", [entity.error("naive")], _from_zero(error_top_m, "naive")),
+            _series(
+                "range to the matched cones (m)",
+                [entity.RANGE],
+                _from_zero(error_top_m, entity.RANGE),
+            ),
             name="naive, range",
         ),
         active_tab=VIEWS[view],

@@ -27,7 +27,8 @@ mkdir -p "$out_dir"
 if [ $# -gt 0 ]; then
   scenarios=("$@")
 else
-  mapfile -t scenarios < <(.venv/bin/vnav-demo list | awk '{print $1}')
+  mapfile -t scenarios < <(.venv/bin/python -c \
+    'from scenarios import builtin; print("\n".join(builtin.names()))')
 fi
 
 display=":$((90 + RANDOM % 100))"

@@ -455,3 +455,13 @@ def test_quaternion_plotted_with_a_continuous_sign(recorded):
         r["StateChange:state"][0] for r in read_rows(rrd, "attitude/gimbal_lock") if "tick" in r
     ]
     assert locks == ["locked" if f.gimbal_locked else "free" for f in result.ticks]
+
+
+def test_depth_for_display_keeps_depth_to_a_64th_and_draws_no_return_as_far():
+    from scenarios.recording import DEPTH_METER, depth_for_display_mm
+
+    depth_m = np.geomspace(0.05, 65.0, 2000)
+    shown_m = depth_for_display_mm(depth_m).astype(np.float64) / DEPTH_METER
+    assert np.all(np.abs(shown_m - depth_m) <= depth_m / 64 + 0.5 / DEPTH_METER)
+    far = depth_for_display_mm(np.array([70.0, np.inf, np.nan]))
+    assert np.all(far == np.iinfo(np.uint16).max)  # the sky is far, not 0 m (nearest)
