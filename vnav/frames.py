@@ -10,15 +10,26 @@ Constants are read-only (3, 3) float64 rotations ``R_A_B`` that map B-coordinate
 - ``FRD``: x forward, y right, z down (aerospace body).
 
 ``FrameTree`` is the lecture's chapter 8 "transform composer": register ``T_parent_child``
-edges (world -> body -> camera) and look up ``T_a_b`` between any two frames.
+edges (world -> body -> camera) and look up ``T_a_b`` between any two frames, as they are now.
+
+``FrameBuffer`` adds time, in the spirit of ROS tf2's ``BufferCore`` and pytransform3d's
+``TemporalTransformManager``: each edge keeps a stamped history (or is static), and
+``lookup(target, source, t_s)`` interpolates every edge on the path at ``t_s`` (translation
+linearly, rotation by slerp along the shorter arc), refusing to extrapolate
+(``ExtrapolationError``). Use ``FrameTree`` for a snapshot (one pose per edge, the lecture's
+exercises, a camera mount); use ``FrameBuffer`` when poses arrive as a stream with stamps and
+must be looked up at a sensor's stamp, which is what a real pipeline does.
 """
 
 from __future__ import annotations
 
+import bisect
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike
 
-from vnav import se3, so3
+from vnav import quat, se3, so3
 from vnav._validate import FloatArray
 
 __all__ = [
@@ -30,6 +41,8 @@ __all__ = [
     "R_NED_ENU",
     "R_RDF_FLU",
     "R_RDF_GLC",
+    "ExtrapolationError",
+    "FrameBuffer",
     "FrameTree",
     "mount_rotation",
 ]
@@ -91,24 +104,12 @@ def mount_rotation(pitch_down_rad: float) -> FloatArray:
     return so3.rot_y(pitch_down_rad) @ R_FLU_RDF
 
 
-class FrameTree:
-    """Named frames linked by ``T_parent_child`` edges; ``lookup`` composes ``T_a_b``.
-
-    Each frame has at most one parent, so the edges form a forest; ``lookup`` walks up from both
-    frames to their lowest common ancestor ``r`` and returns
-    ``T_a_b = invert(T_r_a) @ T_r_b`` (lecture chapter 7: inner letters cancel).
-
-    Examples
-    --------
-    >>> tree = FrameTree()
-    >>> tree.add("world", "body", se3.make(so3.rot_z(np.pi / 2), [5.0, 0.0, 0.0]))
-    >>> tree.add("body", "camera", se3.make(np.eye(3), [0.3, 0.0, 0.2]))
-    >>> np.round(tree.lookup("world", "camera")[:3, 3], 12)
-    array([5. , 0.3, 0.2])
-    """
+class _Graph:
+    """Named frames, each with at most one parent: the bookkeeping ``FrameTree`` and
+    ``FrameBuffer`` share (names, cycles, paths)."""
 
     def __init__(self) -> None:
-        self._edges: dict[str, tuple[str, FloatArray]] = {}  # child -> (parent, T_parent_child)
+        self._parents: dict[str, str] = {}  # child -> parent
         self._frames: dict[str, None] = {}  # insertion-ordered set
 
     @property
@@ -128,8 +129,7 @@ class FrameTree:
             If ``frame`` is unknown.
         """
         self._check_known(frame)
-        edge = self._edges.get(frame)
-        return edge[0] if edge else None
+        return self._parents.get(frame)
 
     @staticmethod
     def _check_name(name: object, what: str) -> str:
@@ -142,14 +142,96 @@ class FrameTree:
             known = ", ".join(repr(f) for f in self._frames) or "none"
             raise ValueError(f"unknown frame {frame!r}; known frames: {known}")
 
-    @staticmethod
-    def _frozen(T: ArrayLike, parent: str, child: str) -> FloatArray:
-        T = se3.check_transform(T, f"T_{parent}_{child}")
-        if T.shape != (4, 4):
-            raise ValueError(f"T_{parent}_{child} must have shape (4, 4); got shape {T.shape}")
-        T = T.copy()
-        T.flags.writeable = False
-        return T
+    def _check_new_edge(self, parent: str, child: str, how: str) -> None:
+        """Refuse an edge that would give ``child`` a second parent or close a cycle."""
+        self._check_name(parent, "parent")
+        self._check_name(child, "child")
+        if parent == child:
+            raise ValueError(f"a frame cannot be its own parent: {parent!r}")
+        if child in self._parents:
+            raise ValueError(
+                f"frame {child!r} already has parent {self._parents[child]!r}; a frame has one "
+                f"parent ({how})"
+            )
+        if child in self._frames and parent in self._frames and child in self._chain(parent):
+            raise ValueError(
+                f"edge {parent!r} -> {child!r} would close a cycle: {child!r} is already an "
+                f"ancestor of {parent!r}"
+            )
+
+    def _link(self, parent: str, child: str) -> None:
+        self._frames.setdefault(parent)
+        self._frames.setdefault(child)
+        self._parents[child] = parent
+
+    def _chain(self, frame: str) -> list[str]:
+        """``frame``, its parent, ..., up to its root."""
+        chain = [frame]
+        while chain[-1] in self._parents:
+            chain.append(self._parents[chain[-1]])
+        return chain
+
+    def _paths(self, a: str, b: str) -> tuple[list[str], list[str]]:
+        """The frames below the lowest common ancestor r on the way up from a and from b
+        (``[a, ..., child of r]``, likewise for b; empty when a or b is r itself).
+
+        Raises
+        ------
+        ValueError
+            If a frame is unknown or the two are not connected.
+        """
+        self._check_known(a)
+        self._check_known(b)
+        chain_a = self._chain(a)
+        chain_b = self._chain(b)
+        if chain_a[-1] != chain_b[-1]:
+            raise ValueError(
+                f"frames {a!r} and {b!r} are not connected: {a!r} is under root "
+                f"{chain_a[-1]!r}, {b!r} under root {chain_b[-1]!r}"
+            )
+        index_a = {f: i for i, f in enumerate(chain_a)}
+        j = next(j for j, f in enumerate(chain_b) if f in index_a)  # lowest common ancestor
+        return chain_a[: index_a[chain_b[j]]], chain_b[:j]
+
+
+def _frozen(T: ArrayLike, parent: str, child: str) -> FloatArray:
+    T = se3.check_transform(T, f"T_{parent}_{child}")
+    if T.shape != (4, 4):
+        raise ValueError(f"T_{parent}_{child} must have shape (4, 4); got shape {T.shape}")
+    T = T.copy()
+    T.flags.writeable = False
+    return T
+
+
+def _inverse(T: FloatArray) -> FloatArray:
+    """``[[R^T, -R^T t], [0, 1]]`` of a valid transform or stack (no validation)."""
+    out = np.zeros_like(T)
+    Rt = np.swapaxes(T[..., :3, :3], -1, -2)
+    out[..., :3, :3] = Rt
+    out[..., :3, 3] = -np.einsum("...ij,...j->...i", Rt, T[..., :3, 3])
+    out[..., 3, 3] = 1.0
+    return out
+
+
+class FrameTree(_Graph):
+    """Named frames linked by ``T_parent_child`` edges; ``lookup`` composes ``T_a_b``.
+
+    Each frame has at most one parent, so the edges form a forest; ``lookup`` walks up from both
+    frames to their lowest common ancestor ``r`` and returns
+    ``T_a_b = invert(T_r_a) @ T_r_b`` (lecture chapter 7: inner letters cancel).
+
+    Examples
+    --------
+    >>> tree = FrameTree()
+    >>> tree.add("world", "body", se3.make(so3.rot_z(np.pi / 2), [5.0, 0.0, 0.0]))
+    >>> tree.add("body", "camera", se3.make(np.eye(3), [0.3, 0.0, 0.2]))
+    >>> np.round(tree.lookup("world", "camera")[:3, 3], 12)
+    array([5. , 0.3, 0.2])
+    """
+
+    def __init__(self) -> None:
+        super().__init__()
+        self._poses: dict[str, FloatArray] = {}  # child -> T_parent_child
 
     def add(self, parent: str, child: str, T_parent_child: ArrayLike) -> None:
         """Register the edge ``parent -> child`` with the pose of child in parent.
@@ -167,24 +249,12 @@ class FrameTree:
             If a name is empty, ``parent == child``, ``child`` already has a parent, the edge
             would close a cycle, or ``T_parent_child`` is not a rigid transform.
         """
-        self._check_name(parent, "parent")
-        self._check_name(child, "child")
-        if parent == child:
-            raise ValueError(f"a frame cannot be its own parent: {parent!r}")
-        if child in self._edges:
-            raise ValueError(
-                f"frame {child!r} already has parent {self._edges[child][0]!r}; a frame has one "
-                f"parent (use set({self._edges[child][0]!r}, {child!r}, T) to move it)"
-            )
-        if child in self._frames and parent in self._frames and child in self._chain(parent):
-            raise ValueError(
-                f"edge {parent!r} -> {child!r} would close a cycle: {child!r} is already an "
-                f"ancestor of {parent!r}"
-            )
-        T = self._frozen(T_parent_child, parent, child)
-        self._frames.setdefault(parent)
-        self._frames.setdefault(child)
-        self._edges[child] = (parent, T)
+        self._check_new_edge(
+            parent, child, f"use set({self._parents.get(child)!r}, {child!r}, T) to move it"
+        )
+        T = _frozen(T_parent_child, parent, child)
+        self._link(parent, child)
+        self._poses[child] = T
 
     def set(self, parent: str, child: str, T_parent_child: ArrayLike) -> None:
         """Update the pose on an existing edge (a moving body, a re-calibrated camera).
@@ -195,27 +265,23 @@ class FrameTree:
             If there is no edge ``parent -> child`` or ``T_parent_child`` is not a rigid
             transform.
         """
-        edge = self._edges.get(child)
-        if edge is None or edge[0] != parent:
-            have = f"its parent is {edge[0]!r}" if edge else "it has no parent"
+        if self._parents.get(child) != parent:
+            have = (
+                f"its parent is {self._parents[child]!r}"
+                if child in self._parents
+                else "it has no parent"
+            )
             raise ValueError(
                 f"no edge {parent!r} -> {child!r} to set ({child!r}: "
                 f"{have if child in self._frames else 'unknown frame'}); add it first"
             )
-        self._edges[child] = (parent, self._frozen(T_parent_child, parent, child))
+        self._poses[child] = _frozen(T_parent_child, parent, child)
 
-    def _chain(self, frame: str) -> list[str]:
-        """``frame``, its parent, ..., up to its root."""
-        chain = [frame]
-        while chain[-1] in self._edges:
-            chain.append(self._edges[chain[-1]][0])
-        return chain
-
-    def _from_ancestor(self, chain: list[str], stop: int) -> FloatArray:
-        """``T_anc_frame`` for ``anc = chain[stop]`` and ``frame = chain[0]``."""
+    def _from_ancestor(self, path: list[str]) -> FloatArray:
+        """``T_r_x`` for ``path = [x, ..., child of r]``."""
         T = np.eye(4)
-        for frame in reversed(chain[:stop]):  # from just below the ancestor down to the frame
-            T = T @ self._edges[frame][1]
+        for frame in reversed(path):  # from just below the ancestor down to the frame
+            T = T @ self._poses[frame]
         return T
 
     def lookup(self, a: str, b: str) -> FloatArray:
@@ -236,17 +302,497 @@ class FrameTree:
         ValueError
             If a frame is unknown, or the two frames are in different trees (not connected).
         """
-        self._check_known(a)
-        self._check_known(b)
-        chain_a = self._chain(a)
-        chain_b = self._chain(b)
-        if chain_a[-1] != chain_b[-1]:
+        path_a, path_b = self._paths(a, b)
+        return _inverse(self._from_ancestor(path_a)) @ self._from_ancestor(path_b)
+
+
+class ExtrapolationError(ValueError):
+    """A lookup at a time outside the stored interval of a time-stamped edge.
+
+    ``FrameBuffer`` never extrapolates a pose (tf2 refuses it on purpose: a pose guessed past
+    the last sample is the silent error this class exists to prevent). The message names the
+    edge, the time asked for and the interval available.
+    """
+
+
+DEFAULT_CACHE_S = 10.0
+"""History kept per time-stamped edge, seconds (tf2's default cache time)."""
+
+
+# A pose as components (qx, qy, qz, qw, px, py, pz): floats for one time, (N,) arrays for many.
+# The same arithmetic serves both, so one lookup (pure Python, a few microseconds) and 1e5
+# lookups (numpy, columns not (N, 4, 4) stacks) run the same formulas.
+_IDENTITY = (0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0)
+
+
+def _rotate(qx, qy, qz, qw, vx, vy, vz):
+    """``R(q) v``: ``v + w t + u x t`` with ``t = 2 u x v``, u the vector part."""
+    tx = 2.0 * (qy * vz - qz * vy)
+    ty = 2.0 * (qz * vx - qx * vz)
+    tz = 2.0 * (qx * vy - qy * vx)
+    return (
+        vx + qw * tx + (qy * tz - qz * ty),
+        vy + qw * ty + (qz * tx - qx * tz),
+        vz + qw * tz + (qx * ty - qy * tx),
+    )
+
+
+def _compose(a, b):
+    """``T_a T_b`` of two poses as components (Hamilton product, x y z w)."""
+    ax, ay, az, aw, apx, apy, apz = a
+    bx, by, bz, bw, bpx, bpy, bpz = b
+    px, py, pz = _rotate(ax, ay, az, aw, bpx, bpy, bpz)
+    return (
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
+        aw * bw - ax * bx - ay * by - az * bz,
+        apx + px,
+        apy + py,
+        apz + pz,
+    )
+
+
+def _invert(a):
+    """``T^-1``: the conjugate rotation and ``-R^T p``."""
+    qx, qy, qz, qw, px, py, pz = a
+    ix, iy, iz = _rotate(-qx, -qy, -qz, qw, px, py, pz)
+    return (-qx, -qy, -qz, qw, -ix, -iy, -iz)
+
+
+def _matrix(a, shape: tuple[int, ...]) -> FloatArray:
+    """The 4x4 homogeneous matrix of a pose given as components (unit quaternion)."""
+    x, y, z, w, px, py, pz = a
+    T = np.zeros((*shape, 4, 4))
+    T[..., 0, 0] = 1.0 - 2.0 * (y * y + z * z)
+    T[..., 0, 1] = 2.0 * (x * y - z * w)
+    T[..., 0, 2] = 2.0 * (x * z + y * w)
+    T[..., 1, 0] = 2.0 * (x * y + z * w)
+    T[..., 1, 1] = 1.0 - 2.0 * (x * x + z * z)
+    T[..., 1, 2] = 2.0 * (y * z - x * w)
+    T[..., 2, 0] = 2.0 * (x * z - y * w)
+    T[..., 2, 1] = 2.0 * (y * z + x * w)
+    T[..., 2, 2] = 1.0 - 2.0 * (x * x + y * y)
+    T[..., 0, 3] = px
+    T[..., 1, 3] = py
+    T[..., 2, 3] = pz
+    T[..., 3, 3] = 1.0
+    return T
+
+
+def _components(T: FloatArray) -> FloatArray:
+    """(7, N) components of a stack of transforms (quaternion from ``vnav.quat``)."""
+    q = quat.from_matrix(T[:, :3, :3])
+    return np.concatenate([q.T, T[:, :3, 3].T])
+
+
+def _segments(q: FloatArray) -> FloatArray:
+    """Slerp constants of each pair of consecutive quaternions (columns of ``q``, (4, K)):
+    rows ``omega`` (the angle between the two 4-vectors), ``1 / sin(omega)`` (0 where the
+    weights are linear to rounding, below 1e-12) and the sign that takes the second to the
+    shorter arc (q and -q are one rotation). (3, K - 1).
+
+    The angle is ``2 atan2(|q1 - q0|, |q1 + q0|)``, accurate when the two are close (unlike
+    ``arccos(q0 . q1)``); computed once per sample, so lookups need no inverse trigonometry.
+    """
+    q0, q1 = q[:, :-1], q[:, 1:]
+    sign = np.where(np.sum(q0 * q1, axis=0) < 0.0, -1.0, 1.0)
+    q1 = sign * q1
+    omega = 2.0 * np.arctan2(
+        np.sqrt(np.sum((q1 - q0) ** 2, axis=0)), np.sqrt(np.sum((q1 + q0) ** 2, axis=0))
+    )
+    sin_omega = np.sin(omega)
+    inv_sin = np.divide(1.0, sin_omega, out=np.zeros_like(omega), where=sin_omega >= 1e-12)
+    return np.stack([omega, inv_sin, sign])
+
+
+def _interpolate(a, b, segment, alpha):
+    """Translation linearly and rotation by slerp along the shorter arc (Shoemake 1985),
+    ``alpha`` of the way from pose ``a`` to pose ``b`` (components; floats, or (N,) columns),
+    with the pair's ``segment`` constants (``_segments``). At ``alpha = 0`` it is ``a``
+    exactly: the weights are then ``sin(omega) / sin(omega) = 1`` and ``sin(0) = 0``."""
+    x0, y0, z0, w0, px0, py0, pz0 = a
+    x1, y1, z1, w1, px1, py1, pz1 = b
+    omega, inv_sin, sign = segment
+    if isinstance(alpha, float):
+        if inv_sin == 0.0:
+            k0, k1 = 1.0 - alpha, sign * alpha
+        else:
+            k0 = math.sin((1.0 - alpha) * omega) * inv_sin
+            k1 = sign * math.sin(alpha * omega) * inv_sin
+    else:
+        k0 = np.sin((1.0 - alpha) * omega) * inv_sin
+        k1 = sign * np.sin(alpha * omega) * inv_sin
+        linear = inv_sin == 0.0
+        if np.any(linear):
+            k0[linear] = 1.0 - alpha[linear]
+            k1[linear] = sign[linear] * alpha[linear]
+    return (
+        k0 * x0 + k1 * x1,
+        k0 * y0 + k1 * y1,
+        k0 * z0 + k1 * z1,
+        k0 * w0 + k1 * w1,
+        px0 + alpha * (px1 - px0),
+        py0 + alpha * (py1 - py0),
+        pz0 + alpha * (pz1 - pz0),
+    )
+
+
+class _Track:
+    """One time-stamped edge's samples: ``[lo, hi)`` of growable arrays is the live part.
+
+    Components are stored column-wise, (7, capacity), with each pair's slerp constants
+    (``_segments``, (3, capacity), column i for samples i and i + 1), so a vectorised lookup
+    gathers contiguous rows; a Python mirror (stamps, component and constant tuples) serves
+    single lookups without numpy's per-call cost. Appending is amortised O(1): the arrays
+    double, or the live part moves to the front once trimming has freed half of them.
+    """
+
+    __slots__ = ("components", "hi", "lo", "rows", "segments", "stamps", "steps", "times")
+
+    def __init__(self) -> None:
+        self.stamps = np.empty(16)
+        self.components = np.empty((7, 16))
+        self.segments = np.empty((3, 16))
+        self.lo = self.hi = 0
+        self.times: list[float] = []
+        self.rows: list[tuple[float, ...]] = []
+        self.steps: list[tuple[float, ...]] = []
+
+    def __len__(self) -> int:
+        return self.hi - self.lo
+
+    @property
+    def t(self) -> FloatArray:
+        return self.stamps[self.lo : self.hi]
+
+    def append(self, t: FloatArray, components: FloatArray) -> None:
+        n = len(t)
+        if self.hi + n > len(self.stamps):
+            live = len(self)
+            capacity = len(self.stamps)
+            while live + n > capacity // 2:
+                capacity *= 2
+            for name, rows in (("stamps", None), ("components", 7), ("segments", 3)):
+                old = getattr(self, name)
+                new = np.empty(capacity if rows is None else (rows, capacity))
+                new[..., :live] = old[..., self.lo : self.hi]
+                setattr(self, name, new)
+            self.lo, self.hi = 0, live
+        first = self.hi - 1 if len(self) else self.hi  # the pair across the old last sample
+        self.stamps[self.hi : self.hi + n] = t
+        self.components[:, self.hi : self.hi + n] = components
+        self.hi += n
+        new_segments = _segments(self.components[:4, first : self.hi])
+        self.segments[:, first : self.hi - 1] = new_segments
+        self.times.extend(t.tolist())
+        self.rows.extend(map(tuple, components.T.tolist()))
+        self.steps.extend(map(tuple, new_segments.T.tolist()))
+
+    def drop_before(self, oldest_s: float) -> None:
+        k = bisect.bisect_left(self.times, oldest_s)
+        if k:
+            self.lo += k
+            del self.times[:k], self.rows[:k], self.steps[:k]
+
+
+class FrameBuffer(_Graph):
+    """A time-stamped frame graph: static edges and edges with a history of stamped poses.
+
+    ``lookup(target, source, t_s)`` returns ``T_target_source`` at time ``t_s`` through any
+    path of the graph, each time-stamped edge interpolated between its two samples around
+    ``t_s``: translation linearly, rotation by slerp along the shorter arc (Shoemake 1985, as
+    tf2). Exactly at a stored stamp it is the stored transform (to rounding: the rotation
+    goes through its quaternion). Outside an edge's stored interval it raises
+    ``ExtrapolationError``. Each edge keeps the samples of its last ``cache_s`` seconds
+    (counted back from its newest stamp), as tf2's cache does.
+
+    With only static edges it behaves like ``FrameTree`` (``t_s`` may then be omitted).
+
+    Parameters
+    ----------
+    cache_s : float
+        History kept per edge, seconds (> 0, finite); default ``DEFAULT_CACHE_S``.
+
+    Raises
+    ------
+    ValueError
+        If ``cache_s`` is not a finite number > 0.
+
+    Examples
+    --------
+    >>> buf = FrameBuffer()
+    >>> buf.set_static("body", "camera", se3.make(np.eye(3), [0.2, 0.0, 0.0]))
+    >>> buf.set_transform("world", "body", [0.0, 1.0],
+    ...                   [se3.make(np.eye(3), [0.0, 0, 0]), se3.make(np.eye(3), [1.0, 0, 0])])
+    >>> buf.lookup("world", "camera", 0.25)[:3, 3]
+    array([0.45, 0.  , 0.  ])
+    """
+
+    def __init__(self, cache_s: float = DEFAULT_CACHE_S) -> None:
+        super().__init__()
+        if isinstance(cache_s, bool) or not isinstance(cache_s, int | float):
+            raise ValueError(f"cache_s must be a number of seconds; got {cache_s!r}")
+        if not 0.0 < cache_s < math.inf:
+            raise ValueError(f"cache_s must be finite and > 0 seconds; got {cache_s!r}")
+        self.cache_s = float(cache_s)
+        self._static: dict[str, tuple[float, ...]] = {}  # child -> components of T_parent_child
+        self._tracks: dict[str, _Track] = {}  # child -> stamped history
+
+    # ------------------------------------------------------------------ writing
+    def set_static(self, parent: str, child: str, T_parent_child: ArrayLike) -> None:
+        """Register (or replace) a static edge: ``T_parent_child`` at every time.
+
+        Raises
+        ------
+        ValueError
+            If a name is empty, ``parent == child``, ``child`` has another parent or a
+            time-stamped edge, the edge would close a cycle, or the transform is not rigid.
+        """
+        if child in self._tracks:
             raise ValueError(
-                f"frames {a!r} and {b!r} are not connected: {a!r} is under root "
-                f"{chain_a[-1]!r}, {b!r} under root {chain_b[-1]!r}"
+                f"edge {self._parents[child]!r} -> {child!r} is time-stamped; it cannot "
+                "become static"
             )
-        index_a = {f: i for i, f in enumerate(chain_a)}
-        j = next(j for j, f in enumerate(chain_b) if f in index_a)  # lowest common ancestor
-        T_r_a = self._from_ancestor(chain_a, index_a[chain_b[j]])
-        T_r_b = self._from_ancestor(chain_b, j)
-        return se3.invert(T_r_a) @ T_r_b
+        if self._parents.get(child) != parent or child not in self._static:
+            self._check_new_edge(parent, child, "build a new FrameBuffer to re-parent it")
+        T = _frozen(T_parent_child, parent, child)
+        self._link(parent, child)
+        self._static[child] = tuple(_components(T[None])[:, 0].tolist())
+
+    def set_transform(
+        self, parent: str, child: str, t_s: ArrayLike, T_parent_child: ArrayLike
+    ) -> None:
+        """Add stamped samples of ``T_parent_child`` to the edge ``parent -> child``.
+
+        Parameters
+        ----------
+        parent, child : str
+            Frame names; either may be new. The first call creates the edge.
+        t_s : float or array_like, shape (N,)
+            Stamps, seconds; strictly increasing, and after the edge's newest stamp.
+        T_parent_child : array_like, shape (4, 4) or (N, 4, 4)
+            The pose of child in parent at each stamp.
+
+        Raises
+        ------
+        ValueError
+            If a name is empty, ``parent == child``, ``child`` has another parent or a static
+            edge, the edge would close a cycle, a stamp is not finite or not increasing, the
+            shapes do not match, or a transform is not rigid.
+        """
+        if child in self._static:
+            raise ValueError(
+                f"edge {parent!r} -> {child!r} is static; it cannot take stamped samples"
+            )
+        if child not in self._tracks or self._parents.get(child) != parent:
+            self._check_new_edge(parent, child, "build a new FrameBuffer to re-parent it")
+        t = np.asarray(t_s, dtype=np.float64)
+        scalar = t.ndim == 0
+        if t.ndim > 1:
+            raise ValueError(f"t_s must be a float or a 1-D array; got shape {t.shape}")
+        t = t.reshape(-1)
+        T = se3.check_transform(T_parent_child, f"T_{parent}_{child}")
+        expected = (4, 4) if scalar else (len(t), 4, 4)
+        if T.shape != expected:
+            raise ValueError(
+                f"T_{parent}_{child} must have shape {expected} for "
+                f"{'one stamp' if scalar else f'{len(t)} stamps'}; got shape {T.shape}"
+            )
+        if not np.all(np.isfinite(t)):
+            raise ValueError(f"stamps of edge {parent!r} -> {child!r} must be finite; got {t}")
+        if len(t) > 1 and np.any(np.diff(t) <= 0.0):
+            k = int(np.argmax(np.diff(t) <= 0.0))
+            raise ValueError(
+                f"stamps of edge {parent!r} -> {child!r} must increase; got "
+                f"{float(t[k])!r} then {float(t[k + 1])!r} s"
+            )
+        track = self._tracks.get(child)
+        if track is not None and len(track) and len(t) and t[0] <= track.times[-1]:
+            raise ValueError(
+                f"stamps of edge {parent!r} -> {child!r} must increase; got {float(t[0])!r} s "
+                f"after the newest stored stamp {track.times[-1]!r} s"
+            )
+        if not len(t):
+            return
+        if track is None:
+            self._link(parent, child)
+            track = self._tracks[child] = _Track()
+        track.append(t, _components(T.reshape(-1, 4, 4)))
+        track.drop_before(float(t[-1]) - self.cache_s)
+
+    # ------------------------------------------------------------------ reading
+    def interval(self, parent: str, child: str) -> tuple[float, float]:
+        """The stored interval ``(first, last)`` of an edge, seconds; ``(-inf, inf)`` for a
+        static edge.
+
+        Raises
+        ------
+        ValueError
+            If there is no edge ``parent -> child``.
+        """
+        if child not in self._frames or self._parents.get(child) != parent:
+            raise ValueError(f"no edge {parent!r} -> {child!r}")
+        if child in self._static:
+            return (-math.inf, math.inf)
+        times = self._tracks[child].times
+        return (times[0], times[-1])
+
+    def lookup(
+        self,
+        target: str,
+        source: str,
+        t_s: ArrayLike | None = None,
+        *,
+        source_time_s: ArrayLike | None = None,
+        fixed: str | None = None,
+    ) -> FloatArray:
+        """``T_target_source`` at time ``t_s``: maps source coordinates into target.
+
+        With ``source_time_s`` and ``fixed`` (tf2's "time travel"): the source as it was at
+        ``source_time_s``, the target as it is at ``t_s``, joined through ``fixed``, a frame
+        assumed not to move between the two times (usually the world):
+        ``T_target(t_s)_source(source_time_s) = T_target_fixed(t_s) T_fixed_source(source_time_s)``.
+        A point seen in the camera at exposure, expressed in the body at arrival, is
+        ``lookup("body", "camera", t_arrival, source_time_s=t_exposure, fixed="world")``.
+
+        Parameters
+        ----------
+        target, source : str
+            Registered frame names.
+        t_s : float or array_like, shape (N,), optional
+            Seconds. May be omitted only if every edge on the path is static.
+        source_time_s : float or array_like, shape (N,), optional
+            The source's time, with ``fixed``; broadcast against ``t_s``.
+        fixed : str, optional
+            The frame fixed in time, with ``source_time_s``.
+
+        Returns
+        -------
+        ndarray, shape (4, 4), or (N, 4, 4) for an array of times
+
+        Raises
+        ------
+        ExtrapolationError
+            If a time falls outside the stored interval of an edge on the path.
+        ValueError
+            If a frame is unknown, the frames are not connected, a time is not finite, or only
+            one of ``source_time_s`` and ``fixed`` is given.
+        """
+        if (source_time_s is None) != (fixed is None):
+            raise ValueError("time travel needs both source_time_s and fixed (or neither)")
+        if fixed is None:
+            t = None if t_s is None else self._times(t_s, "t_s")
+            if isinstance(t, np.ndarray) and t.size > 1 and np.any(t[1:] < t[:-1]):
+                # Sorted times search faster (see _at); the result is put back in order.
+                order = np.argsort(t)
+                back = np.empty_like(order)
+                back[order] = np.arange(len(order))
+                pose = self._pose(target, source, t[order])
+                return _matrix(
+                    tuple(np.take(np.broadcast_to(c, t.shape), back) for c in pose), t.shape
+                )
+            return _matrix(self._pose(target, source, t), () if t is None else np.shape(t))
+        if t_s is None:
+            raise ValueError("time travel needs t_s, the target's time")
+        t_target, t_source = np.broadcast_arrays(
+            self._times(t_s, "t_s"), self._times(source_time_s, "source_time_s")
+        )
+        if t_target.ndim == 0:
+            t_target, t_source = float(t_target), float(t_source)
+        pose = _compose(self._pose(target, fixed, t_target), self._pose(fixed, source, t_source))
+        return _matrix(pose, np.shape(t_target))
+
+    def can_lookup(
+        self,
+        target: str,
+        source: str,
+        t_s: ArrayLike | None = None,
+        *,
+        source_time_s: ArrayLike | None = None,
+        fixed: str | None = None,
+    ) -> bool:
+        """Whether ``lookup`` with the same arguments would succeed (tf2's ``canTransform``)."""
+        try:
+            self.lookup(target, source, t_s, source_time_s=source_time_s, fixed=fixed)
+        except ValueError:
+            return False
+        return True
+
+    @staticmethod
+    def _times(t_s: ArrayLike, name: str) -> float | FloatArray:
+        """A finite float, or a finite 1-D float64 array."""
+        if type(t_s) is float and math.isfinite(t_s):  # the single lookup's fast path
+            return t_s
+        t = np.asarray(t_s, dtype=np.float64)
+        if t.ndim > 1:
+            raise ValueError(f"{name} must be a float or a 1-D array; got shape {t.shape}")
+        if not np.all(np.isfinite(t)):
+            raise ValueError(f"{name} must be finite; got {t_s!r}")
+        return float(t) if t.ndim == 0 else t
+
+    def _pose(self, target: str, source: str, t: float | FloatArray | None):
+        """``T_target_source`` at ``t`` as components."""
+        path_target, path_source = self._paths(target, source)
+        if t is None:
+            stamped = [f for f in path_target + path_source if f in self._tracks]
+            if stamped:
+                raise ValueError(
+                    f"lookup({target!r}, {source!r}) needs t_s: edge "
+                    f"{self._parents[stamped[0]]!r} -> {stamped[0]!r} is time-stamped"
+                )
+        return _compose(
+            _invert(self._from_ancestor(path_target, t)), self._from_ancestor(path_source, t)
+        )
+
+    def _from_ancestor(self, path: list[str], t: float | FloatArray | None):
+        """``T_r_x`` at ``t`` as components, for ``path = [x, ..., child of r]``."""
+        pose = _IDENTITY
+        for frame in reversed(path):
+            edge = self._static.get(frame)
+            if edge is None:
+                edge = self._at(frame, t)
+            pose = edge if pose is _IDENTITY else _compose(pose, edge)
+        return pose
+
+    def _at(self, child: str, t: float | FloatArray):
+        """``T_parent_child`` of a time-stamped edge at ``t`` as components."""
+        track = self._tracks[child]
+        times = track.times
+        first, last = times[0], times[-1]
+        if isinstance(t, float):
+            if not first <= t <= last:
+                self._refuse(child, np.array([t]), 1)
+            i = bisect.bisect_right(times, t) - 1
+            if times[i] == t:  # at a stamp (the last one included): the sample itself
+                return track.rows[i]
+            t0, t1 = times[i], times[i + 1]
+            alpha = (t - t0) / (t1 - t0)
+            return _interpolate(track.rows[i], track.rows[i + 1], track.steps[i], alpha)
+        outside = (t < first) | (t > last)
+        if np.any(outside):
+            self._refuse(child, t[outside], t.size)
+        stamps = track.t
+        if len(stamps) == 1:  # every t equals the one stamp
+            return tuple(np.full(t.shape, c) for c in track.rows[0])
+        # t arrives sorted (see lookup): numpy's binary search then starts from the last
+        # result, several times faster than for scattered times.
+        i0 = np.searchsorted(stamps, t, side="right") - 1
+        np.minimum(i0, len(stamps) - 2, out=i0)  # t at the last stamp: alpha = 1
+        i1 = i0 + 1
+        t0 = stamps[i0]
+        alpha = (t - t0) / (stamps[i1] - t0)
+        live = track.components[:, track.lo : track.hi]
+        a = tuple(np.take(live, i0, axis=1))
+        b = tuple(np.take(live, i1, axis=1))
+        segment = tuple(np.take(track.segments[:, track.lo : track.hi], i0, axis=1))
+        return _interpolate(a, b, segment, alpha)
+
+    def _refuse(self, child: str, bad: FloatArray, asked: int) -> None:
+        times = self._tracks[child].times
+        many = f" ({len(bad)} of {asked} times asked)" if asked > 1 else ""
+        raise ExtrapolationError(
+            f"edge {self._parents[child]!r} -> {child!r} has no pose at t = {float(bad[0])!r} s"
+            f"{many}: it holds [{times[0]!r}, {times[-1]!r}] s ({len(times)} samples); "
+            "a pose outside that interval would be extrapolated, which is refused"
+        )
