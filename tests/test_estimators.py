@@ -24,6 +24,7 @@ from vnav.detect import detect_cones
 from vnav.estimators import (
     MAX_RANGE_ERROR_PER_PX,
     MIN_TRIANGLE_FRACTION,
+    NoEstimate,
     _fit_axis,
     _median,
     _percentile,
@@ -34,6 +35,7 @@ from vnav.estimators import (
     estimate_from_depth,
     estimate_from_ground_plane,
     estimate_from_known_height,
+    known_height_max_elevation_rad,
     naive_estimate,
 )
 from vnav.localize import localize
@@ -67,8 +69,10 @@ def test_known_height_refuses_steep_views(
     if expect_estimate:
         assert estimates.known_height is not None
         assert relative_error(world, estimates.known_height) <= 0.05
+        assert "known_height" not in estimates.no_estimate
     else:
         assert estimates.known_height is None
+        assert estimates.no_estimate == {"known_height": NoEstimate.STEEP}
     assert relative_error(world, estimates.depth_image) <= 0.01
     assert relative_error(world, estimates.ground_plane) <= 0.02
 
@@ -78,9 +82,12 @@ def test_known_height_refuses_tiny_cones(cone_x_m: float, expect_estimate: bool)
     """Both sides of the sensitivity criterion: at 24 m (12 px tall) one pixel moves the
     estimate by under 10% of range (kept); at 36 m (7 px) by about 16% (> MAX_RANGE_ERROR_PER_PX
     = 10%: no estimate rather than a wrong one)."""
-    world, _, (detection,) = render_one((cone_x_m, 0.0), 3.0, 5.0, yaw=0.02)
+    world, frame, (detection,) = render_one((cone_x_m, 0.0), 3.0, 5.0, yaw=0.02)
     p_w = estimate_from_known_height(detection, world.camera, world.T_w_c)
     assert (p_w is not None) == expect_estimate
+    estimates = localize(detection, world.camera, world.T_w_b, world.T_b_c, frame.depth)
+    reason = estimates.no_estimate.get("known_height")
+    assert reason is (None if expect_estimate else NoEstimate.SMALL)
     if p_w is not None:
         assert relative_error(world, p_w) <= 2.0 * MAX_RANGE_ERROR_PER_PX
 
@@ -91,6 +98,8 @@ def test_cone_cut_off_by_border_gives_no_estimate() -> None:
     assert detection.touches_border
     estimates = localize(detection, world.camera, world.T_w_b, world.T_b_c, frame.depth)
     assert all(p is None for p in estimates.as_dict().values()), estimates
+    assert set(estimates.no_estimate.values()) == {NoEstimate.BORDER}
+    assert len(estimates.no_estimate) == len(estimates)
     T_w_c = world.T_w_c
     assert estimate_from_depth(detection, frame.depth, world.camera, T_w_c) is None
     assert estimate_from_ground_plane(detection, world.camera, T_w_c) is None
@@ -103,6 +112,7 @@ def test_no_valid_depth_gives_no_depth_estimate(one_view: dict) -> None:
     assert estimate_from_depth(detection, far, world.camera, world.T_w_c, far_m=500.0) is None
     estimates = localize(detection, world.camera, world.T_w_b, world.T_b_c, far, far_m=500.0)
     assert estimates.depth_image is None
+    assert estimates.no_estimate["depth_image"] is NoEstimate.NO_DEPTH
     assert estimates.ground_plane is not None and estimates.naive is not None
 
 
@@ -117,6 +127,28 @@ def test_ray_not_reaching_ground_gives_no_ground_estimate(one_view: dict) -> Non
     T_below = T_w_c.copy()
     T_below[2, 3] = -1.0
     assert estimate_from_ground_plane(detection, world.camera, T_below) is None
+
+
+def test_known_height_steepest_view_inverts_triangle_fraction() -> None:
+    """The closed form meets ``triangle_fraction`` (the forward formula) at the criterion, and
+    the views on either side fall on either side of it."""
+    e_max = known_height_max_elevation_rad()
+    assert triangle_fraction(e_max) == pytest.approx(MIN_TRIANGLE_FRACTION, abs=1e-12)
+    assert triangle_fraction(e_max - 1e-6) > MIN_TRIANGLE_FRACTION
+    assert triangle_fraction(e_max + 1e-6) < MIN_TRIANGLE_FRACTION
+    assert f"{np.degrees(e_max):.0f} deg" in NoEstimate.STEEP.text
+
+
+def test_no_estimate_reasons_say_which_are_the_geometry() -> None:
+    geometric = {r for r in NoEstimate if r.geometric}
+    assert geometric == {
+        NoEstimate.BORDER,
+        NoEstimate.GROUND_NOT_HIT,
+        NoEstimate.NADIR,
+        NoEstimate.STEEP,
+        NoEstimate.SMALL,
+    }
+    assert all(r.text for r in NoEstimate)
 
 
 def test_naive_estimate_adds_camera_coordinates_to_the_drone_position() -> None:

@@ -27,6 +27,7 @@ from vnav import se3, so3
 from vnav.camera import PinholeCamera
 from vnav.detect import ConeDetection, detect_cones
 from vnav.estimators import (
+    NoEstimate,
     estimate_from_depth,
     estimate_from_ground_plane,
     estimate_from_known_height,
@@ -328,3 +329,12 @@ def test_cone_estimates_is_a_read_only_mapping_in_method_order() -> None:
         ConeEstimates({"lidar": p})
     with pytest.raises(AttributeError, match="lidar"):
         estimates.lidar  # noqa: B018
+    # Why a method gave none: only beside a missing estimate, only for a method.
+    why = ConeEstimates({"ground_plane": p}, {"known_height": NoEstimate.STEEP})
+    assert why.no_estimate == {"known_height": NoEstimate.STEEP}
+    with pytest.raises(
+        ValueError, match=r"reason for methods with an estimate: \['ground_plane'\]"
+    ):
+        ConeEstimates({"ground_plane": p}, {"ground_plane": NoEstimate.STEEP})
+    with pytest.raises(ValueError, match=r"unknown methods \['lidar'\]"):
+        ConeEstimates({}, {"lidar": NoEstimate.STEEP})

@@ -35,6 +35,7 @@ agree.
 
 from __future__ import annotations
 
+import enum
 import logging
 import math
 
@@ -49,10 +50,12 @@ from vnav.silhouette import SilhouetteView, triangle_fraction
 __all__ = [
     "MAX_RANGE_ERROR_PER_PX",
     "MIN_TRIANGLE_FRACTION",
+    "NoEstimate",
     "depth_under_mask",
     "estimate_from_depth",
     "estimate_from_ground_plane",
     "estimate_from_known_height",
+    "known_height_max_elevation_rad",
     "naive",
     "naive_estimate",
 ]
@@ -61,6 +64,64 @@ logger = logging.getLogger(__name__)
 
 _MIN_DEPTH_POINTS = 5
 """Fewest valid depth pixels on a cone's body for a depth-image estimate."""
+
+
+class NoEstimate(enum.Enum):
+    """Why a method gave no estimate of a detection: what ``vnav.localize`` reports beside each
+    missing estimate (``ConeEstimates.no_estimate``), decided where the estimator refuses.
+
+    ``geometric`` reasons follow from where the cone is in view and how large (the view's
+    angle, its size, the image border), not from what the image holds: a method refusing one
+    cannot apply to that view by design (docs/ACCURACY.md). ``text`` says it in words, to
+    follow a count of detections (``51 seen steeper than 69 deg ...``).
+    """
+
+    BORDER = "border"
+    NO_DEPTH = "no_depth"
+    GROUND_NOT_HIT = "ground_not_hit"
+    NADIR = "nadir"
+    STEEP = "steep"
+    SMALL = "small"
+    NO_APEX = "no_apex"
+    INCONSISTENT = "inconsistent"
+    NO_OTHER_ESTIMATE = "no_other_estimate"
+
+    @property
+    def text(self) -> str:
+        """The reason in words, e.g. ``seen steeper than 69 deg (the apex over the base plate)``."""
+        if self is NoEstimate.STEEP:
+            limit_deg = math.degrees(known_height_max_elevation_rad())
+            return f"seen steeper than {limit_deg:.0f} deg (the apex over the base plate)"
+        if self is NoEstimate.SMALL:
+            return (
+                f"too small: 1 px moves the estimate by over {MAX_RANGE_ERROR_PER_PX:.0%} of range"
+            )
+        return _NO_ESTIMATE_TEXT[self]
+
+    @property
+    def geometric(self) -> bool:
+        """Whether the reason is the view's geometry (the method cannot apply to it)."""
+        return self in _GEOMETRIC
+
+
+_NO_ESTIMATE_TEXT = {
+    NoEstimate.BORDER: "cut by the image border",
+    NoEstimate.NO_DEPTH: "with too few depth pixels on the cone's body",
+    NoEstimate.GROUND_NOT_HIT: "whose ray through the base does not meet the ground",
+    NoEstimate.NADIR: "seen from straight above",
+    NoEstimate.NO_APEX: "with no apex found in the silhouette",
+    NoEstimate.INCONSISTENT: "whose similar triangles do not close",
+    NoEstimate.NO_OTHER_ESTIMATE: "with no other estimate to start from",
+}
+_GEOMETRIC = frozenset(
+    {
+        NoEstimate.BORDER,
+        NoEstimate.GROUND_NOT_HIT,
+        NoEstimate.NADIR,
+        NoEstimate.STEEP,
+        NoEstimate.SMALL,
+    }
+)
 
 
 def _view_clear_of_border(
@@ -141,7 +202,12 @@ def estimate_from_depth(
     view = _view_clear_of_border(detection, camera, T_w_c)
     check_depth_image(depth, camera)
     z_c = depth_under_mask(detection, depth)  # checked finite even when not used
-    return None if view is None else _from_depth(view, z_c, cone, far_m)
+    return None if view is None else _or_none(_from_depth(view, z_c, cone, far_m))
+
+
+def _or_none(p_w: np.ndarray | NoEstimate) -> np.ndarray | None:
+    """An estimate, or None for a ``NoEstimate`` reason."""
+    return None if isinstance(p_w, NoEstimate) else p_w
 
 
 def _median(a: np.ndarray) -> float:
@@ -172,22 +238,22 @@ def _percentile(a: np.ndarray, q: float) -> float:
 
 def _from_depth(
     view: SilhouetteView, z_c: np.ndarray, cone: ConeModel, far_m: float
-) -> np.ndarray | None:
+) -> np.ndarray | NoEstimate:
     """``estimate_from_depth`` after validation, for a detection clear of the border; ``z_c``
-    the depth under the mask (``depth_under_mask``)."""
+    the depth under the mask (``depth_under_mask``). Why not, instead of None."""
     uv = view.uv()
     u, v = uv[:, 0], uv[:, 1]
     valid = (z_c > 0.0) & (z_c < far_m)
     n_valid = int(np.count_nonzero(valid))
     if n_valid < _MIN_DEPTH_POINTS:
-        return None
+        return NoEstimate.NO_DEPTH
     z_v = z_c if n_valid == z_c.size else z_c[valid]
     # Far outliers: one selection for both masks.
     keep = valid
     keep[valid] = np.abs(z_v - _median(z_v)) < 2.0
     n_keep = int(np.count_nonzero(keep))
     if n_keep < _MIN_DEPTH_POINTS:
-        return None
+        return NoEstimate.NO_DEPTH
     if n_keep < z_c.size:
         u, v, z_c = u[keep], v[keep], z_c[keep]
     qx, qy, z_w = _world_points(view, u, v, z_c)
@@ -198,7 +264,7 @@ def _from_depth(
     n_body = int(np.count_nonzero(body))
     if n_body < _MIN_DEPTH_POINTS:
         logger.debug("depth: too few body points (%d)", n_body)
-        return None
+        return NoEstimate.NO_DEPTH
     qx, qy = qx[body], qy[body]
     tx, ty = view.t[0], view.t[1]
     r = r0 * (H - height[body]) / (H - t)
@@ -314,17 +380,18 @@ def estimate_from_ground_plane(
         is parallel to the ground or points away from it (``d_z >= -1e-9``).
     """
     view = _view_clear_of_border(detection, camera, T_w_c)
-    return None if view is None else _ground_plane(view, cone)
+    return None if view is None else _or_none(_ground_plane(view, cone))
 
 
-def _ground_plane(view: SilhouetteView, cone: ConeModel) -> np.ndarray | None:
-    """``estimate_from_ground_plane`` after validation, for a detection clear of the border."""
+def _ground_plane(view: SilhouetteView, cone: ConeModel) -> np.ndarray | NoEstimate:
+    """``estimate_from_ground_plane`` after validation, for a detection clear of the border;
+    why not, instead of None."""
     bottom = view.bottom(cone)
     tx, ty, tz = view.t
     dx, dy, dz = view.ray(float(bottom[0]), float(bottom[1]))
     if tz <= 0.0 or dz >= -1e-9:
         logger.debug("ground plane: ray does not reach the ground (d_z = %.3g)", dz)
-        return None
+        return NoEstimate.GROUND_NOT_HIT
     lam = -tz / dz
     gx, gy = tx + lam * dx, ty + lam * dy
     hx, hy = gx - tx, gy - ty
@@ -342,6 +409,19 @@ apex clear of the base plate's image): up to about 69 deg of elevation for the s
 MAX_RANGE_ERROR_PER_PX = 0.10
 """``estimate_from_known_height`` gives no estimate when one pixel of error in the apex or the
 bottom pixel (along the image vertical) moves it by more than this fraction of its range."""
+
+
+def known_height_max_elevation_rad(cone: ConeModel = TRAFFIC_CONE) -> float:
+    """The steepest line of sight (below the horizontal) at which ``estimate_from_known_height``
+    can measure ``cone``: where ``triangle_fraction`` falls to ``MIN_TRIANGLE_FRACTION``.
+
+    ``triangle_fraction(e) = F`` solved for ``e``, with ``k = H - t`` and ``a`` the plate's
+    half-width: ``tan e = (k (1 - F) - F t) / (a (1 + 2 F))`` (about 69 deg for the standard
+    cone). Steeper views give no estimate (``NoEstimate.STEEP``).
+    """
+    F, t = MIN_TRIANGLE_FRACTION, cone.base_thickness_m
+    k, a = cone.height_m - t, 0.5 * cone.base_width_m
+    return math.atan2(k * (1.0 - F) - F * t, a * (1.0 + 2.0 * F))
 
 
 # ------------------------------------------------------------------ known height
@@ -433,26 +513,27 @@ def estimate_from_known_height(
         comes out non-positive or the equations are inconsistent (residual above 25% of H).
     """
     view = _view_clear_of_border(detection, camera, T_w_c)
-    return None if view is None else _known_height(view, cone)
+    return None if view is None else _or_none(_known_height(view, cone))
 
 
-def _known_height(view: SilhouetteView, cone: ConeModel) -> np.ndarray | None:
-    """``estimate_from_known_height`` after validation, for a detection clear of the border."""
+def _known_height(view: SilhouetteView, cone: ConeModel) -> np.ndarray | NoEstimate:
+    """``estimate_from_known_height`` after validation, for a detection clear of the border;
+    why not, instead of None."""
     vertical = view.vertical_at_blob()
     if vertical is None:
         logger.debug("known height: camera looks straight down at the cone")
-        return None
+        return NoEstimate.NADIR
     d, elevation = vertical
     fraction = triangle_fraction(elevation, cone)
     if fraction < MIN_TRIANGLE_FRACTION:
         logger.debug(
             "known height: apex over the base plate (elevation %.1f deg)", math.degrees(elevation)
         )
-        return None
+        return NoEstimate.STEEP
     apex_uv = view.apex(d, fraction)
     if apex_uv is None:
         logger.debug("known height: no apex fit")
-        return None
+        return NoEstimate.NO_APEX
     bottom_uv = view.axis_exit(d, apex_uv)
     c_w = view.t
     s = cone.base_axis_distance_m
@@ -465,13 +546,13 @@ def _known_height(view: SilhouetteView, cone: ConeModel) -> np.ndarray | None:
     solution = _solve_known_height(c_w, a_w, g_w, H, s)
     if solution is None:
         logger.debug("known height: degenerate rays")
-        return None
+        return NoEstimate.INCONSISTENT
     p_w, alpha, gamma, residual = solution
     if alpha <= 0.0 or gamma <= 0.0 or residual > 0.25 * H:
         logger.debug(
             "known height: inconsistent (alpha %.3g, gamma %.3g, res %.3g)", alpha, gamma, residual
         )
-        return None
+        return NoEstimate.INCONSISTENT
     range_m = math.dist(p_w, c_w)
     for moved in (
         _solve_known_height(c_w, view.ray(au + d0, av + d1), g_w, H, s),
@@ -480,7 +561,7 @@ def _known_height(view: SilhouetteView, cone: ConeModel) -> np.ndarray | None:
         shift = math.inf if moved is None else math.dist(moved[0], p_w)
         if shift > MAX_RANGE_ERROR_PER_PX * range_m:
             logger.debug("known height: 1 px moves the estimate %.3g m at %.3g m", shift, range_m)
-            return None
+            return NoEstimate.SMALL
     return np.array(p_w)
 
 

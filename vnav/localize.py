@@ -8,7 +8,7 @@ their accuracy contract are declared in ``vnav.methods``.
 from __future__ import annotations
 
 from collections.abc import Iterator, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -16,7 +16,14 @@ from vnav import se3
 from vnav.camera import PinholeCamera, check_depth_image
 from vnav.cone import TRAFFIC_CONE, ConeModel
 from vnav.detect import ConeDetection, check_detection
-from vnav.estimators import _from_depth, _ground_plane, _known_height, depth_under_mask, naive
+from vnav.estimators import (
+    NoEstimate,
+    _from_depth,
+    _ground_plane,
+    _known_height,
+    depth_under_mask,
+    naive,
+)
 from vnav.methods import METHOD_NAMES, PREFERENCE
 from vnav.silhouette import SilhouetteView
 
@@ -35,22 +42,30 @@ class ConeEstimates(Mapping[str, "np.ndarray | None"]):
     ----------
     p_w_by_method : mapping of str to ndarray, shape (3,), or None
         One entry per method; a method left out gives no estimate.
+    no_estimate : mapping of str to NoEstimate, optional
+        Why a method gave no estimate (``vnav.estimators.NoEstimate``), for methods whose
+        estimate is None; ``localize`` gives one for each.
 
     Raises
     ------
     ValueError
-        On a name that is not a method.
+        On a name that is not a method, or a reason given beside an estimate.
     """
 
     p_w_by_method: Mapping[str, np.ndarray | None]
+    no_estimate: Mapping[str, NoEstimate] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        unknown = sorted(set(self.p_w_by_method) - set(METHOD_NAMES))
+        unknown = sorted((set(self.p_w_by_method) | set(self.no_estimate)) - set(METHOD_NAMES))
         if unknown:
             raise ValueError(f"unknown methods {unknown}; valid: {list(METHOD_NAMES)}")
         object.__setattr__(
             self, "p_w_by_method", {m: self.p_w_by_method.get(m) for m in METHOD_NAMES}
         )
+        both = [m for m in self.no_estimate if self.p_w_by_method[m] is not None]
+        if both:
+            raise ValueError(f"no_estimate gives a reason for methods with an estimate: {both}")
+        object.__setattr__(self, "no_estimate", dict(self.no_estimate))
 
     def __getitem__(self, name: str) -> np.ndarray | None:
         return self.p_w_by_method[name]
@@ -110,11 +125,12 @@ def localize(
     -------
     ConeEstimates
         A method's entry is None when it gives no estimate (see each ``estimate_from_*`` in
-        ``vnav.estimators``). Every entry is None when the detection touches the image border
-        (``touches_border``): part of the cone may be outside the image (apex or base missing,
-        the depth-image axis fit unconstrained), and no estimate is better than a wrong one.
-        Inputs are still validated first. The naive estimate is built from the best one
-        (``ConeEstimates.best``) in camera coordinates.
+        ``vnav.estimators``), and ``no_estimate`` says why. Every entry is None when the
+        detection touches the image border (``touches_border``, ``NoEstimate.BORDER``): part of
+        the cone may be outside the image (apex or base missing, the depth-image axis fit
+        unconstrained), and no estimate is better than a wrong one. Inputs are still validated
+        first. The naive estimate is built from the best one (``ConeEstimates.best``) in camera
+        coordinates.
 
     Raises
     ------
@@ -132,15 +148,19 @@ def localize(
     T_w_c = se3.check_pose(T_w_b @ T_b_c, "T_w_c")
     z_c = None if depth is None else depth_under_mask(detection, depth)
     if detection.touches_border:
-        return ConeEstimates({})
+        return ConeEstimates({}, dict.fromkeys(METHOD_NAMES, NoEstimate.BORDER))
     view = SilhouetteView(detection, camera, T_w_c)
-    p_w_by_method = {
-        "depth_image": None if z_c is None else _from_depth(view, z_c, cone, far_m),
+    found = {
+        "depth_image": NoEstimate.NO_DEPTH if z_c is None else _from_depth(view, z_c, cone, far_m),
         "ground_plane": _ground_plane(view, cone),
         "known_height": _known_height(view, cone),
     }
+    no_estimate = {m: r for m, r in found.items() if isinstance(r, NoEstimate)}
+    p_w_by_method = {m: p for m, p in found.items() if m not in no_estimate}
     best = _best(p_w_by_method)
     if best is not None:
         p_c = np.array(view.camera_coordinates(best))
         p_w_by_method["naive"] = naive(p_c, T_w_b[:3, 3])
-    return ConeEstimates(p_w_by_method)
+    else:
+        no_estimate["naive"] = NoEstimate.NO_OTHER_ESTIMATE
+    return ConeEstimates(p_w_by_method, no_estimate)
