@@ -11,14 +11,19 @@ import math
 from collections.abc import Callable
 from typing import Any
 
-from scenarios.checks import default_checks
+from scenarios.checks import KINDS, default_checks
 from scenarios.spec import ScenarioError, ScenarioSpec, from_dict
 
 Scenario = dict[str, Any]
 
 
 def _check(kind: str, limit: float, method: str = "depth_image", name: str = "") -> dict:
-    entry: dict[str, Any] = {"kind": kind, "limit": limit, "method": method}
+    """A ``[[checks]]`` entry: the method only where the kind uses one, the limit in metres
+    (``limit_m``) where the kind measures metres."""
+    entry: dict[str, Any] = {"kind": kind}
+    if KINDS[kind].uses_method:
+        entry["method"] = method
+    entry[KINDS[kind].limit_key] = limit
     if name:
         entry["name"] = name
     return entry
@@ -65,7 +70,7 @@ def frame_problem() -> Scenario:
             _check(
                 "world_estimate_spread",
                 0.1,
-                name="depth_image world estimate constant while yawing (m)",
+                name="depth_image world estimate constant while yawing",
             ),
         ],
     }
@@ -91,8 +96,8 @@ def yaw_sweep() -> Scenario:
         "checks": [
             *ACCURACY_CHECKS,
             _check("detection_rate", 0.95, name="cone detected whenever fully in view"),
-            _check("camera_coords_span", 2.0, name="cone's camera coordinates move (m)"),
-            _check("world_estimate_spread", 0.15, name="depth_image world estimate constant (m)"),
+            _check("camera_coords_span", 2.0, name="cone's camera coordinates move"),
+            _check("world_estimate_spread", 0.15, name="depth_image world estimate constant"),
         ],
     }
 
@@ -147,8 +152,8 @@ def transform_composer() -> Scenario:
         "checks": [
             *ACCURACY_CHECKS,
             _check("detection_rate", 0.95, name="cone detected whenever fully in view"),
-            _check("camera_coords_span", 1.0, name="cone's camera coordinates move (m)"),
-            _check("world_estimate_spread", 0.15, name="depth_image world estimate constant (m)"),
+            _check("camera_coords_span", 1.0, name="cone's camera coordinates move"),
+            _check("world_estimate_spread", 0.15, name="depth_image world estimate constant"),
         ],
     }
 
@@ -211,7 +216,7 @@ def orbit() -> Scenario:
         "checks": [
             *ACCURACY_CHECKS,
             _check("detection_rate", 0.95, name="cone detected whenever fully in view"),
-            _check("tracking_error", 0.3, name="controller tracking error (m)"),
+            _check("tracking_error", 0.3, name="controller tracking error"),
         ],
     }
 
@@ -237,7 +242,7 @@ def approach() -> Scenario:
         "checks": [
             *ACCURACY_CHECKS,
             _check("detection_rate", 0.95, name="cone detected whenever fully in view"),
-            _check("tracking_error", 1.0, name="controller tracking error (m)"),
+            _check("tracking_error", 1.0, name="controller tracking error"),
         ],
     }
 

@@ -5,22 +5,96 @@ compares it with the scenario's limit. Kinds are registered where they are defin
 ``@check_kind`` (as dm_control registers its tasks): the registry ``KINDS`` is what the
 scenario parser accepts, what ``Check.label`` reads and what the README points to. The accuracy
 bounds are those of the perception contract (docs/ACCURACY.md, declared in ``vnav.methods``).
+
+A check has one of four outcomes (``Outcome``):
+
+- ``passed`` / ``failed``: the figure met its limit, or did not;
+- ``no data``: the run holds nothing the check could judge (no estimate by its method, no cone
+  in view, a yaw check on a run with no yaw); the reason is given, and it **fails** the run:
+  a check that was asked for and judged nothing has not passed;
+- ``skipped``: only a default check (a scenario without ``[[checks]]``) whose method cannot
+  apply to the scenario's geometry by design, e.g. ``known_height`` seen from steeper than its
+  triangle can be measured (``vnav.estimators.NoEstimate.geometric``); the reason is given and
+  the run is not failed for it.
 """
 
 from __future__ import annotations
 
+import enum
+import math
 import operator
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
-from scenarios.records import RunResult
-from vnav.methods import METHODS, method
+from scenarios.records import DetectionRecord, RunResult
+from vnav.methods import CONTRACT_DOMAIN, METHODS, method
 
-__all__ = ["KINDS", "Check", "CheckKind", "CheckResult", "check_kind", "default_checks", "judge"]
+__all__ = [
+    "KINDS",
+    "Check",
+    "CheckKind",
+    "CheckResult",
+    "NoData",
+    "Outcome",
+    "Unit",
+    "check_kind",
+    "default_checks",
+    "judge",
+]
 
-Figure = Callable[[RunResult, str], float | None]
+
+class Outcome(enum.Enum):
+    """What judging a check gave (the module's docstring says what each means)."""
+
+    PASSED = "passed"
+    FAILED = "failed"
+    NO_DATA = "no data"
+    SKIPPED = "skipped"
+
+    @property
+    def fails_run(self) -> bool:
+        """Whether this outcome fails the run (exit status 1): ``failed`` and ``no data``."""
+        return self in (Outcome.FAILED, Outcome.NO_DATA)
+
+
+class Unit(enum.Enum):
+    """What a check's figure and its limit are measured in (the report's ``unit``)."""
+
+    METRES = "m"
+    FRACTION = "fraction"
+    """A share, 0 to 1 (shown in percent)."""
+    COUNT = "count"
+    RATIO = "ratio"
+    """One figure over another (shown as ``12x``)."""
+    BOUND = "fraction of bound"
+    """An error over the method's accuracy bound at its range (1: at the bound)."""
+
+
+_LIMIT_UNIT_DOC = {
+    Unit.METRES: "metres",
+    Unit.FRACTION: "a fraction (0.95: 95%)",
+    Unit.COUNT: "a count",
+    Unit.RATIO: "a ratio (10: ten times)",
+    Unit.BOUND: "times the method's accuracy bound (1: the bound)",
+}
+
+
+@dataclass(frozen=True)
+class NoData:
+    """A figure that could not be computed: why, in words.
+
+    ``geometric``: the reason is that the check's method cannot apply to the view's geometry
+    by design (``vnav.estimators.NoEstimate.geometric``); a default check then is skipped.
+    """
+
+    reason: str
+    geometric: bool = False
+
+
+Figure = Callable[[RunResult, "Check"], "float | NoData"]
 
 
 @dataclass(frozen=True)
@@ -31,10 +105,12 @@ class CheckKind:
     ----------
     name : str
         The ``kind`` a scenario file gives.
-    figure : callable(run, method) -> float or None
-        The figure; None when the run holds nothing to judge (the check then fails).
+    figure : callable(run, check) -> float or NoData
+        The figure, or why the run holds nothing to judge.
     passes : callable(figure, limit) -> bool
         ``operator.le`` (at most the limit) or ``operator.ge`` (at least).
+    unit : Unit
+        What the figure and the limit are measured in.
     uses_method : bool
         Whether the figure depends on the check's ``method``.
     doc : str
@@ -44,21 +120,38 @@ class CheckKind:
     name: str
     figure: Figure
     passes: Callable[[float, float], bool]
+    unit: Unit
     uses_method: bool
     doc: str
+
+    @property
+    def at_most(self) -> bool:
+        """True if the figure must be at most the limit, False if at least."""
+        return self.passes is operator.le
+
+    @property
+    def limit_doc(self) -> str:
+        """What the limit is, in words: its direction and unit (``at most, metres``)."""
+        return f"{'at most' if self.at_most else 'at least'}, {_LIMIT_UNIT_DOC[self.unit]}"
+
+    @property
+    def limit_key(self) -> str:
+        """The key a scenario file writes the limit under: ``limit_m`` in metres, else
+        ``limit``."""
+        return "limit_m" if self.unit is Unit.METRES else "limit"
 
 
 KINDS: dict[str, CheckKind] = {}
 """Every check kind, by name, in the order they are defined."""
 
 
-def check_kind(name: str, passes: Callable, *, uses_method: bool = True) -> Callable:
+def check_kind(name: str, passes: Callable, unit: Unit, *, uses_method: bool = True) -> Callable:
     """Register the decorated figure as the check kind ``name``; its docstring's first line
     is what the check asserts."""
 
     def register(figure: Figure) -> Figure:
         doc = (figure.__doc__ or "").strip().splitlines()[0]
-        KINDS[name] = CheckKind(name, figure, passes, uses_method, doc)
+        KINDS[name] = CheckKind(name, figure, passes, unit, uses_method, doc)
         return figure
 
     return register
@@ -66,12 +159,17 @@ def check_kind(name: str, passes: Callable, *, uses_method: bool = True) -> Call
 
 @dataclass(frozen=True)
 class Check:
-    """One pass/fail criterion evaluated on a finished run (a kind from ``KINDS``)."""
+    """One pass/fail criterion evaluated on a finished run (a kind from ``KINDS``).
+
+    ``default`` marks the checks of ``default_checks``: skipped, not failed, when their method
+    cannot apply to the scenario's geometry.
+    """
 
     kind: str
     limit: float
     method: str = "depth_image"
     name: str = ""
+    default: bool = False
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
@@ -88,141 +186,335 @@ class Check:
 
 @dataclass(frozen=True)
 class CheckResult:
-    """A check's outcome: its figure (None: nothing to judge), the limit and the verdict."""
+    """A check's outcome: its figure (None without data), the limit, the verdict and why.
+
+    Attributes
+    ----------
+    name, kind : str
+    value : float or None
+        The figure in ``unit`` (an int for counts); None for ``no data`` and ``skipped``.
+    limit : float
+    outcome : Outcome
+    unit : Unit
+    shown : str
+        The figure next to its limit, with units, e.g. ``0.012 m (must be <= 0.1 m)``; for
+        ``no data`` and ``skipped``, the reason.
+    """
 
     name: str
     kind: str
     value: float | None
     limit: float
-    passed: bool
+    outcome: Outcome
+    unit: Unit
+    shown: str
+
+    @property
+    def passed(self) -> bool:
+        """Whether the check was judged and met its limit."""
+        return self.outcome is Outcome.PASSED
+
+    @property
+    def reason(self) -> str | None:
+        """Why the check judged nothing, or None when it was judged."""
+        return self.shown if self.value is None else None
 
     def as_dict(self) -> dict:
         return {
             "name": self.name,
             "kind": self.kind,
+            "outcome": self.outcome.value,
+            "passed": self.passed,
             "value": self.value,
             "limit": self.limit,
-            "passed": self.passed,
+            "unit": self.unit.value,
+            "shown": self.shown,
+            "reason": self.reason,
         }
 
 
 def judge(check: Check, run: RunResult) -> CheckResult:
-    """Compute ``check``'s figure on ``run``; a check with no data to judge fails."""
+    """Compute ``check``'s figure on ``run`` and compare it with the limit.
+
+    A figure the run cannot give is ``no data`` (a failure), except for a default check whose
+    method cannot apply to the geometry: ``skipped``.
+    """
     kind = KINDS[check.kind]
-    value = kind.figure(run, check.method)
-    passed = value is not None and bool(kind.passes(value, check.limit))
-    return CheckResult(check.label, check.kind, value, check.limit, passed)
+    figure = kind.figure(run, check)
+    if isinstance(figure, NoData):
+        skipped = check.default and figure.geometric
+        outcome = Outcome.SKIPPED if skipped else Outcome.NO_DATA
+        return CheckResult(
+            check.label, check.kind, None, check.limit, outcome, kind.unit, figure.reason
+        )
+    value: float = round(figure) if kind.unit is Unit.COUNT else float(figure)
+    outcome = Outcome.PASSED if kind.passes(value, check.limit) else Outcome.FAILED
+    shown = _shown(kind, check, value, run)
+    return CheckResult(check.label, check.kind, value, check.limit, outcome, kind.unit, shown)
 
 
 def default_checks() -> tuple[Check, ...]:
-    """Checks for a scenario that declares none: every method's bound and the detection rate."""
+    """Checks for a scenario that declares none: every method's bound and the detection rate.
+
+    Each is a ``default`` check: a bound whose method cannot apply to the scenario's geometry
+    is skipped with the reason.
+    """
     return (
-        *(Check("error_bound", 1.0, m.name, f"{m.name} {m.promise}") for m in METHODS if m.bound),
-        Check("detection_rate", 0.95, name="cones in view detected (fraction)"),
+        *(
+            Check("error_bound", 1.0, m.name, f"{m.name} {m.promise}", default=True)
+            for m in METHODS
+            if m.bound
+        ),
+        Check("detection_rate", 0.95, name="cones in view detected", default=True),
+    )
+
+
+# ------------------------------------------------------------------- figures shown in words
+
+
+def _number(x: float, digits: int = 3) -> str:
+    """``x`` to ``digits`` significant digits (whole numbers in full, at most 6 decimals),
+    without exponent or trailing zeros: 0.000788, 0.05, 20.5, 25988, 0 for 6e-18."""
+    if x == 0.0 or not math.isfinite(x):
+        return f"{x:g}"
+    # At most 6 decimals: a micrometre, a millionth of a percent, reads as 0.
+    decimals = min(6, max(0, digits - 1 - math.floor(math.log10(abs(x)))))
+    text = f"{x:.{decimals}f}"
+    return text.rstrip("0").rstrip(".") if "." in text else text
+
+
+def _percent(fraction: float) -> str:
+    return f"{_number(100.0 * fraction)}%"
+
+
+def _in_unit(x: float, unit: Unit) -> str:
+    if unit is Unit.METRES:
+        return f"{_number(x)} m"
+    if unit is Unit.FRACTION:
+        return _percent(x)
+    if unit is Unit.RATIO:
+        return f"{_number(x)}x"
+    return _number(x)  # counts (integers print as integers)
+
+
+def _shown(kind: CheckKind, check: Check, value: float, run: RunResult) -> str:
+    op = "<=" if kind.at_most else ">="
+    if kind.unit is Unit.BOUND:
+        return _shown_bound(check, value, op, run)
+    return f"{_in_unit(value, kind.unit)} (must be {op} {_in_unit(check.limit, kind.unit)})"
+
+
+def _shown_bound(check: Check, value: float, op: str, run: RunResult) -> str:
+    """An ``error_bound`` figure (error / bound) in the bound's own unit where it has one.
+
+    The bound is ``max(floor, fraction x range)``: where every judged detection lies beyond
+    the crossover range (``floor / fraction``) it is ``fraction x range`` and the figure is the
+    error in % of range; where every one lies within, it is the floor and the figure is the
+    error in metres; for a mix, the error in % of the bound.
+    """
+    bound = method(check.method).bound
+    assert bound is not None  # the parser refuses error_bound on a method without one
+    statistic = "worst" if bound.statistic == "max" else "median"
+    ranges_m = run.ranges_for(check.method, contract_only=True)
+    if bound.fraction_of_range > 0.0 and np.all(
+        bound.fraction_of_range * ranges_m >= bound.floor_m
+    ):
+        scale, unit = 100.0 * bound.fraction_of_range, "% of range"
+    elif bound.floor_m > 0.0 and np.all(bound.fraction_of_range * ranges_m <= bound.floor_m):
+        scale, unit = bound.floor_m, " m"
+    else:
+        scale, unit = 100.0, "% of the bound"
+    return (
+        f"{statistic} {_number(value * scale)}{unit} "
+        f"(must be {op} {_number(check.limit * scale)}{unit})"
+    )
+
+
+# ------------------------------------------------------------------- why there is no data
+
+
+def _detections(run: RunResult) -> list[DetectionRecord]:
+    return [d for t in run.ticks for d in t.detections]
+
+
+def _no_detection(run: RunResult) -> NoData | None:
+    """Why no detection was matched to a true cone, or None if one was."""
+    detections = _detections(run)
+    if not detections:
+        return NoData("no cone was detected in any camera image")
+    if any(d.cone_index is not None for d in detections):
+        return None
+    border = sum(d.detection.touches_border for d in detections)
+    cut = f" ({border} touch the image border)" if border else ""
+    return NoData(f"none of the {len(detections)} detections was matched to a true cone{cut}")
+
+
+def _no_estimates(run: RunResult, method_name: str, *, contract_only: bool) -> NoData:
+    """Why ``method_name`` has no error to judge: no detection, none matched, none in the
+    contract's domain, or the method's own reasons (``vnav.estimators.NoEstimate``)."""
+    missing = _no_detection(run)
+    if missing is not None:
+        return missing
+    pool = [d for d in _detections(run) if d.cone_index is not None]
+    where = "matched detections"
+    if contract_only:
+        pool = [d for d in pool if d.in_contract]
+        where = "detections in the contract's domain"
+        if not pool:
+            # Nothing is promised outside the domain: the geometry rules the bound out.
+            return NoData(
+                f"no matched detection in the contract's domain ({CONTRACT_DOMAIN.text})",
+                geometric=True,
+            )
+    reasons = Counter(d.no_estimate.get(method_name) for d in pool)
+    parts = [
+        f"{n} {'no reason recorded' if r is None else r.text}" for r, n in reasons.most_common()
+    ]
+    if len(parts) == 1:
+        parts = [f"all {parts[0]}" if len(pool) > 1 else parts[0]]
+    return NoData(
+        f"no {method_name} estimates for the {len(pool)} {where}: {'; '.join(parts)}",
+        geometric=all(r is not None and r.geometric for r in reasons),
     )
 
 
 # ------------------------------------------------------------------------------ the kinds
 
 
-def _max(x: np.ndarray) -> float | None:
-    return float(np.max(x)) if x.size else None
+def _max(x: np.ndarray) -> float:
+    return float(np.max(x))
 
 
-def _median(x: np.ndarray) -> float | None:
-    return float(np.median(x)) if x.size else None
+def _median(x: np.ndarray) -> float:
+    return float(np.median(x))
 
 
-@check_kind("max_error", operator.le)
-def _max_error(run: RunResult, method: str) -> float | None:
+@check_kind("max_error", operator.le, Unit.METRES)
+def _max_error(run: RunResult, check: Check) -> float | NoData:
     """largest position error of ``method`` over all matched detections <= limit_m"""
-    return _max(run.errors(method))
+    errors = run.errors(check.method)
+    return _max(errors) if errors.size else _no_estimates(run, check.method, contract_only=False)
 
 
-@check_kind("median_error", operator.le)
-def _median_error(run: RunResult, method: str) -> float | None:
+@check_kind("median_error", operator.le, Unit.METRES)
+def _median_error(run: RunResult, check: Check) -> float | NoData:
     """median position error of ``method`` <= limit_m"""
-    return _median(run.errors(method))
+    errors = run.errors(check.method)
+    if not errors.size:
+        return _no_estimates(run, check.method, contract_only=False)
+    return _median(errors)
 
 
-@check_kind("error_bound", operator.le)
-def _error_bound(run: RunResult, method_name: str) -> float | None:
-    """error / accuracy bound of ``method`` <= limit: worst or median as the bound states,
-    over the contract's domain (docs/ACCURACY.md)"""
-    bound = method(method_name).bound
+@check_kind("error_bound", operator.le, Unit.BOUND)
+def _error_bound(run: RunResult, check: Check) -> float | NoData:
+    """error / accuracy bound of ``method`` (worst or median, as the bound says) <= limit
+
+    Over the detections in the contract's domain (docs/ACCURACY.md)."""
+    bound = method(check.method).bound
     if bound is None:
-        return None
-    errors = run.errors(method_name, contract_only=True)
-    ratio = errors / bound.allowed_m(run.ranges_for(method_name, contract_only=True))
+        return NoData(f"{check.method} has no accuracy bound")
+    errors = run.errors(check.method, contract_only=True)
+    if not errors.size:
+        return _no_estimates(run, check.method, contract_only=True)
+    ratio = errors / bound.allowed_m(run.ranges_for(check.method, contract_only=True))
     return _max(ratio) if bound.statistic == "max" else _median(ratio)
 
 
-@check_kind("detection_rate", operator.ge, uses_method=False)
-def _detection_rate(run: RunResult, method: str) -> float | None:
+@check_kind("detection_rate", operator.ge, Unit.FRACTION, uses_method=False)
+def _detection_rate(run: RunResult, check: Check) -> float | NoData:
     """detections / cones fully in view (summed over camera ticks) >= limit"""
     seen = detected = 0
     for t in run.ticks:
         matched = {d.cone_index for d in t.detections if d.cone_index is not None}
         seen += len(t.cones_in_view)
         detected += len(set(t.cones_in_view) & matched)
-    return detected / seen if seen else None
+    if seen:
+        return detected / seen
+    border = sum(d.detection.touches_border for d in _detections(run))
+    cut = f"; {border} detections touch the image border" if border else ""
+    return NoData(
+        f"no cone was fully in view and >= {CONTRACT_DOMAIN.min_height_px:g} px tall at any "
+        f"camera tick{cut}"
+    )
 
 
-def _per_cone(run: RunResult, method: str | None) -> dict[int, np.ndarray]:
-    """Per matched cone: ``method``'s estimates (world), or with None its true camera coords."""
-    out: dict[int, list[np.ndarray]] = {}
-    for t in run.ticks:
-        for d in t.detections:
-            if d.cone_index is None:
-                continue
-            value = d.p_c_true if method is None else d.estimates_w.get(method)
-            if value is not None:
-                out.setdefault(d.cone_index, []).append(value)
-    return {i: np.array(v) for i, v in out.items()}
+def _per_cone(run: RunResult, method: str | None) -> dict[int, list[DetectionRecord]]:
+    """Per matched cone: its detections with an estimate by ``method`` (any with None)."""
+    out: dict[int, list[DetectionRecord]] = {}
+    for d in _detections(run):
+        if d.cone_index is not None and (method is None or method in d.estimates_w):
+            out.setdefault(d.cone_index, []).append(d)
+    return out
 
 
-@check_kind("world_estimate_spread", operator.le)
-def _world_spread(run: RunResult, method: str) -> float | None:
-    """largest distance of ``method``'s estimates of a cone from their mean <= limit_m"""
-    spreads = [
-        float(np.max(np.linalg.norm(p - p.mean(axis=0), axis=1)))
-        for p in _per_cone(run, method).values()
-    ]
-    return max(spreads) if spreads else None
+def _span_m(points: np.ndarray) -> float:
+    """Length of the diagonal of the points' bounding box, metres."""
+    return float(np.linalg.norm(np.ptp(points, axis=0)))
 
 
-@check_kind("camera_coords_span", operator.ge, uses_method=False)
-def _camera_span(run: RunResult, method: str) -> float | None:
+@check_kind("world_estimate_spread", operator.le, Unit.METRES)
+def _world_spread(run: RunResult, check: Check) -> float | NoData:
+    """largest distance of ``method``'s estimates of a cone from their mean <= limit_m
+
+    Over the cones whose camera coordinates moved by more than the limit: where nothing moved
+    in the camera, a constant world estimate shows nothing (no data)."""
+    per_cone = _per_cone(run, check.method)
+    if not per_cone:
+        return _no_estimates(run, check.method, contract_only=False)
+    spreads, moved_m = [], []
+    for records in per_cone.values():
+        p_w = np.array([d.estimates_w[check.method] for d in records])
+        moved_m.append(_span_m(np.array([d.p_c_true for d in records])))
+        if moved_m[-1] > check.limit:
+            spreads.append(float(np.max(np.linalg.norm(p_w - p_w.mean(axis=0), axis=1))))
+    if spreads:
+        return max(spreads)
+    # Nothing moved in the camera: a constant world estimate shows nothing (the naive
+    # estimate would be constant too).
+    return NoData(
+        f"the cone's camera coordinates moved {_number(max(moved_m))} m, not more than the "
+        f"limit ({_number(check.limit)} m): nothing moved for the world estimate to follow"
+    )
+
+
+@check_kind("camera_coords_span", operator.ge, Unit.METRES, uses_method=False)
+def _camera_span(run: RunResult, check: Check) -> float | NoData:
     """the cone's camera-frame coordinates move by >= limit_m"""
-    spans = [float(np.linalg.norm(np.ptp(p, axis=0))) for p in _per_cone(run, None).values()]
-    return max(spans) if spans else None
+    per_cone = _per_cone(run, None)
+    if not per_cone:
+        missing = _no_detection(run)
+        assert missing is not None  # no matched detection is exactly what it explains
+        return missing
+    return max(_span_m(np.array([d.p_c_true for d in r])) for r in per_cone.values())
 
 
-@check_kind("naive_worse", operator.ge)
-def _naive_worse(run: RunResult, method: str) -> float | None:
+@check_kind("naive_worse", operator.ge, Unit.RATIO)
+def _naive_worse(run: RunResult, check: Check) -> float | NoData:
     """median naive error >= limit x the median error of ``method``"""
-    naive, ref = _median(run.errors("naive")), _median(run.errors(method))
-    if naive is None or ref is None:
-        return None
-    return naive / max(ref, 1e-6)
+    naive, ref = run.errors("naive"), run.errors(check.method)
+    if not ref.size:
+        return _no_estimates(run, check.method, contract_only=False)
+    if not naive.size:
+        return _no_estimates(run, "naive", contract_only=False)
+    return _median(naive) / max(_median(ref), 1e-6)
 
 
-@check_kind("gimbal_lock_seen", operator.ge, uses_method=False)
-def _gimbal_lock(run: RunResult, method: str) -> float | None:
+@check_kind("gimbal_lock_seen", operator.ge, Unit.COUNT, uses_method=False)
+def _gimbal_lock(run: RunResult, check: Check) -> float | NoData:
     """camera ticks whose roll/pitch/yaw flag gimbal lock >= limit"""
     return float(sum(t.gimbal_locked for t in run.ticks))
 
 
-@check_kind("tracking_error", operator.le, uses_method=False)
-def _tracking(run: RunResult, method: str) -> float | None:
+@check_kind("tracking_error", operator.le, Unit.METRES, uses_method=False)
+def _tracking(run: RunResult, check: Check) -> float | NoData:
     """largest distance of the body from its reference (controlled flights) <= limit_m"""
     errors = [t.reference_error_m for t in run.ticks if t.reference_error_m is not None]
-    return max(errors) if errors else None
+    if errors:
+        return max(errors)
+    return NoData("the flight has no reference to track (kinematic keyframes are exact)")
 
 
-@check_kind("matched_cones", operator.ge, uses_method=False)
-def _matched_cones(run: RunResult, method: str) -> float | None:
+@check_kind("matched_cones", operator.ge, Unit.COUNT, uses_method=False)
+def _matched_cones(run: RunResult, check: Check) -> float | NoData:
     """number of distinct true cones matched at least once >= limit"""
-    return float(
-        len({d.cone_index for t in run.ticks for d in t.detections if d.cone_index is not None})
-    )
+    return float(len(_per_cone(run, None)))

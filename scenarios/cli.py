@@ -1,12 +1,14 @@
 """The ``vnav-demo`` command line.
 
 - ``vnav-demo list``: the built-in scenarios, one line each.
-- ``vnav-demo show NAME``: a built-in scenario as a TOML file, to start your own from.
+- ``vnav-demo show NAME``: a built-in scenario as a TOML file named ``my-NAME``, to start your
+  own from.
 - ``vnav-demo run NAME|FILE.toml [...] [--all] [--out DIR] [--seed N] [--duration S] [--quiet]``:
   runs scenarios headless, writes ``DIR/<name>.rrd`` and ``DIR/<name>.json``, prints a summary.
 - ``vnav-demo lecture``: the lecture's worked examples next to vnav's results.
 
-Exit status: 0 when every check passed, 1 when a check failed, 2 for bad usage or bad input
+Output fits 80 columns (``scenarios.console.WIDTH``). Exit status: 0 when every check passed
+(or was skipped), 1 when a check failed or had no data, 2 for bad usage or bad input
 (one line on stderr, no traceback; nothing is written), 3 when a run could not complete (I/O
 error, diverging simulation, out of memory, internal error), 128 + N on signal N.
 """
@@ -16,6 +18,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import textwrap
 from collections.abc import Sequence
 
 __all__ = ["main"]
@@ -38,25 +41,35 @@ def _lecture(args: argparse.Namespace) -> int:
     from scenarios import lecture
 
     outcomes = [lecture.evaluate(e) for e in lecture.EXAMPLES]
-    from scenarios.console import say
+    from scenarios.console import WIDTH, say
 
-    say("MIT 16.485 VNAV lecture 1: every worked example and quiz answer, computed by vnav")
-    say(lecture.table(outcomes))
+    say("MIT 16.485 VNAV lecture 1: every worked example and quiz, computed by vnav")
+    say(lecture.table(outcomes, WIDTH))
     return 0 if all(o.agrees for o in outcomes) else 1
 
 
 def _list(args: argparse.Namespace) -> int:
     from scenarios import builtin
-    from scenarios.console import say
+    from scenarios.console import WIDTH, say
 
-    width = max(len(n) for n in builtin.names())
-    say(
-        "\n".join(
-            f"{name:<{width}}  {builtin.REGISTRY[name]()['description']}"
-            for name in builtin.names()
+    # Each name, then its description wrapped beside it (80 columns).
+    width = max(len(n) for n in builtin.names()) + 2
+    lines = []
+    for name in builtin.names():
+        lines += textwrap.wrap(
+            builtin.REGISTRY[name]()["description"],
+            WIDTH,
+            initial_indent=f"{name:<{width}}",
+            subsequent_indent=" " * width,
         )
-    )
+    say("\n".join(lines))
     return 0
+
+
+def show_name(name: str) -> str:
+    """The name ``vnav-demo show NAME`` gives its copy, so that running the copy writes
+    ``my-NAME.rrd`` and leaves the built-in's files alone."""
+    return f"my-{name}"
 
 
 def _show(args: argparse.Namespace) -> int:
@@ -71,10 +84,12 @@ def _show(args: argparse.Namespace) -> int:
         return 2
     from scenarios.console import say
 
-    say(
-        f"# {PROG} show {args.name}: save as FILE.toml, edit, run with `{PROG} run FILE.toml`\n"
-        + toml_out.dumps(builtin.REGISTRY[args.name](), comments=True).rstrip("\n")
+    scenario = {**builtin.REGISTRY[args.name](), "name": show_name(args.name)}
+    header = toml_out.comment_lines(
+        f"{PROG} show {args.name}: the built-in as a scenario file. Save it as FILE.toml, edit "
+        f"it, run it with `{PROG} run FILE.toml`: it writes {scenario['name']}.rrd and .json."
     )
+    say("\n".join(header) + "\n" + toml_out.dumps(scenario, comments=True).rstrip("\n"))
     return 0
 
 
@@ -108,7 +123,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser(
         "show",
         help="print a built-in scenario as a TOML file to start your own from",
-        description="Print the built-in scenario NAME in the scenario-file format (TOML).",
+        description="Print the built-in scenario NAME in the scenario-file format (TOML), every "
+        "key commented, named my-NAME so that running it leaves the built-in's files alone.",
     )
     p.add_argument("name", metavar="NAME", help="a built-in scenario (see `vnav-demo list`)")
     p.set_defaults(func=_show)
@@ -125,8 +141,9 @@ def _add_run_parser(sub) -> None:
         description="Run built-in scenarios (by name) or scenario files (a path: FILE.toml or "
         "DIR/FILE) headless. Each writes DIR/<name>.rrd (open it with `rerun`) and "
         "DIR/<name>.json (error statistics and checks), both or neither. Exit status 0 if every "
-        "check passed, 1 if one failed, 2 for bad input, 3 if a run could not complete (I/O "
-        "error, diverging simulation, out of memory, internal error), 128+N on signal N.",
+        "check passed, 1 if one failed or had no data, 2 for bad input, 3 if a run could not "
+        "complete (I/O error, diverging simulation, out of memory, internal error), 128+N on "
+        "signal N.",
     )
     p.add_argument(
         "scenarios",

@@ -9,7 +9,10 @@ from __future__ import annotations
 import os
 import sys
 
-__all__ = ["error", "say"]
+__all__ = ["WIDTH", "error", "say"]
+
+WIDTH = 80
+"""Columns every line of ``vnav-demo``'s output fits in (a test checks each command)."""
 
 
 def say(text: str) -> None:

@@ -139,13 +139,14 @@ def _compare(
 ) -> DetectionRecord:
     """One detection's record: its estimates and, if matched, their errors and the range."""
     estimates_w = {m: p for m, p in estimates.items() if p is not None}
+    no_estimate = dict(estimates.no_estimate)
     if cone_index is None:
-        return DetectionRecord(detection, estimates_w)
+        return DetectionRecord(detection, estimates_w, no_estimate=no_estimate)
     p_true_w = cones_w[cone_index]
     p_c_true = se3.apply(T_c_w, p_true_w)
     range_m = float(np.linalg.norm(p_c_true))
     errors_m = {m: float(metrics.position_error(p_true_w, p)[0]) for m, p in estimates_w.items()}
     in_contract = cone_index in in_view and CONTRACT_DOMAIN.contains_range(range_m)
     return DetectionRecord(
-        detection, estimates_w, cone_index, errors_m, range_m, p_c_true, in_contract
+        detection, estimates_w, cone_index, errors_m, range_m, p_c_true, in_contract, no_estimate
     )

@@ -8,6 +8,7 @@ rather than reading them from here.
 
 from __future__ import annotations
 
+import textwrap
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -269,48 +270,39 @@ def _format(x: np.ndarray, decimals: int) -> list[str]:
     return ["[" + " ".join(c.rjust(width) for c in row) + "]" for row in cells]
 
 
-def table(outcomes: list[Outcome]) -> str:
-    """The outcomes as a plain-text table: chapter, example, lecture, vnav, |error|, agree."""
-    head = ("ch", "example", "lecture", "vnav", "max |err|", "agree")
-    rows: list[tuple[list[str], ...]] = []
-    for o in outcomes:
-        e = o.example
-        rows.append(
-            (
-                [str(e.chapter)],
-                [e.what],
-                _format(np.asarray(e.lecture), e.decimals),
-                _format(o.value, e.decimals),
-                [f"{o.error:.1e}"],
-                ["yes" if o.agrees else "NO"],
-            )
+def table(outcomes: list[Outcome], width: int = 80) -> str:
+    """The outcomes as a plain-text table ``width`` columns wide: per example, its chapter and
+    description (wrapped), then the lecture's value, vnav's, the largest |error| and whether
+    they agree (matrices take one line per row)."""
+    head = ("lecture", "vnav", "max |err|", "agree")
+    rows = [
+        (
+            _format(np.asarray(o.example.lecture), o.example.decimals),
+            _format(o.value, o.example.decimals),
+            [f"{o.error:.1e}"],
+            ["yes" if o.agrees else "NO"],
         )
+        for o in outcomes
+    ]
     widths = [
         max(len(head[i]), *(len(line) for r in rows for line in r[i])) for i in range(len(head))
     ]
-    widths[1] = min(widths[1], 46)
-    lines = ["  ".join(h.ljust(w) for h, w in zip(head, widths, strict=True)).rstrip()]
-    lines.append("  ".join("-" * w for w in widths))
-    for r in rows:
-        # Wrap the description; matrices take one line per row.
-        what = _wrap(r[1][0], widths[1])
-        cells = [r[0], what, r[2], r[3], r[4], r[5]]
-        for k in range(max(len(c) for c in cells)):
-            parts = [
-                (c[k] if k < len(c) else "").ljust(w) for c, w in zip(cells, widths, strict=True)
-            ]
-            lines.append("  ".join(parts).rstrip())
+    indent = " " * 4
+    lines = [
+        "ch  example",
+        (indent + "  ".join(h.ljust(w) for h, w in zip(head, widths, strict=True))).rstrip(),
+        "--  " + "  ".join("-" * w for w in widths),
+    ]
+    for o, r in zip(outcomes, rows, strict=True):
+        lines += textwrap.wrap(
+            o.example.what,
+            width,
+            initial_indent=f"{o.example.chapter:<4}",
+            subsequent_indent=indent,
+        )
+        for k in range(max(len(c) for c in r)):
+            parts = [(c[k] if k < len(c) else "").ljust(w) for c, w in zip(r, widths, strict=True)]
+            lines.append((indent + "  ".join(parts)).rstrip())
     n_ok = sum(o.agrees for o in outcomes)
     lines.append(f"{n_ok} of {len(outcomes)} worked examples agree with the lecture")
     return "\n".join(lines)
-
-
-def _wrap(text: str, width: int) -> list[str]:
-    words, lines, line = text.split(), [], ""
-    for word in words:
-        if line and len(line) + 1 + len(word) > width:
-            lines.append(line)
-            line = word
-        else:
-            line = f"{line} {word}" if line else word
-    return [*lines, line]

@@ -20,6 +20,7 @@ from vnav.detect import ConeDetection
 
 if TYPE_CHECKING:
     from scenarios.spec import ScenarioSpec
+    from vnav.estimators import NoEstimate
 
 __all__ = ["DetectionRecord", "RunResult", "TickRecord"]
 
@@ -45,6 +46,8 @@ class DetectionRecord:
     in_contract : bool
         The matched cone is in the accuracy contract's domain (``vnav.methods.CONTRACT_DOMAIN``):
         fully in view, tall enough, at a range within the bounds.
+    no_estimate : dict of str to NoEstimate
+        Why each method that gave no estimate gave none (``vnav.estimators.NoEstimate``).
     """
 
     detection: ConeDetection
@@ -54,6 +57,7 @@ class DetectionRecord:
     range_m: float | None = None
     p_c_true: np.ndarray | None = None
     in_contract: bool = False
+    no_estimate: dict[str, NoEstimate] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)

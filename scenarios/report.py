@@ -2,8 +2,12 @@
 
 Statistics follow evo (``vnav.metrics.error_stats``): rmse, mean, median, std, min, max, count,
 all in metres, over all matched detections and per 5 m bin of range (``by_range``).
-Statistics of an empty series are ``null``. Only ``timing_s`` depends on the machine;
-everything else is fixed by the scenario and the seed.
+Statistics of an empty series are ``null``; ``no_estimate`` counts, per method, the matched
+detections it gave no estimate for, by reason (``vnav.estimators.NoEstimate``). Each check
+has an ``outcome``: ``passed``, ``failed``, ``no data`` (nothing to judge, with its
+``reason``: fails the run) or ``skipped`` (a default check whose method cannot apply to the
+scenario's geometry, with its ``reason``); ``shown`` is the figure next to its limit in words.
+Only ``timing_s`` depends on the machine; everything else is fixed by the scenario and the seed.
 """
 
 from __future__ import annotations
@@ -11,6 +15,7 @@ from __future__ import annotations
 import itertools
 import json
 import math
+from collections import Counter
 from typing import Any
 
 from scenarios.checks import CheckResult
@@ -18,9 +23,12 @@ from scenarios.records import RunResult
 from vnav import metrics
 from vnav.methods import METHOD_NAMES
 
-REPORT_VERSION = 2
+REPORT_VERSION = 3
 """2: ``camera_ticks`` (was ``frames``): the word frame means a coordinate frame only;
-``recording`` names the ``.rrd`` file and its Rerun recording id."""
+``recording`` names the ``.rrd`` file and its Rerun recording id.
+3: each check has an ``outcome`` (passed, failed, no data, skipped), a ``unit``, the figure
+``shown`` in words next to its limit, and the ``reason`` it has no data; ``passed`` is
+whether no check failed or lacked data (``scenarios.checks.Outcome``)."""
 
 
 def _finite_or_none(value: float) -> float | int | None:
@@ -47,7 +55,11 @@ def build(
     """
     spec = run.spec
     methods = {
-        m: {"position_error_m": _stats(run.errors(m)), "by_range": _by_range(run, m)}
+        m: {
+            "position_error_m": _stats(run.errors(m)),
+            "by_range": _by_range(run, m),
+            "no_estimate": _no_estimate(run, m),
+        }
         for m in METHOD_NAMES
     }
     n_detections = sum(len(t.detections) for t in run.ticks)
@@ -57,7 +69,7 @@ def build(
         "scenario": spec.name,
         "description": spec.description,
         "seed": run.seed,
-        "passed": all(c.passed for c in checks),
+        "passed": not any(c.outcome.fails_run for c in checks),
         "camera_ticks": len(run.ticks),
         "detections": n_detections,
         "matched_detections": n_matched,
@@ -73,6 +85,17 @@ def build(
         "recording": recording,
         "timing_s": {k: round(v, 4) for k, v in run.timing_s.items()},
     }
+
+
+def _no_estimate(run: RunResult, method: str) -> dict[str, int]:
+    """How many matched detections ``method`` gave no estimate for, per reason, most first."""
+    reasons = Counter(
+        d.no_estimate[method].value
+        for t in run.ticks
+        for d in t.detections
+        if d.cone_index is not None and method in d.no_estimate
+    )
+    return dict(reasons.most_common())
 
 
 def _by_range(run: RunResult, method: str) -> list[dict[str, Any]]:

@@ -16,17 +16,22 @@ import dataclasses
 import logging
 import math
 import os
+import re
+import shutil
 import signal
 import sys
 import tempfile
+import textwrap
 import time
 from pathlib import Path
 
 from scenarios import builtin, outputs, pipeline
+from scenarios.console import WIDTH, say
 from scenarios.console import error as _error
-from scenarios.console import say
+from scenarios.evaluate import MATCH_GATE_M
 from scenarios.spec import ScenarioError, ScenarioSpec, load_toml
 from sim.world import SimulationError
+from vnav.estimators import NoEstimate
 from vnav.methods import METHOD_NAMES
 
 logger = logging.getLogger(__name__)
@@ -130,37 +135,134 @@ class Progress:
         sys.stderr.flush()
 
 
+_MARK = {"passed": "ok", "failed": "FAILED", "no data": "NO DATA", "skipped": "skipped"}
+"""How the table marks each check outcome (``scenarios.checks.Outcome``)."""
+
+
 def _fmt(value: float | None, digits: int = 3) -> str:
     if value is None or (isinstance(value, float) and not math.isfinite(value)):
         return "-"
     return f"{value:.{digits}f}"
 
 
+def _wrap(text: str, indent: int = 0, first: str | None = None) -> list[str]:
+    """``text`` wrapped to ``WIDTH`` columns; ``first`` prefixes the first line (default:
+    ``indent`` spaces), later lines are indented by ``indent``. Paths are never broken."""
+    pad = " " * indent
+    # A number keeps its unit, a bound its number, on its line: joined by a no-break space.
+    glued = re.sub(r"(\d (?=(m|deg|px|s)\b)|[<>]= )", lambda m: m[0][:-1] + "\u00a0", text)
+    lines = textwrap.wrap(
+        glued,
+        WIDTH,
+        initial_indent=pad if first is None else first,
+        subsequent_indent=pad,
+        break_long_words=False,
+        break_on_hyphens=False,
+    )
+    return [line.replace("\u00a0", " ") for line in lines]
+
+
+def _no_estimate_text(reasons: dict[str, int]) -> str:
+    """Why a method gave no estimate, from the report's ``no_estimate`` counts."""
+    if not reasons:
+        return "no estimate"
+    parts = [f"{n} {NoEstimate(r).text}" for r, n in reasons.items()]
+    if len(parts) == 1 and next(iter(reasons.values())) > 1:
+        parts = [f"all {parts[0]}"]
+    return "no estimate: " + "; ".join(parts)
+
+
+def _check_lines(check: dict) -> list[str]:
+    """One check: its mark and name, then the figure next to its limit (or why it has none);
+    on one line where it fits."""
+    first = f"  {_MARK[check['outcome']]:<8}"
+    line = f"{first}{check['name']}: {check['shown']}"
+    if len(line) <= WIDTH:
+        return [line]
+    return _wrap(check["name"], len(first), first) + _wrap(check["shown"], len(first))
+
+
 def summary(rep: dict, wall_s: float, rrd: Path, json_path: Path) -> str:
-    """The table printed after each scenario."""
+    """The table printed after each scenario, ``WIDTH`` columns wide."""
     status = "PASSED" if rep["passed"] else "FAILED"
-    lines = [
+    lines = _wrap(
         f"{rep['scenario']}: {status}  ({rep['camera_ticks']} camera ticks, "
-        f"{rep['detections']} detections, "
-        f"{rep['matched_detections']} matched, {wall_s:.1f} s)",
-        f"  {'method':<13} {'count':>5} {'mean':>8} {'median':>8} {'rmse':>8} {'max':>8}  "
-        "position error (m)",
-    ]
+        f"{rep['detections']} detections, {rep['matched_detections']} matched, {wall_s:.1f} s)",
+        2,
+        "",
+    )
+    lines.append(
+        f"  {'method':<13} {'count':>5} {'mean':>8} {'median':>8} {'rmse':>8} {'max':>8}  error, m"
+    )
     for method in METHOD_NAMES:
-        s = rep["methods"][method]["position_error_m"]
-        lines.append(
-            f"  {method:<13} {s['count']:>5} {_fmt(s['mean']):>8} "
-            f"{_fmt(s['median']):>8} {_fmt(s['rmse']):>8} {_fmt(s['max']):>8}"
-        )
+        entry = rep["methods"][method]
+        s = entry["position_error_m"]
+        row = f"  {method:<13} {s['count']:>5}"
+        if s["count"]:
+            lines.append(
+                f"{row} {_fmt(s['mean']):>8} {_fmt(s['median']):>8} {_fmt(s['rmse']):>8} "
+                f"{_fmt(s['max']):>8}"
+            )
+        else:  # the row says why it is empty
+            lines += _wrap(_no_estimate_text(entry["no_estimate"]), len(row) + 2, row + "  ")
+    lines.append("  checks:")
     for c in rep["checks"]:
-        mark = "ok  " if c["passed"] else "FAIL"
-        lines.append(f"  [{mark}] {c['name']}: {_fmt(c['value'])} (limit {c['limit']:g})")
-    lines.append(f"  wrote {rrd} and {json_path}")
+        lines += _check_lines(c)
+    lines += _wrap(f"wrote {rrd} and {json_path}", 2)
     return "\n".join(lines)
 
 
-def run_one(spec: ScenarioSpec, args: argparse.Namespace, out_dir: Path) -> int:
-    """Run one scenario, write its files, print its summary; return its exit status."""
+def legend() -> str:
+    """One line: what the detection counts of ``summary`` mean."""
+    return (
+        "detections: cones found in the images; "
+        f"matched: estimated within {MATCH_GATE_M:g} m of a cone"
+    )
+
+
+def rerun_command() -> str:
+    """How to call the Rerun viewer installed beside this Python (``.venv/bin/rerun``)."""
+    beside = Path(sys.executable).parent / "rerun"
+    if not beside.exists():
+        return "rerun"
+    found = shutil.which("rerun")
+    if found and Path(found).resolve() == beside.resolve():
+        return "rerun"
+    try:
+        return str(beside.relative_to(Path.cwd()))
+    except ValueError:
+        return str(beside)
+
+
+def final_summary(outcomes: list[tuple[ScenarioSpec, int, Path | None]], out_dir: Path) -> str:
+    """The lines after every scenario: the legend; with several scenarios, how many passed
+    and failed and where their files are; the command to open a recording.
+
+    ``outcomes`` holds each scenario's spec, exit status and recording (None if none).
+    """
+    lines = [legend()]
+    if len(outcomes) > 1:
+        by_status: dict[int, list[str]] = {}
+        for spec, status, _ in outcomes:
+            by_status.setdefault(status, []).append(spec.name)
+        counts = [f"{len(by_status.get(EXIT_PASSED, []))} passed"]
+        for status, word in ((EXIT_CHECK_FAILED, "failed"), (EXIT_INCOMPLETE, "incomplete")):
+            if by_status.get(status):
+                counts.append(f"{len(by_status[status])} {word} ({', '.join(by_status[status])})")
+        lines += _wrap(f"{len(outcomes)} scenarios: {', '.join(counts)}")
+        lines += _wrap(f"files: {out_dir}/<name>.rrd (recording), {out_dir}/<name>.json (report)")
+    written = [(status, rrd) for _, status, rrd in outcomes if rrd is not None]
+    if written:
+        # The first failure is the one worth a look; else the first recording.
+        _, rrd = min(written, key=lambda item: item[0] != EXIT_CHECK_FAILED)
+        lines += _wrap(f"open: {rerun_command()} {rrd}")
+        lines.append("  (no display? add --serve-web and browse http://localhost:9090)")
+    return "\n".join(lines)
+
+
+def run_one(spec: ScenarioSpec, args: argparse.Namespace, out_dir: Path) -> tuple[int, Path | None]:
+    """Run one scenario, write its files, print its summary; return its exit status and its
+    recording (None when nothing was written)."""
     start = time.perf_counter()
     try:
         outcome = pipeline.run(
@@ -171,24 +273,24 @@ def run_one(spec: ScenarioSpec, args: argparse.Namespace, out_dir: Path) -> int:
         )
     except SimulationError as exc:
         _error(f"{spec.name}: could not complete: the simulation diverged: {exc}")
-        return EXIT_INCOMPLETE
+        return EXIT_INCOMPLETE, None
     except OSError as exc:
         _error(
             f"{spec.name}: could not complete: cannot write its files: {exc}; "
             "the previous files were kept"
         )
-        return EXIT_INCOMPLETE
+        return EXIT_INCOMPLETE, None
     except MemoryError:
         _error(f"{spec.name}: could not complete: out of memory")
-        return EXIT_INCOMPLETE
+        return EXIT_INCOMPLETE, None
     except Exception as exc:  # an internal error: say it in one line, keep the others going
         logger.debug("internal error", exc_info=True)
         _error(f"{spec.name}: could not complete: internal error: {type(exc).__name__}: {exc}")
-        return EXIT_INCOMPLETE
+        return EXIT_INCOMPLETE, None
     if not args.quiet:
         wall_s = time.perf_counter() - start
         say(summary(outcome.report, wall_s, outcome.rrd_path, outcome.json_path))
-    return EXIT_PASSED if outcome.passed else EXIT_CHECK_FAILED
+    return (EXIT_PASSED if outcome.passed else EXIT_CHECK_FAILED), outcome.rrd_path
 
 
 def _validate(args: argparse.Namespace) -> tuple[list[ScenarioSpec], Path]:
@@ -220,7 +322,7 @@ def run(args: argparse.Namespace) -> int:
     previous = {s: signal.signal(s, _raise_signalled) for s in (signal.SIGTERM, signal.SIGHUP)}
     try:
         with outputs.directory_lock(out_dir):
-            statuses = [run_one(spec, args, out_dir) for spec in specs]
+            results = [(spec, *run_one(spec, args, out_dir)) for spec in specs]
     except BlockingIOError:
         _error(f"another vnav-demo run is writing into {out_dir}; wait for it to finish")
         return EXIT_BAD_INPUT
@@ -233,4 +335,6 @@ def run(args: argparse.Namespace) -> int:
     finally:
         for signum, handler in previous.items():
             signal.signal(signum, handler)
-    return max(statuses, default=EXIT_PASSED)
+    if not args.quiet:
+        say(final_summary(results, out_dir))
+    return max((status for _, status, _ in results), default=EXIT_PASSED)

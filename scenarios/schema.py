@@ -230,24 +230,41 @@ CHECK: tuple[Key, ...] = (
 )
 
 
-def comment(path: str) -> str | None:
-    """The schema's one-line doc of the key at ``path`` (``camera.fovy_deg``), or None."""
+def comment(path: str, table: dict[str, Any] | None = None) -> str | None:
+    """The schema's one-line doc of the key at ``path`` (``camera.fovy_deg``), or None.
+
+    ``table``, the table holding the key, lets a check's ``kind`` and limit say what that kind
+    asserts and in which unit its limit is (``scenarios.checks.KINDS``).
+    """
     if path == "flight.mode":
         return " | ".join(FLIGHT_MODES) + " (each mode has its own keys)"
-    table, _, name = path.rpartition(".")
+    parent, _, name = path.rpartition(".")
+    if parent == "checks" and table is not None and name in ("kind", "limit", "limit_m"):
+        from scenarios.checks import KINDS  # the kinds register themselves there
+
+        kind = KINDS.get(table.get("kind"))  # type: ignore[arg-type]
+        if kind is not None:
+            return kind.doc.replace("``", "") if name == "kind" else kind.limit_doc
     keys = {
         "": TOP,
         "camera": CAMERA,
         "noise": NOISE,
         "flight": tuple(k for mode in FLIGHT_MODES.values() for k in mode),
+        "flight.keyframes": KEYFRAME,
+        "flight.waypoints": WAYPOINT,
         "cones": CONE,
         "checks": CHECK,
-    }.get(table, ())
+    }.get(parent, ())
     return next((k.doc for k in keys if k.name == name), None)
 
 
 def example_toml() -> str:
-    """The README's example scenario file, its comments from this schema."""
+    """The README's example scenario file, its comments from this schema.
+
+    A cone 6 m ahead and 1 m left of a drone 4 m up, its camera pitched 30 deg down: the line
+    of sight falls 33 deg below the horizontal, near the image's centre, and stays well inside
+    the image while the drone yaws 20 deg towards the cone.
+    """
     from scenarios import toml_out
 
     example = {
@@ -259,8 +276,8 @@ def example_toml() -> str:
         "flight": {
             "mode": "kinematic",
             "keyframes": [
-                {"t": 0.0, "position_w": [0.0, 0.0, 10.0], "rpy_deg": [0.0, 0.0, 0.0]},
-                {"t": 5.0, "position_w": [0.0, 0.0, 10.0], "rpy_deg": [0.0, 0.0, 90.0]},
+                {"t": 0.0, "position_w": [0.0, 0.0, 4.0], "rpy_deg": [0.0, 0.0, 0.0]},
+                {"t": 5.0, "position_w": [0.0, 0.0, 4.0], "rpy_deg": [0.0, 0.0, 20.0]},
             ],
         },
         "noise": {k.name: k.default for k in NOISE},

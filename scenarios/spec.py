@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from scenarios import schema
-from scenarios.checks import KINDS, Check
+from scenarios.checks import KINDS, Check, Unit
 from sim.config import CameraConfig, SceneConfig
 from vnav import quat, so3
 from vnav.methods import METHOD_NAMES, METHODS, method
@@ -253,6 +253,13 @@ def _checks(raw: Any, where: str) -> tuple[Check, ...]:
             )
         if (c["limit"] is None) == (c["limit_m"] is None):
             raise _err(where, key, "give exactly one of limit or limit_m")
+        unit = KINDS[c["kind"]].unit
+        if c["limit_m"] is not None and unit is not Unit.METRES:
+            raise _err(
+                where,
+                f"{key}.limit_m",
+                f"{c['kind']}'s limit is a {unit.value}, not metres; give it as limit",
+            )
         limit_key = "limit" if c["limit"] is not None else "limit_m"
         try:
             limit = schema.number(c[limit_key], f"{key}.{limit_key}", 0.0, schema.MAX_LIMIT)

@@ -1,19 +1,41 @@
-"""Write a scenario (the TOML schema as plain dicts) back out as a TOML file.
+"""Write a scenario (the TOML schema as plain dicts) back out as a TOML file a person can read.
 
 ``vnav-demo show NAME`` prints a built-in scenario this way, so a user can start a scenario
 file from one. Only what the schema uses is supported: strings, numbers, booleans, lists of
 those, tables, arrays of tables, and lists of inline tables (keyframes, waypoints).
+
+The text fits ``WIDTH`` columns: floats are rounded to ``SIGNIFICANT_DIGITS`` (the file parses
+back to the same scenario within that rounding), a long string becomes a multi-line string
+whose line-ending backslashes join it back exactly, a comment that does not fit after its key
+goes on the line above, and a list of inline tables with a line too long (TOML 1.0 keeps an
+inline table on one line) is written as an array of tables (``[[flight.keyframes]]``).
 """
 
 from __future__ import annotations
 
 import json
 import math
+import re
+import textwrap
 from typing import Any
 
 from scenarios import schema
 
 _SCALARS = (str, int, float, bool)
+
+WIDTH = 80
+"""Columns the text fits in, where a value allows (a single word longer cannot be split)."""
+
+SIGNIFICANT_DIGITS = 6
+"""Floats are written to this many significant digits: 33.690067525979785 -> 33.6901."""
+
+
+def _float(v: float) -> str:
+    """``v`` rounded to ``SIGNIFICANT_DIGITS``, in Python's shortest form (a valid TOML float:
+    ``33.6901``, ``10.0``, ``1e-07``)."""
+    if not math.isfinite(v):
+        raise ValueError(f"TOML has no literal for {v!r} in this schema")
+    return repr(float(f"{v:.{SIGNIFICANT_DIGITS}g}"))
 
 
 def _value(v: Any) -> str:
@@ -22,9 +44,7 @@ def _value(v: Any) -> str:
     if isinstance(v, int):
         return str(v)
     if isinstance(v, float):
-        if not math.isfinite(v):
-            raise ValueError(f"TOML has no literal for {v!r} in this schema")
-        return repr(v)
+        return _float(v)
     if isinstance(v, str):
         return json.dumps(v, ensure_ascii=False)  # a valid TOML basic string
     if isinstance(v, dict):
@@ -38,41 +58,99 @@ def _is_table_array(v: Any) -> bool:
     return isinstance(v, list) and bool(v) and all(isinstance(x, dict) for x in v)
 
 
-def _with_comment(line: str, path: str, comments: bool) -> str:
-    doc = schema.comment(path) if comments else None
-    commented = f"{line}  # {doc}"
-    return commented if doc and len(commented) <= 100 else line
+def _string_lines(key: str, text: str) -> list[str]:
+    """``key = "text"``, or, when longer than ``WIDTH``, a multi-line basic string broken after
+    spaces: each line ends with ``\\``, which TOML drops with the newline and the next line's
+    leading whitespace (there is none: every line starts with a word), so the value is
+    ``text`` exactly."""
+    one = f"{key} = {_value(text)}"
+    if len(one) <= WIDTH or not text or text[0].isspace():
+        return [one]
+    lines, line = [f'{key} = """\\'], ""
+    for chunk in re.findall(r"\S+\s*", text):  # a word and the spaces after it
+        escaped = json.dumps(chunk, ensure_ascii=False)[1:-1]
+        if line and len(line) + len(escaped) + 1 > WIDTH:
+            lines.append(line + "\\")
+            line = ""
+        line += escaped
+    return [*lines, line + '"""']
 
 
-def _table_body(table: dict[str, Any], path: str = "", comments: bool = False) -> list[str]:
-    lines = []
+def _with_comment(lines: list[str], path: str, table: dict, comments: bool) -> list[str]:
+    """``lines`` (a key's value) with the schema's comment after them, or above if too long."""
+    doc = schema.comment(path, table) if comments else None
+    if not doc:
+        return lines
+    after = f"{lines[0]}  # {doc}"
+    if len(lines) == 1 and len(after) <= WIDTH:
+        return [after]
+    return [*comment_lines(doc), *lines]
+
+
+def comment_lines(text: str) -> list[str]:
+    """``text`` as TOML comment lines (``# ...``), wrapped to ``WIDTH``."""
+    return textwrap.wrap(
+        text, WIDTH, initial_indent="# ", subsequent_indent="# ", break_on_hyphens=False
+    )
+
+
+def _table_body(
+    table: dict[str, Any], path: str = "", comments: bool = False
+) -> tuple[list[str], list[tuple[str, list[dict]]]]:
+    """The lines of a table's keys, and the lists of inline tables too long for their lines
+    (written after it as arrays of tables, ``[[path.key]]``)."""
+    lines: list[str] = []
+    deferred: list[tuple[str, list[dict]]] = []
     prefix = f"{path}." if path else ""
     for key, v in table.items():
         if v is None:  # an optional key left out
             continue
         if _is_table_array(v):  # e.g. keyframes: one inline table per line
-            lines.append(_with_comment(f"{key} = [", prefix + key, comments))
-            lines += [f"  {_value(x)}," for x in v]
-            lines.append("]")
+            rows = [f"  {_value(x)}," for x in v]
+            if any(len(r) > WIDTH for r in rows):
+                deferred.append((prefix + key, v))
+                continue
+            opening = f"{key} = ["
+            doc = schema.comment(prefix + key, table) if comments else None
+            if doc and len(f"{opening}  # {doc}") <= WIDTH:
+                lines.append(f"{opening}  # {doc}")
+            else:
+                lines += comment_lines(doc) if doc else []
+                lines.append(opening)
+            lines += [*rows, "]"]
+        elif isinstance(v, str):
+            lines += _with_comment(_string_lines(key, v), prefix + key, table, comments)
         else:
-            lines.append(_with_comment(f"{key} = {_value(v)}", prefix + key, comments))
+            lines += _with_comment([f"{key} = {_value(v)}"], prefix + key, table, comments)
+    return lines, deferred
+
+
+def _section(header: str, table: dict[str, Any], path: str, comments: bool) -> list[str]:
+    """``header`` and the table's keys, then its deferred lists as arrays of tables."""
+    body, deferred = _table_body(table, path, comments)
+    lines = ["", header, *body]
+    for sub_path, entries in deferred:
+        for entry in entries:
+            lines += _section(f"[[{sub_path}]]", entry, sub_path, comments)
     return lines
 
 
 def dumps(data: dict[str, Any], *, comments: bool = False) -> str:
     """TOML text for a scenario dict (top-level keys, then tables, then arrays of tables).
 
-    With ``comments``, each key the schema documents (``scenarios.schema``) is followed by its
-    meaning and unit.
+    With ``comments``, each key the schema documents (``scenarios.schema.comment``) is
+    followed by its meaning and unit (on the line above where it does not fit ``WIDTH``).
     """
-    lines: list[str] = []
     tables = {k: v for k, v in data.items() if isinstance(v, dict)}
     arrays = {k: v for k, v in data.items() if _is_table_array(v)}
     top = {k: v for k, v in data.items() if k not in tables and k not in arrays}
-    lines += _table_body(top, comments=comments)
+    lines, deferred = _table_body(top, comments=comments)
+    for path, entries in deferred:  # top-level lists of inline tables (none in the schema)
+        for entry in entries:
+            lines += _section(f"[[{path}]]", entry, path, comments)
     for key, table in tables.items():
-        lines += ["", f"[{key}]", *_table_body(table, key, comments)]
+        lines += _section(f"[{key}]", table, key, comments)
     for key, entries in arrays.items():
         for entry in entries:
-            lines += ["", f"[[{key}]]", *_table_body(entry, key, comments)]
+            lines += _section(f"[[{key}]]", entry, key, comments)
     return "\n".join(lines) + "\n"

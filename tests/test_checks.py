@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import dataclasses
+import math
 import operator
+import re
 
 import numpy as np
 import pytest
@@ -11,6 +14,7 @@ from scenarios import builtin, checks
 from scenarios.records import DetectionRecord, RunResult, TickRecord
 from scenarios.spec import from_dict
 from vnav.detect import ConeDetection
+from vnav.estimators import NoEstimate, known_height_max_elevation_rad
 from vnav.methods import METHODS
 
 
@@ -25,7 +29,7 @@ def test_every_registered_check_kind_is_accepted_by_the_parser_and_documented(ki
 # ------------------------------------------------------------- each kind on a run by hand
 
 
-def _detection(cone_index, errors_m, range_m, in_contract, p_w, p_c_true):
+def _detection(cone_index, errors_m, range_m, in_contract, p_w, p_c_true, no_estimate=None):
     mask = np.ones((2, 2), dtype=bool)
     blob = ConeDetection(
         bbox=(10, 10, 2, 2),
@@ -46,6 +50,7 @@ def _detection(cone_index, errors_m, range_m, in_contract, p_w, p_c_true):
         range_m,
         None if p_c_true is None else np.asarray(p_c_true, dtype=np.float64),
         in_contract,
+        no_estimate or {},
     )
 
 
@@ -151,21 +156,144 @@ def test_figure_and_verdict(run: RunResult, kind: str) -> None:
     assert checks.judge(checks.Check(kind, looser), run).passed
 
 
-def test_a_check_with_nothing_to_judge_fails(run: RunResult) -> None:
+def test_a_check_with_nothing_to_judge_has_no_data_and_fails(run: RunResult) -> None:
     # The naive method has no accuracy bound; no tick of an empty run has errors.
     result = checks.judge(checks.Check("error_bound", 1e9, "naive"), run)
-    assert result.value is None and not result.passed
+    assert result.value is None and result.outcome is checks.Outcome.NO_DATA
+    assert not result.passed and result.outcome.fails_run
     empty = RunResult(spec=None, seed=0, ticks=[_tick(0, [], [])])
     for kind in ("max_error", "median_error", "detection_rate", "tracking_error"):
         result = checks.judge(checks.Check(kind, 1e9), empty)
-        assert result.value is None and not result.passed, kind
+        assert result.value is None and result.outcome is checks.Outcome.NO_DATA, kind
+        assert result.reason and result.shown == result.reason
     assert result.as_dict() == {
         "name": "tracking_error",
         "kind": "tracking_error",
+        "outcome": "no data",
+        "passed": False,
         "value": None,
         "limit": 1e9,
-        "passed": False,
+        "unit": "m",
+        "shown": "the flight has no reference to track (kinematic keyframes are exact)",
+        "reason": "the flight has no reference to track (kinematic keyframes are exact)",
     }
+    assert checks.judge(checks.Check("max_error", 1.0), empty).reason == (
+        "no cone was detected in any camera image"
+    )
+    assert (
+        "no cone was fully in view" in checks.judge(checks.Check("detection_rate", 1), empty).shown
+    )
+
+
+def _steep_run(reason: NoEstimate, in_contract: bool = True) -> RunResult:
+    """Three ticks, one cone seen each time; depth_image estimates it, known_height refuses
+    every time for ``reason``."""
+    ticks = [
+        _tick(
+            k,
+            [0],
+            [
+                _detection(
+                    0,
+                    {"depth_image": 0.01},
+                    10.0,
+                    in_contract,
+                    {"depth_image": [1.0, 0.0, 0.0]},
+                    [0.0, 0.0, 10.0],
+                    {"known_height": reason},
+                )
+            ],
+        )
+        for k in range(3)
+    ]
+    return RunResult(spec=None, seed=0, ticks=ticks)
+
+
+def test_default_check_skips_a_method_the_geometry_rules_out() -> None:
+    """known_height refused every view as too steep: the default bound is skipped (the run is
+    not failed for it) and says why; the same check written by a user has no data and fails."""
+    run = _steep_run(NoEstimate.STEEP)
+    defaults = {c.method: c for c in checks.default_checks() if c.kind == "error_bound"}
+    skipped = checks.judge(defaults["known_height"], run)
+    assert skipped.outcome is checks.Outcome.SKIPPED and not skipped.outcome.fails_run
+    limit_deg = math.degrees(known_height_max_elevation_rad())
+    assert skipped.reason == (
+        f"no known_height estimates for the 3 detections in the contract's domain: all 3 seen "
+        f"steeper than {limit_deg:.0f} deg (the apex over the base plate)"
+    )
+    written = checks.judge(dataclasses.replace(defaults["known_height"], default=False), run)
+    assert written.outcome is checks.Outcome.NO_DATA and written.reason == skipped.reason
+    # The other methods are judged as usual.
+    assert checks.judge(defaults["depth_image"], run).outcome is checks.Outcome.PASSED
+
+
+def test_default_check_fails_when_no_data_is_not_the_geometry() -> None:
+    run = _steep_run(NoEstimate.NO_APEX)
+    (kh,) = [c for c in checks.default_checks() if c.method == "known_height"]
+    result = checks.judge(kh, run)
+    assert result.outcome is checks.Outcome.NO_DATA and "no apex found" in result.reason
+    # Outside the contract's domain nothing is promised: the default bound is skipped.
+    result = checks.judge(kh, _steep_run(NoEstimate.NO_APEX, in_contract=False))
+    assert result.outcome is checks.Outcome.SKIPPED and "contract's domain" in result.reason
+
+
+def test_world_spread_without_motion_in_the_camera_has_no_data() -> None:
+    """The cone's camera coordinates never moved: a constant world estimate shows nothing
+    (the naive estimate would be constant too)."""
+    run = _steep_run(NoEstimate.STEEP)
+    result = checks.judge(checks.Check("world_estimate_spread", 0.1), run)
+    assert result.outcome is checks.Outcome.NO_DATA
+    assert "camera coordinates moved 0 m" in result.reason
+
+
+def _numbers(text: str) -> list[float]:
+    return [float(x) for x in re.findall(r"-?\d+(?:\.\d+)?", text)]
+
+
+@pytest.mark.parametrize(
+    ("kind", "unit_text"),
+    [
+        ("max_error", " m (must be <= "),
+        ("detection_rate", "% (must be >= "),
+        ("naive_worse", "x (must be >= "),
+        ("gimbal_lock_seen", " (must be >= "),
+        ("matched_cones", " (must be >= "),
+    ],
+)
+def test_shown_values_carry_units_next_to_the_limit(run: RunResult, kind: str, unit_text: str):
+    result = checks.judge(checks.Check(kind, 0.5), run)
+    assert unit_text in result.shown
+    value, limit = _numbers(result.shown)
+    scale = 100.0 if checks.KINDS[kind].unit is checks.Unit.FRACTION else 1.0
+    assert value == pytest.approx(scale * FIGURES[kind], rel=5e-3)
+    assert limit == pytest.approx(scale * 0.5)
+    if checks.KINDS[kind].unit is checks.Unit.COUNT:
+        assert isinstance(result.value, int) and str(result.value) == result.shown.split()[0]
+
+
+def _bound_run(errors_m: list[float], ranges_m: list[float]) -> RunResult:
+    ticks = [
+        _tick(
+            k, [0], [_detection(0, {"depth_image": e}, r, True, {"depth_image": [0, 0, 0]}, None)]
+        )
+        for k, (e, r) in enumerate(zip(errors_m, ranges_m, strict=True))
+    ]
+    return RunResult(spec=None, seed=0, ticks=ticks)
+
+
+def test_error_bound_shown_in_percent_of_range_or_metres() -> None:
+    """depth_image: every error <= max(5 cm, 1% of range), 5 m the crossover."""
+    check = checks.Check("error_bound", 1.0, "depth_image")
+    far = checks.judge(check, _bound_run([0.02, 0.1], [10.0, 20.0]))
+    # Beyond 5 m the bound is 1% of range: the figure is the worst error in % of range.
+    assert (
+        far.shown
+        == f"worst {100 * max(0.02 / 10.0, 0.1 / 20.0):g}% of range (must be <= 1% of range)"
+    )
+    near = checks.judge(check, _bound_run([0.01, 0.02], [2.0, 3.0]))
+    assert near.shown == "worst 0.02 m (must be <= 0.05 m)"  # the floor: metres
+    mixed = checks.judge(check, _bound_run([0.02, 0.05], [2.0, 10.0]))
+    assert mixed.shown == "worst 50% of the bound (must be <= 100% of the bound)"
 
 
 def test_check_labels_and_bad_checks() -> None:
@@ -185,3 +313,4 @@ def test_default_checks_are_every_bound_and_the_detection_rate() -> None:
     assert all(c.limit == 1.0 for c in bounds)
     (rate,) = [c for c in defaults if c.kind == "detection_rate"]
     assert rate.limit == 0.95
+    assert all(c.default for c in defaults)

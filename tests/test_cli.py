@@ -16,7 +16,7 @@ from helpers import read_rows
 from rerun.chunk import RrdReader
 
 import scenarios.runner
-from scenarios import builtin, pipeline
+from scenarios import builtin, checks, pipeline
 from scenarios.cli import main
 
 PITCH_90_TOML = textwrap.dedent("""\
@@ -119,9 +119,84 @@ def test_same_seed_same_json(tmp_path):
 
 
 def test_list_names_every_builtin(capsys):
+    """One entry per built-in: its name, then its description (wrapped, indented)."""
     assert main(["list"]) == 0
-    listed = [line.split()[0] for line in capsys.readouterr().out.splitlines()]
-    assert listed == builtin.names()
+    entries = re.split(r"\n(?=\S)", capsys.readouterr().out.strip())
+    assert [e.split()[0] for e in entries] == builtin.names()
+    for name, entry in zip(builtin.names(), entries, strict=True):
+        description = builtin.REGISTRY[name]()["description"]
+        assert " ".join(entry.split()[1:]) == " ".join(description.split())
+
+
+@pytest.mark.parametrize(
+    "args",
+    [["list"], ["lecture"], *(["show", name] for name in builtin.names())],
+    ids=lambda a: " ".join(a),
+)
+def test_output_fits_80_columns(capsys, args):
+    main(args)
+    out = capsys.readouterr().out
+    assert out.strip()
+    too_wide = [line for line in out.splitlines() if len(line) > 80]
+    assert not too_wide, too_wide
+
+
+def _run_in(tmp_path, monkeypatch, capsys, *args) -> tuple[int, str]:
+    """``vnav-demo run ARGS --out out`` in ``tmp_path`` (short relative paths in the output);
+    its status and stdout, every line of which fits 80 columns."""
+    monkeypatch.chdir(tmp_path)
+    status = main(["run", *args, "--out", "out"])
+    out = capsys.readouterr().out
+    too_wide = [line for line in out.splitlines() if len(line) > 80]
+    assert not too_wide, too_wide
+    return status, out
+
+
+def test_a_check_with_no_data_says_why_and_fails(tmp_path, monkeypatch, capsys):
+    """Cut at 0.5 s, frame-problem ends before its yaw: its "constant while yawing" check has
+    nothing to judge. It says so and why, in the table and the report, and fails the run."""
+    status, out = _run_in(tmp_path, monkeypatch, capsys, "frame-problem", "--duration", "0.5")
+    assert status == 1
+    rep = json.loads((tmp_path / "out" / "frame-problem.json").read_text())
+    (yaw,) = [c for c in rep["checks"] if c["kind"] == "world_estimate_spread"]
+    assert yaw["outcome"] == "no data" and not yaw["passed"] and yaw["value"] is None
+    assert "camera coordinates moved 0 m" in yaw["reason"]
+    assert not rep["passed"]
+    assert re.search(r"^  NO DATA +depth_image world estimate constant while yawing", out, re.M)
+    assert "camera coordinates moved 0 m" in " ".join(out.split())
+    # Values carry units next to their limits; counts are integers.
+    assert "% (must be >= 95%)" in out and "x (must be >= 10x)" in out
+    assert re.search(r"6 camera ticks, 6 detections, 6 matched", out)
+    assert "detections: cones found in the images; matched: estimated within 3 m" in out
+
+
+def test_copy_of_a_builtin_without_checks_passes_and_says_what_it_skipped(
+    tmp_path, monkeypatch, capsys
+):
+    """A user's copy of frame-problem with its [[checks]] removed is held to the default
+    checks; known_height cannot measure a cone seen from almost straight above, so its bound
+    is skipped, with the reason, in the table and the report, and the run passes. Run beside
+    another scenario, the command ends with a summary."""
+    assert main(["show", "frame-problem"]) == 0
+    text = capsys.readouterr().out
+    (tmp_path / "mine.toml").write_text(text[: text.index("[[checks]]")])
+    status, out = _run_in(tmp_path, monkeypatch, capsys, "./mine.toml", "yaw-sweep")
+    assert status == 0, out
+    rep = json.loads((tmp_path / "out" / "my-frame-problem.json").read_text())
+    outcomes = {c["name"]: c for c in rep["checks"]}
+    assert {c.label for c in checks.default_checks()} == set(outcomes)
+    skipped = outcomes["known_height median <= 5% of range"]
+    assert skipped["outcome"] == "skipped" and "seen steeper than 69 deg" in skipped["reason"]
+    assert rep["passed"] and rep["methods"]["known_height"]["no_estimate"] == {"steep": 51}
+    assert all(c["outcome"] == "passed" for c in rep["checks"] if c is not skipped)
+    assert re.search(r"^  skipped +known_height median <= 5% of range", out, re.M)
+    # The summary: counts, where the files are, how to open one (a file that exists).
+    assert "2 scenarios: 2 passed" in out
+    assert "files: out/<name>.rrd (recording), out/<name>.json (report)" in out
+    (open_line,) = [line for line in out.splitlines() if line.startswith("open: ")]
+    viewer, rrd = open_line.split()[1:]
+    assert (tmp_path / rrd).is_file() and viewer.endswith("rerun")
+    assert not (tmp_path / "out" / "frame-problem.rrd").exists()  # the built-in's untouched
 
 
 @pytest.mark.parametrize(
@@ -271,7 +346,7 @@ def test_progress_bar_only_on_a_terminal(tmp_path):
     import pty
 
     env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
-    args = [sys.executable, "-m", "scenarios", "run", "frame-problem", "--duration", "0.5"]
+    args = [sys.executable, "-m", "scenarios", "run", "frame-problem", "--duration", "1.5"]
     controller, terminal = pty.openpty()
     try:
         proc = subprocess.run(
@@ -294,7 +369,7 @@ def test_progress_bar_only_on_a_terminal(tmp_path):
     finally:
         os.close(controller)
     assert proc.returncode == 0
-    assert b"frame-problem" in shown and b"6/6" in shown and b"#" in shown
+    assert b"frame-problem" in shown and b"16/16" in shown and b"#" in shown
     piped = subprocess.run(
         [*args, "--out", str(tmp_path / "pipe")],
         env=env,
@@ -313,7 +388,9 @@ def _files(directory: Path) -> dict[str, bytes]:
 
 
 def _first_pair(out: Path) -> dict[str, bytes]:
-    assert main(["run", "frame-problem", "--out", str(out), "--quiet", "--duration", "0.5"]) == 0
+    """frame-problem cut at 0.5 s, before its yaw: its yaw check has no data (exit status 1),
+    and the pair is written all the same."""
+    assert main(["run", "frame-problem", "--out", str(out), "--quiet", "--duration", "0.5"]) == 1
     return {k: v for k, v in _files(out).items() if not k.startswith(".")}
 
 
@@ -441,7 +518,7 @@ def test_closed_pipe_ends_quietly_and_the_runs_still_write(tmp_path):
     )
     assert listing.stdout.startswith("frame-problem") and listing.stderr == ""
     run = subprocess.run(
-        f"{cmd} run frame-problem yaw-sweep --duration 0.5 --out {tmp_path} | head -1; "
+        f"{cmd} run frame-problem yaw-sweep --duration 1.5 --out {tmp_path} | head -1; "
         "exit ${PIPESTATUS[0]}",
         shell=True,
         executable="/bin/bash",
@@ -521,6 +598,11 @@ def _file_with(tmp_path: Path, old: str, new: str) -> Path:
             f'name = "{"n" * 236}"',
             r"name: must be at most 100 characters, got 236",
         ),
+        (
+            'kind = "detection_rate"\nlimit = 0.95',
+            'kind = "detection_rate"\nlimit_m = 0.95',
+            r"checks\[1\]\.limit_m: detection_rate's limit is a fraction, not metres; give it",
+        ),
     ],
 )
 def test_absurd_numbers_and_names_exit_2_one_line(tmp_path, capsys, old, new, message):
@@ -557,7 +639,7 @@ def test_scenario_files_that_are_not_regular_files_are_refused(tmp_path, capsys)
 def test_a_bare_name_is_the_builtin_even_beside_a_file_of_that_name(tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
     Path("frame-problem").write_text("not toml at all [")
-    assert main(["run", "frame-problem", "--out", "out", "--quiet", "--duration", "0.5"]) == 0
+    assert main(["run", "frame-problem", "--out", "out", "--quiet", "--duration", "1.5"]) == 0
     assert main(["run", "./frame-problem", "--out", "out"]) == 2
     assert "invalid TOML" in capsys.readouterr().err
 

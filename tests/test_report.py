@@ -3,6 +3,7 @@ errors recomputed from the estimates and the true cones, per method and per rang
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -54,3 +55,34 @@ def test_error_against_range_bins_partition_the_detections(runs, name):
             ]
             assert len(errors) == b["position_error_m"]["count"]
             assert max(errors) == pytest.approx(b["position_error_m"]["max"], abs=1e-8)
+
+
+@pytest.mark.parametrize("name", builtin.names())
+def test_every_matched_detection_has_an_estimate_or_a_reason(runs, name):
+    """Per method, the matched detections with an estimate (the error count) and those
+    without, counted by reason (``no_estimate``), add up to the matched detections."""
+    _, result, _, rep = runs[name]
+    matched = [d for f in result.ticks for d in f.detections if d.cone_index is not None]
+    assert rep["matched_detections"] == len(matched)
+    for method in METHOD_NAMES:
+        entry = rep["methods"][method]
+        assert entry["position_error_m"]["count"] + sum(entry["no_estimate"].values()) == len(
+            matched
+        ), method
+        with_reason = [d for d in matched if method in d.no_estimate]
+        assert not [d for d in with_reason if method in d.estimates_w]
+        assert set(entry["no_estimate"]) == {d.no_estimate[method].value for d in with_reason}
+
+
+def test_check_outcomes_decide_whether_the_report_passed(runs):
+    """``passed`` is false exactly when a check failed or had no data; a skipped check does
+    not fail the run."""
+    from scenarios import checks, report
+
+    _, result, judged, _ = runs["frame-problem"]
+    skipped = dataclasses.replace(judged[0], outcome=checks.Outcome.SKIPPED)
+    no_data = dataclasses.replace(judged[0], outcome=checks.Outcome.NO_DATA)
+    assert report.build(result, judged)["passed"] is True
+    assert report.build(result, [skipped, *judged[1:]])["passed"] is True
+    assert report.build(result, [no_data, *judged[1:]])["passed"] is False
+    assert report.build(result, [no_data])["checks"][0]["outcome"] == "no data"

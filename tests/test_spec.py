@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import tomllib
 
@@ -101,16 +102,47 @@ def test_bad_flights_name_the_key(flight, message):
         from_dict(_base(**flight), where="f.toml")
 
 
+def _close(a, b, rel: float = 1e-5) -> bool:
+    """Equal, floats within ``rel`` (``vnav-demo show`` rounds to 6 significant digits)."""
+    if dataclasses.is_dataclass(a) and not isinstance(a, type):
+        return type(a) is type(b) and _close(dataclasses.asdict(a), dataclasses.asdict(b), rel)
+    if isinstance(a, dict):
+        same_keys = isinstance(b, dict) and a.keys() == b.keys()
+        return same_keys and all(_close(a[k], b[k], rel) for k in a)
+    if isinstance(a, list | tuple):
+        return len(a) == len(b) and all(_close(x, y, rel) for x, y in zip(a, b, strict=True))
+    if isinstance(a, float) and isinstance(b, float):
+        return math.isclose(a, b, rel_tol=rel, abs_tol=1e-12)
+    return a == b
+
+
 @pytest.mark.parametrize("name", builtin.names())
 def test_show_prints_a_file_that_parses_to_the_same_scenario(tmp_path, capsys, name):
     """``vnav-demo show NAME`` output, parsed by tomllib (the independent reader) and by
-    load_toml, gives the built-in's own dict and spec back."""
+    load_toml, gives the built-in's own dict and spec back, but for its name (``my-NAME``, so
+    running it does not overwrite the built-in's files) and floats rounded to 6 digits."""
     assert main(["show", name]) == 0
     text = capsys.readouterr().out
-    assert tomllib.loads(text) == builtin.REGISTRY[name]()
+    assert all(len(line) <= 80 for line in text.splitlines())
+    parsed = tomllib.loads(text)
+    assert parsed["name"] == f"my-{name}" != name
+    expected = {**builtin.REGISTRY[name](), "name": parsed["name"]}
+    assert _close(parsed, expected)
     path = tmp_path / f"{name}.toml"
     path.write_text(text)
-    assert load_toml(path) == builtin.load(name)
+    assert _close(load_toml(path), dataclasses.replace(builtin.load(name), name=f"my-{name}"))
+
+
+def test_show_rounds_floats_and_explains_check_limits(capsys):
+    assert main(["show", "orbit"]) == 0
+    text = capsys.readouterr().out
+    pitch_deg = builtin.REGISTRY["orbit"]()["camera"]["pitch_down_deg"]
+    assert f"pitch_down_deg = {float(f'{pitch_deg:.6g}')!r}" in text
+    assert repr(pitch_deg) not in text
+    tracking = text.split('kind = "tracking_error"')[1]
+    assert "method" not in tracking  # the kind does not use one
+    assert "limit_m = 0.3  # at most, metres" in tracking
+    assert "limit = 0.95  # at least, a fraction (0.95: 95%)" in text
 
 
 def test_show_unknown_name_exit_2(capsys):

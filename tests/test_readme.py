@@ -1,0 +1,275 @@
+"""The README runs: every shell command, the TOML example and the Python example in it.
+
+Each fenced block of README.md is taken from the file itself, so a README that changes is
+tested as it reads. Shell commands run in a temporary directory with the ``.venv/bin/`` of
+this interpreter (``/tmp/`` paths are moved into that directory), except where a comment in
+``_KIND`` says why a command is checked another way: ``./setup.sh`` needs root, apt-get and
+the network and would rebuild the environment the tests run in; ``rerun FILE`` opens a window;
+``rerun --serve-web FILE`` serves until stopped, so it is started, asked for its page, then
+stopped.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import socket
+import subprocess
+import sys
+import time
+import tomllib
+import urllib.request
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from scenarios import builtin, pipeline
+from scenarios.cli import main
+from scenarios.spec import from_dict
+
+ROOT = Path(__file__).resolve().parents[1]
+README = (ROOT / "README.md").read_text()
+VENV_BIN = Path(sys.executable).parent
+"""Where this interpreter's ``vnav-demo`` and ``rerun`` are: the README's ``.venv/bin``."""
+
+
+def _blocks(language: str) -> list[str]:
+    """The bodies of the README's fenced blocks in ``language``, in order."""
+    return [
+        body for lang, body in re.findall(r"```(\w+)\n(.*?)```", README, re.S) if lang == language
+    ]
+
+
+def _commands(block: str) -> list[str]:
+    """The commands of a shell block, one per line, without their trailing comments."""
+    return [c for line in block.splitlines() if (c := re.sub(r"\s+#.*$", "", line).strip())]
+
+
+COMMANDS = [c for block in _blocks("bash") for c in _commands(block)]
+
+
+def _kind(command: str) -> str:
+    """How the test runs ``command``; a command of no known kind fails ``test_every_...``."""
+    if command.startswith("./setup.sh && "):
+        return "setup"  # set-up checked by its files; the command after && is run
+    if re.fullmatch(r"\.venv/bin/rerun --serve-web \S+\.rrd", command):
+        return "serve"  # started, asked for its page, stopped
+    if re.fullmatch(r"\.venv/bin/rerun \S+\.rrd", command):
+        return "viewer"  # opens a window: checked to name a file the README makes
+    if command.startswith(".venv/bin/vnav-demo "):
+        return "run"
+    raise AssertionError(f"README command with no test: {command!r}")
+
+
+def test_every_block_of_the_readme_is_tested() -> None:
+    languages = {lang for lang, _ in re.findall(r"```(\w*)\n(.*?)```", README, re.S)}
+    assert languages == {"bash", "toml", "python"}
+    assert {_kind(c) for c in COMMANDS} == {"setup", "serve", "viewer", "run"}
+
+
+def _shell(command: str, cwd: Path, timeout_s: float = 300.0) -> subprocess.CompletedProcess:
+    """``command`` as a user would type it in ``cwd``, with this interpreter's ``.venv/bin``
+    and ``/tmp/`` moved into ``cwd``."""
+    command = command.replace(".venv/bin/", f"{VENV_BIN}/").replace(" /tmp/", f" {cwd}/tmp/")
+    return subprocess.run(
+        ["bash", "-c", command], cwd=cwd, capture_output=True, text=True, timeout=timeout_s
+    )
+
+
+# ------------------------------------------------------------------ on a new machine
+
+
+def _new_machine_commands() -> list[str]:
+    section = README.split("## On a new machine", 1)[1].split("\n## ", 1)[0]
+    return [c for body in re.findall(r"```bash\n(.*?)```", section, re.S) for c in _commands(body)]
+
+
+def test_a_new_machine_needs_two_commands_that_set_up_first() -> None:
+    """One sets up and runs a scenario, one sets up and runs the tests."""
+    first, second = _new_machine_commands()
+    assert first == "./setup.sh && .venv/bin/vnav-demo run frame-problem"
+    assert second == "./setup.sh && .venv/bin/python -m pytest"
+
+
+def test_setup_script_makes_the_venv_the_commands_use() -> None:
+    """Not run here (it needs root, apt-get and the network, and would rebuild the venv these
+    tests run in): it exists, is executable, and makes ``.venv`` with the test extra."""
+    script = ROOT / "setup.sh"
+    assert script.is_file() and os.access(script, os.X_OK)
+    text = script.read_text()
+    assert "-m venv .venv" in text and "pip install -q -e '.[test]'" in text
+    # The tests the second command runs: pytest's configured test paths.
+    pyproject = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    assert all((ROOT / p).is_dir() for p in pyproject["tool"]["pytest"]["ini_options"]["testpaths"])
+    assert "vnav-demo" in pyproject["project"]["scripts"]
+
+
+@pytest.fixture(scope="module")
+def first_run(tmp_path_factory) -> Path:
+    """The first command after its set-up, run where a user would: the directory it ran in."""
+    cwd = tmp_path_factory.mktemp("readme-first")
+    command = _new_machine_commands()[0].split(" && ", 1)[1]
+    proc = _shell(command, cwd)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    return cwd
+
+
+def test_first_command_writes_what_the_readme_says(first_run: Path) -> None:
+    said = re.search(r"written to\s+`(\S+\.rrd)` and `(\S+\.json)`", README)
+    assert said, "the README says where the first command writes"
+    rrd, report = (first_run / p for p in said.groups())
+    assert rrd.is_file() and json.loads(report.read_text())["passed"] is True
+
+
+# ------------------------------------------------------------------------- vnav-demo
+
+
+def test_vnav_demo_commands_run_in_order(tmp_path: Path) -> None:
+    """Every ``vnav-demo`` command of the README, in its order, in one directory: each exits
+    0; ``show orbit > my-scene.toml`` then ``run my-scene.toml`` writes ``my-orbit`` files and
+    leaves ``orbit``'s alone."""
+    commands = [c for c in COMMANDS if _kind(c) == "run"]
+    assert len(commands) >= 6
+    orbit_report = tmp_path / "recordings" / "orbit.json"
+    before = None
+    for command in commands:
+        if "run my-scene.toml" in command:
+            before = orbit_report.read_text()  # written by `run --all`
+        proc = _shell(command, tmp_path)
+        assert proc.returncode == 0, f"{command}\n{proc.stdout}\n{proc.stderr}"
+        assert proc.stderr == "", proc.stderr
+    assert before is not None and orbit_report.read_text() == before
+    name = tomllib.loads((tmp_path / "my-scene.toml").read_text())["name"]
+    assert name != "orbit"
+    assert (tmp_path / "recordings" / f"{name}.rrd").is_file()
+    assert json.loads((tmp_path / "recordings" / f"{name}.json").read_text())["passed"]
+    for builtin_name in builtin.names():
+        assert (tmp_path / "recordings" / f"{builtin_name}.rrd").is_file()
+    assert (tmp_path / "tmp" / "r" / "orbit.json").is_file()  # --out /tmp/r, moved
+
+
+# ------------------------------------------------------------------------ recordings
+
+
+def test_viewer_command_opens_the_file_the_first_command_writes(first_run: Path) -> None:
+    """Not run (it opens a window); the file it names is the one the first command writes,
+    and the viewer it calls starts."""
+    for command in (c for c in COMMANDS if _kind(c) == "viewer"):
+        assert (first_run / command.split()[-1]).is_file()
+    version = subprocess.run(
+        [VENV_BIN / "rerun", "--version"], capture_output=True, text=True, timeout=60
+    )
+    assert version.returncode == 0 and "rerun" in version.stdout.lower()
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_serve_web_command_serves_the_recording_without_a_display(first_run: Path) -> None:
+    """The README's no-display command, on free ports (the defaults it names are checked
+    against ``rerun --help``), with no DISPLAY: its web viewer answers over HTTP."""
+    (command,) = [c for c in COMMANDS if _kind(c) == "serve"]
+    help_text = subprocess.run(
+        [VENV_BIN / "rerun", "--help"], capture_output=True, text=True, timeout=60
+    ).stdout
+    web_default = re.search(r"--web-viewer-port.*?\[default: (\d+)\]", help_text, re.S)
+    grpc_default = re.search(r"default port is (\d+)", help_text)
+    assert f"http://localhost:{web_default[1]}" in README
+    assert f"-L {grpc_default[1]}:localhost:{grpc_default[1]}" in README
+    web, grpc = _free_port(), _free_port()
+    args = command.replace(".venv/bin/", f"{VENV_BIN}/").split()
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    proc = subprocess.Popen(
+        [*args, "--web-viewer-port", str(web), "--port", str(grpc)],
+        cwd=first_run,
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
+    try:
+        deadline, status = time.monotonic() + 60.0, None
+        while status is None and time.monotonic() < deadline:
+            assert proc.poll() is None, f"rerun --serve-web exited with {proc.returncode}"
+            try:
+                with urllib.request.urlopen(f"http://127.0.0.1:{web}/", timeout=5) as response:
+                    status, page = response.status, response.read().decode(errors="replace")
+            except OSError:
+                time.sleep(0.5)
+        assert status == 200 and "rerun" in page.lower()
+    finally:
+        os.killpg(proc.pid, signal.SIGTERM)
+        proc.wait(timeout=30)
+
+
+def test_screenshot_script_renders_without_a_display() -> None:
+    """Named by the README as the way to take pictures headless; not run here (it needs
+    apt-get, Xvfb and minutes): it exists and runs the viewer on a virtual display."""
+    assert "bash scripts/screenshots.sh" in README
+    script = (ROOT / "scripts" / "screenshots.sh").read_text()
+    assert "Xvfb" in script and "--screenshot-to" in script
+
+
+# ------------------------------------------------------------------ the TOML example
+
+
+def test_toml_example_runs_and_passes_with_the_cone_well_inside_the_image(tmp_path: Path):
+    (block,) = _blocks("toml")
+    spec = from_dict(tomllib.loads(block), where="README.md")
+    path = tmp_path / "example.toml"
+    path.write_text(block)
+    assert main(["run", str(path), "--out", str(tmp_path / "out"), "--quiet"]) == 0
+    report = json.loads((tmp_path / "out" / f"{spec.name}.json").read_text())
+    assert report["passed"]
+    assert report["detections"] == report["matched_detections"] == report["camera_ticks"]
+    # At every camera tick the cone is fully in view (its extreme points inside the image,
+    # vnav.cone), and no detection touches the border.
+    result = pipeline.run(spec).result
+    assert all(t.cones_in_view == [0] for t in result.ticks)
+    assert not any(d.detection.touches_border for t in result.ticks for d in t.detections)
+
+
+# --------------------------------------------------------------- the Python example
+
+
+def test_python_example_prints_what_its_comment_says(capsys) -> None:
+    (block,) = _blocks("python")
+    exec(compile(block, "README.md", "exec"), {})  # the README's own code
+    printed = capsys.readouterr().out
+    claimed = re.search(r"print\(.*\)\s*#\s*(\[[^\]]*\])", block)
+    assert claimed, "the example's print says what it prints"
+
+    def numbers(text: str) -> np.ndarray:
+        return np.array([float(x) for x in re.findall(r"-?\d+\.?\d*(?:e-?\d+)?", text)])
+
+    np.testing.assert_allclose(numbers(printed), numbers(claimed[1]), atol=1e-12)
+
+
+# ------------------------------------------------------------------------ packaging
+
+
+def test_dependencies_are_each_explained() -> None:
+    """Every runtime dependency and every package of the test extra is named in the README's
+    paragraph on what gets installed and why."""
+    paragraph = README.split("What gets installed, and why:", 1)[1].split("\n\n", 1)[0].lower()
+    pyproject = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    requirements = pyproject["dependencies"] + pyproject["optional-dependencies"]["test"]
+    called = {"opencv-python-headless": "opencv", "rerun-sdk": "rerun"}
+    for requirement in requirements:
+        name = re.match(r"[A-Za-z0-9_.-]+", requirement)[0].lower()
+        assert called.get(name, name) in paragraph, name
+
+
+def test_license_is_an_spdx_expression_for_a_setuptools_that_reads_it() -> None:
+    """A TOML-table license makes setuptools print a deprecation warning on every install;
+    an SPDX string needs setuptools 77 or newer."""
+    pyproject = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    assert pyproject["project"]["license"] == "MIT"
+    (setuptools,) = [r for r in pyproject["build-system"]["requires"] if "setuptools" in r]
+    assert int(re.fullmatch(r"setuptools>=(\d+)(\.\d+)*", setuptools)[1]) >= 77
