@@ -518,3 +518,26 @@ def _tracking(run: RunResult, check: Check) -> float | NoData:
 def _matched_cones(run: RunResult, check: Check) -> float | NoData:
     """number of distinct true cones matched at least once >= limit"""
     return float(len(_per_cone(run, None)))
+
+
+@check_kind("latency_prediction", operator.le, Unit.FRACTION, uses_method=False)
+def _latency_prediction(run: RunResult, check: Check) -> float | NoData:
+    """median |latest-pose error / predicted - 1| <= limit (depth_image with the newest pose)
+
+    The ``depth_image`` estimate made with the newest pose received when the image arrived,
+    against the first-order prediction of its error from the body's true motion between the
+    exposure and that pose's stamp, ``|dp| + range |dtheta|`` (``scenarios.evaluate``); over
+    the matched detections whose newest pose was not the exposure pose."""
+    latest, predicted = run.latest_pose_errors()
+    moved = predicted > 0.0
+    if np.any(moved):
+        return _median(np.abs(latest[moved] / predicted[moved] - 1.0))
+    missing = _no_detection(run)
+    if missing is not None:
+        return missing
+    if latest.size:
+        return NoData(
+            "the body did not move between any image's exposure and the newest pose received "
+            "when it arrived: no stale pose to judge"
+        )
+    return NoData("no matched detection has a depth_image estimate with the newest pose")

@@ -7,19 +7,24 @@ the simulator that produced them (``scenarios.runner`` reads them out of MuJoCo)
     match                     <- each detection's best estimate to the nearest true cone,
                                  on the ground plane (vnav.metrics.match_nearest)
     compare  error = |p_w - truth|, range, contract domain (vnav.methods.CONTRACT_DOMAIN)
+    latest   the depth_image estimate again with the newest pose received when the image
+             arrived (what a pipeline ignoring stamps does), its error and the first-order
+             prediction of that error from the body's true motion, |dp| + range |dtheta|
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
 
-from scenarios.records import DetectionRecord, TickRecord
+from scenarios.records import DetectionRecord, ImageTiming, TickRecord
 from vnav import metrics, se3, so3
 from vnav.camera import PinholeCamera
 from vnav.cone import cones_fully_in_view
 from vnav.detect import ConeDetection
+from vnav.estimators import estimate_from_depth
 from vnav.localize import ConeEstimates, localize
 from vnav.methods import CONTRACT_DOMAIN
 
@@ -66,6 +71,7 @@ def evaluate_tick(
     camera: PinholeCamera,
     T_w_b_est: np.ndarray,
     far_m: float,
+    timing: ImageTiming | None = None,
 ) -> TickRecord:
     """Localise every detection with the estimator's pose and compare with the truth.
 
@@ -78,9 +84,14 @@ def evaluate_tick(
         This tick's planar depth image, metres.
     camera : PinholeCamera
     T_w_b_est : ndarray, shape (4, 4)
-        The body pose the estimator is given (the truth plus any pose noise).
+        The body pose the estimator looked up at the exposure stamp (the truth plus any pose
+        noise, interpolated in the pose stream).
     far_m : float
         Depth at or beyond which a pixel has no return.
+    timing : ImageTiming, optional
+        The image's stamps and the newest pose received when it arrived: with it, every
+        matched detection also gets the ``depth_image`` estimate made with that pose
+        (``DetectionRecord.latest_w``), its error and its predicted error.
 
     Returns
     -------
@@ -102,6 +113,10 @@ def evaluate_tick(
         _compare(d, e, cone_of.get(i), truth.cones_w, T_c_w, in_view)
         for i, (d, e) in enumerate(zip(detections, estimates, strict=True))
     ]
+    if timing is not None and timing.T_w_b_latest is not None:
+        records = [
+            _with_latest(r, timing, T_w_b_est, truth, camera, depth_m, far_m) for r in records
+        ]
     return TickRecord(
         tick=truth.tick,
         t_s=truth.t_s,
@@ -114,6 +129,43 @@ def evaluate_tick(
         cones_in_view=in_view,
         detections=records,
         reference_error_m=truth.reference_error_m,
+        timing=timing,
+    )
+
+
+def _with_latest(
+    record: DetectionRecord,
+    timing: ImageTiming,
+    T_w_b_est: np.ndarray,
+    truth: TickTruth,
+    camera: PinholeCamera,
+    depth_m: np.ndarray | None,
+    far_m: float,
+) -> DetectionRecord:
+    """``record`` with its latest-pose ``depth_image`` estimate, error and prediction.
+
+    The prediction is first order: a pose older by ``dt`` is off by the body's motion over
+    ``dt``, ``|v| dt`` in position and ``|omega| dt`` in attitude, and the attitude error
+    swings a point at ``range`` by ``range |omega| dt`` (an upper bound: the part of the
+    lever arm along the rotation axis does not move).
+    """
+    if record.cone_index is None or depth_m is None or record.range_m is None:
+        return record
+    T_w_b_latest = timing.T_w_b_latest
+    assert T_w_b_latest is not None
+    if np.array_equal(T_w_b_latest, T_w_b_est):  # the same pose: the same estimate
+        p_w = record.estimates_w.get("depth_image")
+    else:
+        p_w = estimate_from_depth(
+            record.detection, depth_m, camera, T_w_b_latest @ truth.T_b_c, far_m=far_m
+        )
+    if p_w is None:
+        return record
+    return dataclasses.replace(
+        record,
+        latest_w=p_w,
+        latest_error_m=float(metrics.position_error(truth.cones_w[record.cone_index], p_w)[0]),
+        predicted_latest_error_m=timing.true_motion_m + record.range_m * timing.true_motion_rad,
     )
 
 

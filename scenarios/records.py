@@ -22,7 +22,7 @@ if TYPE_CHECKING:
     from scenarios.spec import ScenarioSpec
     from vnav.estimators import NoEstimate
 
-__all__ = ["DetectionRecord", "RunResult", "TickRecord"]
+__all__ = ["DetectionRecord", "ImageTiming", "PoseStream", "RunResult", "TickRecord"]
 
 
 @dataclass(frozen=True)
@@ -48,6 +48,14 @@ class DetectionRecord:
         fully in view, tall enough, at a range within the bounds.
     no_estimate : dict of str to NoEstimate
         Why each method that gave no estimate gave none (``vnav.estimators.NoEstimate``).
+    latest_w : ndarray, shape (3,), or None
+        The ``depth_image`` estimate made with the newest pose received when the image arrived
+        instead of the pose at exposure (what a pipeline ignoring stamps computes), or None.
+    latest_error_m : float or None
+        Its distance from the matched cone, metres.
+    predicted_latest_error_m : float or None
+        The first-order prediction of that error from the body's true motion between the
+        exposure and the newest pose's stamp: ``|dp| + range |dtheta|`` (``ImageTiming``).
     """
 
     detection: ConeDetection
@@ -58,6 +66,75 @@ class DetectionRecord:
     p_c_true: np.ndarray | None = None
     in_contract: bool = False
     no_estimate: dict[str, NoEstimate] = field(default_factory=dict)
+    latest_w: np.ndarray | None = None
+    latest_error_m: float | None = None
+    predicted_latest_error_m: float | None = None
+
+
+@dataclass(frozen=True)
+class ImageTiming:
+    """When one image was taken, stamped and received, and which poses the estimator used.
+
+    Times are on the pose clock (the simulator's) unless said otherwise
+    (docs/CONVENTIONS.md, "Time and stamps").
+
+    Attributes
+    ----------
+    stamp_cam_s : float
+        The exposure stamp the image carries, on the camera clock.
+    exposure_pose_s : float
+        That stamp read on the pose clock (``stamp_cam_s + camera_clock_offset_s``): where the
+        estimator looked its pose up. It equals the true exposure time.
+    arrival_s : float
+        When the image reached the estimator.
+    latest_pose_s : float or None
+        Stamp of the newest pose received by then (None if none had arrived).
+    T_w_b_latest : ndarray, shape (4, 4), or None
+        That pose (with the scenario's pose noise, as received).
+    true_motion_m : float
+        How far the body truly moved between ``exposure_pose_s`` and ``latest_pose_s``,
+        metres (0 without a latest pose).
+    true_motion_rad : float
+        How far it truly turned over the same interval, radians.
+    """
+
+    stamp_cam_s: float
+    exposure_pose_s: float
+    arrival_s: float
+    latest_pose_s: float | None
+    T_w_b_latest: np.ndarray | None
+    true_motion_m: float = 0.0
+    true_motion_rad: float = 0.0
+
+    @property
+    def image_latency_s(self) -> float:
+        """Seconds from exposure to arrival."""
+        return self.arrival_s - self.exposure_pose_s
+
+    @property
+    def latest_minus_exposure_s(self) -> float | None:
+        """The newest pose's stamp minus the exposure stamp, seconds: the ``dt`` of the stale
+        pose's error ``|v| dt + range |omega| dt`` (negative when the newest pose is older)."""
+        return None if self.latest_pose_s is None else self.latest_pose_s - self.exposure_pose_s
+
+
+@dataclass(frozen=True)
+class PoseStream:
+    """The pose samples the estimator was sent, as stamped (noise included).
+
+    Attributes
+    ----------
+    stamps_s : ndarray, shape (N,)
+        Pose-clock stamps, increasing.
+    T_w_b : ndarray, shape (N, 4, 4)
+        The poses sent.
+    arrivals_s : ndarray, shape (N,)
+        When each reached the estimator.
+    """
+
+    stamps_s: np.ndarray
+    T_w_b: np.ndarray
+    arrivals_s: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -87,6 +164,9 @@ class TickRecord:
     detections : list of DetectionRecord
     reference_error_m : float or None
         Distance of the body from the flight's reference position (controlled flights).
+    timing : ImageTiming or None
+        The image's stamps and arrival and the poses used (None for a tick not made by the
+        runner's streams, e.g. in a unit test).
     """
 
     tick: int
@@ -100,6 +180,7 @@ class TickRecord:
     cones_in_view: list[int]
     detections: list[DetectionRecord]
     reference_error_m: float | None = None
+    timing: ImageTiming | None = None
 
     def estimates_w(self, method: str) -> np.ndarray:
         """Every estimate of ``method`` at this tick, one row per detection giving one, (K, 3)."""
@@ -153,12 +234,15 @@ class RunResult:
     timing_s : dict of str to float
         Seconds spent per stage (``physics``, ``render``, ``detect``, ``localize``, ``log``,
         ``setup``); the only figures that depend on the machine.
+    poses : PoseStream or None
+        The pose stream the estimator was sent (set when the run ends).
     """
 
     spec: ScenarioSpec
     seed: int
     ticks: list[TickRecord] = field(default_factory=list)
     timing_s: dict[str, float] = field(default_factory=dict)
+    poses: PoseStream | None = None
 
     @property
     def cones_w(self) -> np.ndarray:
@@ -186,6 +270,18 @@ class RunResult:
         return np.array(
             [d.errors_m[method] for d in self._scored(method, contract_only)], dtype=np.float64
         )
+
+    def latest_pose_errors(self) -> tuple[np.ndarray, np.ndarray]:
+        """The latest-pose ``depth_image`` errors and their first-order predictions, metres,
+        over matched detections that have both, shapes (K,) and (K,)."""
+        pairs = [
+            (d.latest_error_m, d.predicted_latest_error_m)
+            for t in self.ticks
+            for d in t.detections
+            if d.latest_error_m is not None and d.predicted_latest_error_m is not None
+        ]
+        a = np.array(pairs, dtype=np.float64).reshape(-1, 2)
+        return a[:, 0], a[:, 1]
 
     def ranges_for(self, method: str, *, contract_only: bool = False) -> np.ndarray:
         """Ranges of the detections behind ``errors``, same order, metres."""

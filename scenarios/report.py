@@ -12,23 +12,29 @@ Only ``timing_s`` depends on the machine; everything else is fixed by the scenar
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import json
 import math
 from collections import Counter
 from typing import Any
 
+import numpy as np
+
 from scenarios.checks import CheckResult
 from scenarios.records import RunResult
 from vnav import metrics
 from vnav.methods import METHOD_NAMES
 
-REPORT_VERSION = 3
+REPORT_VERSION = 4
 """2: ``camera_ticks`` (was ``frames``): the word frame means a coordinate frame only;
 ``recording`` names the ``.rrd`` file and its Rerun recording id.
 3: each check has an ``outcome`` (passed, failed, no data, skipped), a ``unit``, the figure
 ``shown`` in words next to its limit, and the ``reason`` it has no data; ``passed`` is
-whether no check failed or lacked data (``scenarios.checks.Outcome``)."""
+whether no check failed or lacked data (``scenarios.checks.Outcome``).
+4: ``timing`` (the scenario's sensor clocks) and ``pose_lookup``: the ``depth_image`` errors with
+the pose looked up at the exposure stamp and with the newest pose received when the image
+arrived, the latter's first-order prediction, image latencies and the newest pose's lead."""
 
 
 def _finite_or_none(value: float) -> float | int | None:
@@ -78,12 +84,50 @@ def build(
         "flight_mode": spec.flight.mode,
         "cones_w": [list(c) for c in spec.scene.cones_w],
         "methods": methods,
+        "timing": dataclasses.asdict(spec.timing),
+        "pose_lookup": pose_lookup(run),
         "checks": [
             {**c.as_dict(), "value": None if c.value is None else _finite_or_none(c.value)}
             for c in checks
         ],
         "recording": recording,
         "timing_s": {k: round(v, 4) for k, v in run.timing_s.items()},
+    }
+
+
+def _spread(values: list[float]) -> dict[str, float | None]:
+    """Mean, min and max of a series (null when empty)."""
+    if not values:
+        return {"mean": None, "min": None, "max": None}
+    a = np.array(values, dtype=np.float64)
+    return {
+        k: _finite_or_none(f(a)) for k, f in (("mean", np.mean), ("min", np.min), ("max", np.max))
+    }
+
+
+def pose_lookup(run: RunResult) -> dict[str, Any]:
+    """The two ways of choosing the pose for an image, compared on ``depth_image``.
+
+    ``at_exposure``: the pose looked up at the image's exposure stamp (what the methods use);
+    ``latest_at_arrival``: the newest pose received when the image arrived, over the matched
+    detections it gave an estimate for, with the first-order prediction of its error
+    (``scenarios.evaluate``); ``image_latency_s`` (exposure to arrival) and
+    ``latest_minus_exposure_s`` (the newest pose's stamp minus the exposure stamp: the ``dt`` of
+    the prediction) over the camera ticks.
+    """
+    latest, predicted = run.latest_pose_errors()
+    timed = [t.timing for t in run.ticks if t.timing is not None]
+    return {
+        "method": "depth_image",
+        "at_exposure": {"position_error_m": _stats(run.errors("depth_image"))},
+        "latest_at_arrival": {
+            "position_error_m": _stats(latest),
+            "predicted_error_m": _stats(predicted),
+        },
+        "image_latency_s": _spread([t.image_latency_s for t in timed]),
+        "latest_minus_exposure_s": _spread(
+            [t.latest_minus_exposure_s for t in timed if t.latest_minus_exposure_s is not None]
+        ),
     }
 
 

@@ -205,11 +205,34 @@ def summary(rep: dict, wall_s: float, rrd: Path, json_path: Path) -> str:
             )
         else:  # the row says why it is empty
             lines += _wrap(_no_estimate_text(entry["no_estimate"]), len(row) + 2, row + "  ")
+    lines += _latest_pose_lines(rep)
     lines.append("  checks:")
     for c in rep["checks"]:
         lines += _check_lines(c)
     lines += _wrap(f"wrote {rrd} and {json_path}", 2)
     return "\n".join(lines)
+
+
+def _latest_pose_lines(rep: dict) -> list[str]:
+    """Where images arrive late: the row of ``depth_image`` with the newest pose at arrival,
+    and what it is (nothing for a synchronous run, where it is ``depth_image``'s row)."""
+    lookup = rep["pose_lookup"]
+    s = lookup["latest_at_arrival"]["position_error_m"]
+    lead = lookup["latest_minus_exposure_s"]
+    if not s["count"] or not lead["max"] or lead["max"] == lead["min"] == 0.0:
+        return []
+    row = (
+        f"  {'newest pose':<13} {s['count']:>5} {_fmt(s['mean']):>8} {_fmt(s['median']):>8} "
+        f"{_fmt(s['rmse']):>8} {_fmt(s['max']):>8}"
+    )
+    latency_ms = 1000.0 * lookup["image_latency_s"]["mean"]
+    predicted = lookup["latest_at_arrival"]["predicted_error_m"]["mean"]
+    text = (
+        f"newest pose: depth_image with the newest pose received when the image arrived "
+        f"({latency_ms:.0f} ms after exposure), not the pose at its stamp; predicted mean "
+        f"{_fmt(predicted)} m"
+    )
+    return [row, *_wrap(text, 4, "    ")]
 
 
 def legend() -> str:

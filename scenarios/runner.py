@@ -20,13 +20,15 @@ import logging
 import math
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
 
 from scenarios.evaluate import TickTruth, evaluate_tick
-from scenarios.records import RunResult, TickRecord
+from scenarios.records import ImageTiming, PoseStream, RunResult, TickRecord
 from scenarios.spec import ControlledFlight, KinematicFlight, OrbitFlight, ScenarioSpec
+from scenarios.streams import BODY, WORLD, Delivered, Receiver, Streams
 from sim.flight import (
     Autopilot,
     KeyframePlayer,
@@ -40,6 +42,7 @@ from sim.world import World
 from vnav import quat, se3, so3
 from vnav.camera import PinholeCamera
 from vnav.detect import detect_cones
+from vnav.frames import FrameBuffer
 
 __all__ = ["STAGES", "TickObserver", "run_scenario"]
 
@@ -124,19 +127,47 @@ def _run_ticks(
     observer: TickObserver | None,
     progress: Callable[[int, int], None] | None,
 ) -> None:
-    """Every camera tick of the run, appended to ``result.ticks``, each stage timed."""
-    rng = np.random.default_rng(result.seed)
+    """Every camera tick of the run, appended to ``result.ticks`` in order, each stage timed.
+
+    The physics advances one pose sample at a time; each sample goes out on the pose stream,
+    each image on the camera's link, and every image is evaluated once it has arrived and its
+    exposure pose can be looked up (``scenarios.streams``). After the last exposure the
+    simulation runs on until every image has been evaluated.
+    """
     timing = result.timing_s
-    dt = float(world.model.opt.timestep)
     n_ticks = spec.n_ticks
-    driver = _driver(world, spec)
+    flow = _Flow(spec, world, result.seed)
     camera_track = _camera_track(spec)
     cones_w = world.cones_w
+    done = 0
+
+    def evaluate(delivered: list[Delivered]) -> None:
+        nonlocal done
+        for d in delivered:
+            t0 = time.perf_counter()
+            image: _Image = d.payload
+            record = evaluate_tick(
+                image.truth,
+                image.detections,
+                image.depth,
+                world.camera,
+                d.T_w_b_at_exposure,
+                spec.scene.zfar_m,
+                flow.image_timing(d),
+            )
+            result.ticks.append(record)
+            t1 = time.perf_counter()
+            if observer:
+                observer.on_tick(record, image.rgb, image.depth)
+            timing["localize"] += t1 - t0
+            timing["log"] += time.perf_counter() - t1
+            done += 1
+            if progress:
+                progress(done, n_ticks)
+
     for k in range(n_ticks):
         t0 = time.perf_counter()
-        n_steps = round((k / spec.camera_rate_hz - world.time_s) / dt)
-        if n_steps > 0:
-            driver.step(n_steps)
+        evaluate(flow.advance_to(flow.step_of(k / spec.camera_rate_hz)))
         if camera_track:
             world.set_camera_position_b(_interpolate(camera_track, world.time_s))
         t1 = time.perf_counter()
@@ -144,22 +175,138 @@ def _run_ticks(
         t2 = time.perf_counter()
         detections = detect_cones(image.rgb)
         t3 = time.perf_counter()
-        truth = _truth(k, world, driver, cones_w)
-        T_w_b_est = _noisy_pose(truth.T_w_b, spec, rng)
-        record = evaluate_tick(
-            truth, detections, image.depth, world.camera, T_w_b_est, spec.scene.zfar_m
+        timing["physics"] += t1 - t0
+        timing["render"] += t2 - t1
+        timing["detect"] += t3 - t2
+        truth = _truth(k, world, flow.driver, cones_w)
+        evaluate(flow.expose(_Image(truth, detections, image.rgb, image.depth)))
+    t0 = time.perf_counter()
+    evaluate(flow.drain())
+    timing["physics"] += time.perf_counter() - t0
+    result.poses = flow.pose_stream()
+
+
+@dataclass(frozen=True)
+class _Image:
+    """What travels with an image to the estimator (and the truth the evaluation needs)."""
+
+    truth: TickTruth
+    detections: list
+    rgb: np.ndarray
+    depth: np.ndarray | None
+
+
+class _Flow:
+    """The simulation's clock and the sensor streams: physics stepped a pose sample at a time.
+
+    Pose sample ``j`` is the state after the physics step nearest ``j / pose_rate_hz``; it
+    is sent (with the scenario's pose noise, drawn per sample) on the pose stream and kept
+    exactly in a truth buffer, which gives the body's true motion between two stamps.
+    """
+
+    def __init__(self, spec: ScenarioSpec, world: World, seed: int) -> None:
+        self.spec = spec
+        self.world = world
+        self.driver = _driver(world, spec)
+        self.dt = float(world.model.opt.timestep)
+        t = spec.timing
+        # Independent streams of randomness: pose noise and arrival jitter.
+        noise_seq, jitter_seq = np.random.SeedSequence(seed).spawn(2)
+        self._noise_rng = np.random.default_rng(noise_seq)
+        self.streams = Streams(
+            pose_latency_s=t.pose_latency_s,
+            image_latency_s=t.image_latency_s,
+            jitter_s=t.jitter_s,
+            camera_clock_offset_s=t.camera_clock_offset_s,
+            rng=np.random.default_rng(jitter_seq),
         )
-        result.ticks.append(record)
-        t4 = time.perf_counter()
-        if observer:
-            observer.on_tick(record, image.rgb, image.depth)
-        t5 = time.perf_counter()
-        for stage, seconds in zip(
-            STAGES, (t1 - t0, t2 - t1, t3 - t2, t4 - t3, t5 - t4), strict=True
-        ):
-            timing[stage] += seconds
-        if progress:
-            progress(k + 1, n_ticks)
+        # The receiver keeps what the slowest image may still need; the truth buffer all.
+        wait_s = t.image_latency_s + t.pose_latency_s + 20.0 * t.jitter_s + 2.0 / t.pose_rate_hz
+        self.receiver = Receiver(t.camera_clock_offset_s, cache_s=max(10.0, 2.0 * wait_s))
+        self.truth = FrameBuffer(cache_s=spec.end_s + wait_s + 10.0)  # the whole run
+        self._wait_s = wait_s + 1.0
+        self._step = 0
+        self._j = 0  # the next pose sample
+        self._stamps: list[float] = []
+        self._sent: list[np.ndarray] = []
+        self._arrivals: list[float] = []
+        self._sample()  # the first pose, at t = 0
+
+    def step_of(self, t_s: float) -> int:
+        """The physics step nearest ``t_s``."""
+        return round(t_s / self.dt)
+
+    def _next_sample_step(self) -> int:
+        return self.step_of(self._j / self.spec.timing.pose_rate_hz)
+
+    def _sample(self) -> None:
+        """Take pose sample ``j`` now and send it."""
+        w = self.world
+        stamp_s, T_w_b = w.time_s, w.T_w_b
+        self.truth.set_transform(WORLD, BODY, stamp_s, T_w_b)
+        sent = _noisy_pose(T_w_b, self.spec, self._noise_rng)
+        self._arrivals.append(self.streams.send_pose(stamp_s, sent))
+        self._stamps.append(stamp_s)
+        self._sent.append(sent)
+        self._j += 1
+
+    def _deliver(self) -> list[Delivered]:
+        if not (self.streams.images_in_flight or self.receiver.waiting):
+            return []  # poses wait in the link until an image needs them
+        return self.streams.deliver(self.world.time_s, self.receiver)
+
+    def advance_to(self, step: int) -> list[Delivered]:
+        """Step the physics to ``step``, sampling poses on the way; the images delivered."""
+        out: list[Delivered] = []
+        while self._step < step:
+            n = min(self._next_sample_step(), step) - self._step
+            self.driver.step(n)
+            self._step += n
+            if self._step == self._next_sample_step():
+                self._sample()
+                out += self._deliver()
+        return out
+
+    def expose(self, image: _Image) -> list[Delivered]:
+        """The image just rendered leaves, stamped at exposure; the images delivered."""
+        self.streams.send_image(self.world.time_s, image)
+        return self._deliver()
+
+    def drain(self) -> list[Delivered]:
+        """Run on until every image sent has been evaluated."""
+        out = self._deliver()
+        deadline_s = self.world.time_s + self._wait_s
+        while self.streams.images_in_flight or self.receiver.waiting:
+            if self.world.time_s > deadline_s:
+                raise RuntimeError(
+                    f"images still undelivered {self._wait_s:.3g} s after the last exposure"
+                )
+            out += self.advance_to(self._next_sample_step())
+        return out
+
+    def image_timing(self, d: Delivered) -> ImageTiming:
+        """The stamps of a delivered image and the body's true motion since the newest pose."""
+        motion_m = motion_rad = 0.0
+        if d.latest_stamp_s is not None and d.latest_stamp_s != d.exposure_pose_s:
+            T_a = self.truth.lookup(WORLD, BODY, d.exposure_pose_s)
+            T_b = self.truth.lookup(WORLD, BODY, d.latest_stamp_s)
+            motion_m = float(np.linalg.norm(T_b[:3, 3] - T_a[:3, 3]))
+            motion_rad = float(np.linalg.norm(so3.log(T_a[:3, :3].T @ T_b[:3, :3])))
+        return ImageTiming(
+            stamp_cam_s=d.stamp_cam_s,
+            exposure_pose_s=d.exposure_pose_s,
+            arrival_s=d.arrival_s,
+            latest_pose_s=d.latest_stamp_s,
+            T_w_b_latest=d.T_w_b_latest,
+            true_motion_m=motion_m,
+            true_motion_rad=motion_rad,
+        )
+
+    def pose_stream(self) -> PoseStream:
+        """Every pose sample sent, as stamped, with its arrival."""
+        return PoseStream(
+            np.array(self._stamps), np.array(self._sent).reshape(-1, 4, 4), np.array(self._arrivals)
+        )
 
 
 def _truth(tick: int, world: World, driver, cones_w: np.ndarray) -> TickTruth:

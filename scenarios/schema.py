@@ -22,6 +22,7 @@ __all__ = [
     "FLIGHT_MODES",
     "KEYFRAME",
     "NOISE",
+    "TIMING",
     "TOP",
     "WAYPOINT",
     "Key",
@@ -165,6 +166,7 @@ TOP: tuple[Key, ...] = (
     Key("cones", "any", "array of tables: the cones", REQUIRED),
     Key("flight", "any", "table: how the drone flies", REQUIRED),
     Key("noise", "any", "table: error on the pose the estimator is given", None),
+    Key("timing", "any", "table: sensor clocks, rates and latencies", None),
     Key("checks", "any", "array of tables: pass/fail criteria", None),
 )
 
@@ -221,6 +223,44 @@ NOISE: tuple[Key, ...] = (
     Key("position_std_m", "number", "error added to the body position, m", 0.0, 0.0, 100.0),
     Key("attitude_std_deg", "number", "error added to the attitude, deg", 0.0, 0.0, 180.0),
 )
+MAX_LATENCY_S = 5.0
+"""Largest latency, clock offset and jitter of ``[timing]``, seconds."""
+TIMING: tuple[Key, ...] = (
+    Key(
+        "pose_rate_hz",
+        "number",
+        "pose samples per second sent to the estimator, Hz",
+        200.0,
+        0.0,
+        1000.0,
+        True,
+    ),
+    Key(
+        "pose_latency_s",
+        "number",
+        "a pose stamped at t arrives at t + latency, s",
+        0.0,
+        0.0,
+        MAX_LATENCY_S,
+    ),
+    Key(
+        "image_latency_s",
+        "number",
+        "an image arrives this long after its exposure, s",
+        0.0,
+        0.0,
+        MAX_LATENCY_S,
+    ),
+    Key(
+        "camera_clock_offset_s",
+        "number",
+        "t_pose = t_cam + offset, s",
+        0.0,
+        -MAX_LATENCY_S,
+        MAX_LATENCY_S,
+    ),
+    Key("jitter_s", "number", "standard deviation of each arrival's extra delay, s", 0.0, 0.0, 1.0),
+)
 CHECK: tuple[Key, ...] = (
     Key("kind", "any", "a check kind (scenarios.checks.KINDS)"),
     Key("method", "any", "a localisation method (vnav.methods)", "depth_image"),
@@ -249,6 +289,7 @@ def comment(path: str, table: dict[str, Any] | None = None) -> str | None:
         "": TOP,
         "camera": CAMERA,
         "noise": NOISE,
+        "timing": TIMING,
         "flight": tuple(k for mode in FLIGHT_MODES.values() for k in mode),
         "flight.keyframes": KEYFRAME,
         "flight.waypoints": WAYPOINT,
@@ -281,6 +322,7 @@ def example_toml() -> str:
             ],
         },
         "noise": {k.name: k.default for k in NOISE},
+        "timing": {k.name: k.default for k in TIMING},
         "checks": [{"kind": "max_error", "method": "depth_image", "limit_m": 0.1}],
     }
     return toml_out.dumps(example, comments=True)

@@ -126,6 +126,42 @@ class Noise:
 
 
 @dataclass(frozen=True)
+class Timing:
+    """The sensors' clocks and links (``scenarios.streams``; docs/CONVENTIONS.md, "Time").
+
+    Attributes
+    ----------
+    pose_rate_hz : float
+        Pose samples per second the estimator receives (at most the physics rate: a sample
+        is the state after a physics step).
+    pose_latency_s : float
+        A pose stamped at ``t`` arrives at ``t + pose_latency_s``.
+    image_latency_s : float
+        An image arrives this long after its exposure.
+    camera_clock_offset_s : float
+        ``t_pose = t_cam + camera_clock_offset_s``: how a camera stamp reads on the pose clock.
+    jitter_s : float
+        Standard deviation of each arrival's extra delay (drawn from the run's seed).
+    """
+
+    pose_rate_hz: float = 200.0
+    pose_latency_s: float = 0.0
+    image_latency_s: float = 0.0
+    camera_clock_offset_s: float = 0.0
+    jitter_s: float = 0.0
+
+    @property
+    def synchronous(self) -> bool:
+        """No latency, offset or jitter: each image is processed the moment it is taken."""
+        return (
+            self.pose_latency_s == 0.0
+            and self.image_latency_s == 0.0
+            and self.camera_clock_offset_s == 0.0
+            and self.jitter_s == 0.0
+        )
+
+
+@dataclass(frozen=True)
 class ScenarioSpec:
     """Everything needed to run a scenario, in SI units and vnav conventions."""
 
@@ -136,6 +172,7 @@ class ScenarioSpec:
     camera_rate_hz: float = 10.0
     duration_s: float | None = None
     noise: Noise = field(default_factory=Noise)
+    timing: Timing = field(default_factory=Timing)
     checks: tuple[Check, ...] = ()
     lesson: str = ""
     view: str = "errors"
@@ -338,6 +375,14 @@ def from_dict(data: dict[str, Any], where: str = "<scenario>") -> ScenarioSpec:
             f"must be at most the physics rate, {physics_hz:g} Hz (one image per physics step), "
             f"got {top['camera_rate_hz']:g}",
         )
+    timing = Timing(**_read(top["timing"] or {}, schema.TIMING, where, "timing"))
+    if timing.pose_rate_hz > physics_hz + 1e-9:
+        raise _err(
+            where,
+            "timing.pose_rate_hz",
+            f"must be at most the physics rate, {physics_hz:g} Hz (one pose per physics step), "
+            f"got {timing.pose_rate_hz:g}",
+        )
     if not isinstance(top["lesson"], str):
         raise _err(where, "lesson", f"must be a string, got {type(top['lesson']).__name__}")
     return ScenarioSpec(
@@ -348,6 +393,7 @@ def from_dict(data: dict[str, Any], where: str = "<scenario>") -> ScenarioSpec:
         camera_rate_hz=top["camera_rate_hz"],
         duration_s=top["duration_s"],
         noise=noise,
+        timing=timing,
         checks=_checks(top["checks"], where) if top["checks"] is not None else (),
         lesson=top["lesson"],
         view=top["view"],

@@ -7,9 +7,9 @@ The simulator knows every state exactly; the estimator does not. Between the two
   later;
 - **the camera**: each image stamped at exposure on the camera clock,
   ``t_cam = t_pose - camera_clock_offset_s``, delivered ``image_latency_s`` later;
-- **jitter**: each delivery is late by a further Gaussian amount of standard deviation
-  ``jitter_s`` (never earlier than it was sent); a link is first-in first-out, so jitter delays
-  a message but never lets it overtake the one before it.
+- **jitter**: each delay is the link's latency plus a Gaussian draw of standard deviation
+  ``jitter_s`` (the latency is the mean delay), clipped so that nothing arrives before it was
+  sent; a link is first-in first-out, so jitter never lets a message overtake the one before.
 
 ``Receiver`` is the estimator's side (the pattern of tf2's ``MessageFilter``): poses go into a
 ``vnav.frames.FrameBuffer`` as they arrive; an image waits until the buffer can give the pose
@@ -205,21 +205,30 @@ class Streams:
         self.offset_s = camera_clock_offset_s
         self._queue: list[_Message] = []
         self._order = itertools.count()
+        self._images = 0
 
     @property
     def in_flight(self) -> int:
         """Messages sent and not yet delivered."""
         return len(self._queue)
 
-    def send_pose(self, stamp_s: float, T_w_b: np.ndarray) -> None:
-        """A pose sample taken at ``stamp_s`` (pose clock) leaves for the estimator."""
+    @property
+    def images_in_flight(self) -> int:
+        """Images sent and not yet delivered."""
+        return self._images
+
+    def send_pose(self, stamp_s: float, T_w_b: np.ndarray) -> float:
+        """A pose sample taken at ``stamp_s`` (pose clock) leaves for the estimator; returns
+        when it will arrive."""
         arrival = self._pose_link.arrival_s(stamp_s)
         heapq.heappush(self._queue, _Message(arrival, next(self._order), "pose", stamp_s, T_w_b))
+        return arrival
 
     def send_image(self, exposure_s: float, payload: Any) -> None:
         """An image exposed at ``exposure_s`` (pose clock) leaves, stamped on the camera clock."""
         arrival = self._image_link.arrival_s(exposure_s)
         stamp_cam = exposure_s - self.offset_s
+        self._images += 1
         heapq.heappush(
             self._queue, _Message(arrival, next(self._order), "image", stamp_cam, payload)
         )
@@ -245,6 +254,7 @@ class Streams:
                 poses.append(message.data)
                 continue
             flush()  # the image sees every pose that arrived before it
+            self._images -= 1
             receiver.receive_image(message.data, message.stamp_s, message.arrival_s)
             ready.extend(receiver.ready())
         flush()

@@ -29,7 +29,9 @@ def test_every_registered_check_kind_is_accepted_by_the_parser_and_documented(ki
 # ------------------------------------------------------------- each kind on a run by hand
 
 
-def _detection(cone_index, errors_m, range_m, in_contract, p_w, p_c_true, no_estimate=None):
+def _detection(
+    cone_index, errors_m, range_m, in_contract, p_w, p_c_true, no_estimate=None, latest=None
+):
     mask = np.ones((2, 2), dtype=bool)
     blob = ConeDetection(
         bbox=(10, 10, 2, 2),
@@ -51,6 +53,9 @@ def _detection(cone_index, errors_m, range_m, in_contract, p_w, p_c_true, no_est
         None if p_c_true is None else np.asarray(p_c_true, dtype=np.float64),
         in_contract,
         no_estimate or {},
+        # (latest-pose error, its prediction), metres
+        latest_error_m=None if latest is None else latest[0],
+        predicted_latest_error_m=None if latest is None else latest[1],
     )
 
 
@@ -90,6 +95,7 @@ def run() -> RunResult:
                         True,
                         {"depth_image": [1.0, 0.0, 0.0], "naive": [4.0, 0.0, 0.0]},
                         [0.0, 0.0, 5.0],
+                        latest=(0.12, 0.1),
                     ),
                     _detection(None, {}, None, False, {"depth_image": [9.0, 9.0, 0.0]}, None),
                 ],
@@ -106,6 +112,7 @@ def run() -> RunResult:
                         True,
                         {"depth_image": [1.02, 0.0, 0.0], "naive": [6.0, 0.0, 0.0]},
                         [0.0, 1.0, 5.0],
+                        latest=(0.27, 0.3),
                     ),
                     _detection(
                         1,
@@ -114,6 +121,7 @@ def run() -> RunResult:
                         False,
                         {"depth_image": [3.0, 3.0, 0.0]},
                         [2.0, 0.0, 30.0],
+                        latest=(0.5, 0.0),  # no motion: not judged
                     ),
                 ],
                 gimbal_locked=True,
@@ -136,6 +144,8 @@ FIGURES = {
     "gimbal_lock_seen": 1.0,
     "tracking_error": 0.7,
     "matched_cones": 2.0,
+    # |0.12 / 0.1 - 1| = 0.2 and |0.27 / 0.3 - 1| = 0.1; the third had no motion
+    "latency_prediction": 0.15,
 }
 
 

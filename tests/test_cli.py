@@ -570,8 +570,28 @@ def _file_with(tmp_path: Path, old: str, new: str) -> Path:
         ),
         (
             "camera_rate_hz = 5.0",
-            "camera_rate_hz = 150.0",
-            r"camera_rate_hz: must be at most the physics rate, 100 Hz",
+            "camera_rate_hz = 250.0",
+            r"camera_rate_hz: must be at most the physics rate, 200 Hz",
+        ),
+        (
+            "[[checks]]",
+            "[timing]\npose_rate_hz = 400.0\n\n[[checks]]",
+            r"timing\.pose_rate_hz: must be at most the physics rate, 200 Hz",
+        ),
+        (
+            "[[checks]]",
+            "[timing]\nimage_latency_s = -0.01\n\n[[checks]]",
+            r"timing\.image_latency_s: must be >= 0",
+        ),
+        (
+            "[[checks]]",
+            "[timing]\ncamera_clock_offset_s = 1e300\n\n[[checks]]",
+            r"timing\.camera_clock_offset_s: must be <= 5",
+        ),
+        (
+            "[[checks]]",
+            "[timing]\nlatency_s = 0.1\n\n[[checks]]",
+            r"timing\.latency_s: unknown key",
         ),
         (
             "[[checks]]",

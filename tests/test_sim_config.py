@@ -15,7 +15,7 @@ def test_defaults_are_the_documented_scene() -> None:
     assert cfg.cones_w == ((6.0, 1.0, 0.0),)
     assert cfg.start_position_w == (0.0, 0.0, 10.0)
     assert cfg.start_quat_xyzw == (0.0, 0.0, 0.0, 1.0)
-    assert cfg.timestep_s == 0.01
+    assert cfg.timestep_s == 0.005  # 200 Hz: the pose stream's default rate
     assert cfg.render_quality == "fast"
 
 
