@@ -6,11 +6,20 @@ tick of each stage (physics, render, detect, localize, log), the overhead ratio
 (detect + localize + log) / render (target <= 0.5), and the average bytes of the .rrd per
 tick (target <= 60 KB). The total wall time of all built-ins is the figure behind
 "``vnav-demo run --all`` finishes within 2 minutes" (target <= 120 s).
+
+``--against REV`` measures a change: the same scenarios (those both versions have) are run by
+this checkout and by git revision REV (checked out in a temporary worktree), each in a fresh
+process, alternating for ``--rounds`` rounds; the best wall time of each counts, and the ratio
+now / REV is printed per scenario and in total.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import os
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -28,6 +37,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         choices=builtin.names(),
         help="scenario to run (repeatable; default: every built-in)",
     )
+    parser.add_argument(
+        "--against",
+        metavar="REV",
+        help="compare with git revision REV, side by side (see the module docstring)",
+    )
+    parser.add_argument("--rounds", type=int, default=2, help="rounds of --against")
 
 
 def _run_one(name: str, out: Path) -> dict:
@@ -52,6 +67,8 @@ def _run_one(name: str, out: Path) -> dict:
 
 
 def run(args: argparse.Namespace) -> dict:
+    if getattr(args, "against", None):
+        return _against(args)
     names = getattr(args, "scenario", None) or builtin.names()
     with tempfile.TemporaryDirectory(prefix="vnav-bench-") as tmp:
         start = time.perf_counter()
@@ -106,4 +123,71 @@ def run(args: argparse.Namespace) -> dict:
             f".rrd bytes per tick: {t['rrd_bytes_per_tick'] / 1e3:.1f} KB (target <= "
             f"{TARGETS['rrd_bytes_per_tick'] / 1e3:.0f} KB)"
         )
+    return figures
+
+
+_ROOT = Path(__file__).resolve().parent.parent
+
+
+def _walls(root: Path, names: list[str]) -> dict[str, float]:
+    """Wall time of each scenario, run by the code under ``root`` in a fresh process."""
+    cmd = [sys.executable, "-m", "benchmarks", "pipeline", "--json"]
+    for name in names:
+        cmd += ["--scenario", name]
+    # The checkout under ``root`` first on the path, whatever is installed.
+    env = {**os.environ, "PYTHONPATH": str(root)}
+    out = subprocess.run(cmd, cwd=root, env=env, check=True, capture_output=True, text=True)
+    return {n: p["wall_s"] for n, p in json.loads(out.stdout)["scenarios"].items()}
+
+
+def _against(args: argparse.Namespace) -> dict:
+    """This checkout against revision ``args.against``, alternating, best of rounds."""
+    with tempfile.TemporaryDirectory(prefix="vnav-bench-rev-") as tmp:
+        base = Path(tmp) / "rev"
+        subprocess.run(
+            ["git", "-C", str(_ROOT), "worktree", "add", "--detach", str(base), args.against],
+            check=True,
+            capture_output=True,
+        )
+        try:
+            listed = subprocess.run(
+                [sys.executable, "-c", "from scenarios import builtin; print(*builtin.names())"],
+                cwd=base,
+                env={**os.environ, "PYTHONPATH": str(base)},
+                check=True,
+                capture_output=True,
+                text=True,
+            ).stdout.split()
+            wanted = getattr(args, "scenario", None) or builtin.names()
+            names = [n for n in wanted if n in listed]
+            best: dict[str, dict[str, float]] = {"now": {}, "rev": {}}
+            for _ in range(args.rounds):
+                for side, root in (("now", _ROOT), ("rev", base)):
+                    for name, wall in _walls(root, names).items():
+                        best[side][name] = min(wall, best[side].get(name, float("inf")))
+        finally:
+            subprocess.run(
+                ["git", "-C", str(_ROOT), "worktree", "remove", "--force", str(base)],
+                check=False,
+                capture_output=True,
+            )
+    total = {side: sum(best[side].values()) for side in best}
+    figures = {
+        "against": args.against,
+        "rounds": args.rounds,
+        "wall_s": best,
+        "ratio": {n: best["now"][n] / best["rev"][n] for n in names},
+        "total_ratio": total["now"] / total["rev"],
+    }
+    if not args.json:
+        print(
+            f"wall time per scenario, best of {args.rounds} alternating rounds, "
+            "each in a fresh process"
+        )
+        print(f"{'scenario':<19}{'now s':>8}{args.against[:10]:>12}{'ratio':>8}")
+        for n in names:
+            print(
+                f"{n:<19}{best['now'][n]:>8.2f}{best['rev'][n]:>12.2f}{figures['ratio'][n]:>8.3f}"
+            )
+        print(f"{'ALL':<19}{total['now']:>8.2f}{total['rev']:>12.2f}{figures['total_ratio']:>8.3f}")
     return figures

@@ -227,6 +227,7 @@ class _Flow:
         self._wait_s = wait_s + 1.0
         self._step = 0
         self._j = 0  # the next pose sample
+        self._truth_new: list[tuple[float, np.ndarray]] = []  # not yet in self.truth
         self._stamps: list[float] = []
         self._sent: list[np.ndarray] = []
         self._arrivals: list[float] = []
@@ -243,7 +244,7 @@ class _Flow:
         """Take pose sample ``j`` now and send it."""
         w = self.world
         stamp_s, T_w_b = w.time_s, w.T_w_b
-        self.truth.set_transform(WORLD, BODY, stamp_s, T_w_b)
+        self._truth_new.append((stamp_s, T_w_b))
         sent = _noisy_pose(T_w_b, self.spec, self._noise_rng)
         self._arrivals.append(self.streams.send_pose(stamp_s, sent))
         self._stamps.append(stamp_s)
@@ -287,6 +288,10 @@ class _Flow:
     def image_timing(self, d: Delivered) -> ImageTiming:
         """The stamps of a delivered image and the body's true motion since the newest pose."""
         motion_m = motion_rad = 0.0
+        if self._truth_new:  # one batch into the buffer: far cheaper than one per sample
+            stamps, poses = zip(*self._truth_new, strict=True)
+            self.truth.set_transform(WORLD, BODY, np.array(stamps), np.array(poses))
+            self._truth_new.clear()
         if d.latest_stamp_s is not None and d.latest_stamp_s != d.exposure_pose_s:
             T_a = self.truth.lookup(WORLD, BODY, d.exposure_pose_s)
             T_b = self.truth.lookup(WORLD, BODY, d.latest_stamp_s)

@@ -28,7 +28,8 @@ import numpy as np
 
 from sim import names
 from sim.world import World
-from vnav import quat, se3, so3
+from vnav import quat, se3
+from vnav.frames import FrameBuffer
 
 logger = logging.getLogger(__name__)
 
@@ -313,7 +314,10 @@ class GeometricController:
         b2_d = b2_d / n2
         R_w_d = np.column_stack([_cross(b2_d, b3_d), b2_d, b3_d])
         thrust = float(F_d @ R_w_b[:, 2])
-        e_R = 0.5 * so3.vee(R_w_d.T @ R_w_b - R_w_b.T @ R_w_d)
+        # vee of a skew-symmetric matrix by hand: so3.vee validates its input, and this runs
+        # at every physics step.
+        E = R_w_d.T @ R_w_b
+        e_R = 0.5 * np.array([E[2, 1] - E[1, 2], E[0, 2] - E[2, 0], E[1, 0] - E[0, 1]])
         e_Omega = omega_b  # Omega_d = 0
         moment = -self._k_R * e_R - self._k_Omega * e_Omega + _cross(omega_b, self.J @ omega_b)
         return ControlOutput(thrust_N=thrust, moment_b=moment, R_w_d=R_w_d, e_R=e_R)
@@ -384,7 +388,7 @@ class Mixer:
         u0 = self.A_inv @ wrench
         u_yaw = self.A_inv[:, 3] * moment_b[2]
         u = u0 + u_yaw
-        if np.any(u < self.u_min) or np.any(u > self.u_max):
+        if u.min() < self.u_min or u.max() > self.u_max:
             scale = 1.0
             for i in range(4):
                 if u_yaw[i] > 0.0:
@@ -555,6 +559,11 @@ class KeyframeTrajectory:
         self.times_s = t
         self.positions_w = T[:, :3, 3].copy()
         self.quats_xyzw = quat.from_matrix(T[:, :3, :3])
+        # The interpolation is a stamped frame buffer's (same slerp on the shorter arc, its
+        # constants computed once per segment): a lookup costs microseconds, and the player
+        # makes one per physics step.
+        self._buffer = FrameBuffer(cache_s=float(t[-1] - t[0]) + 1.0)
+        self._buffer.set_transform("world", "body", t, T)
 
     @property
     def duration_s(self) -> float:
@@ -562,20 +571,8 @@ class KeyframeTrajectory:
 
     def pose(self, t_s: float) -> np.ndarray:
         """(4, 4) ``T_w_b`` at time ``t_s``."""
-        times = self.times_s
-        if t_s <= times[0] or times.size == 1:
-            i, s = 0, 0.0
-        elif t_s >= times[-1]:
-            i, s = times.size - 2, 1.0
-        else:
-            i = int(np.searchsorted(times, t_s, side="right")) - 1
-            s = (t_s - times[i]) / (times[i + 1] - times[i])
-        if times.size == 1:
-            p_w, q = self.positions_w[0], self.quats_xyzw[0]
-        else:
-            p_w = (1.0 - s) * self.positions_w[i] + s * self.positions_w[i + 1]
-            q = quat.slerp(self.quats_xyzw[i], self.quats_xyzw[i + 1], s)
-        return se3.make(quat.to_matrix(q), p_w)
+        t = min(max(float(t_s), float(self.times_s[0])), float(self.times_s[-1]))
+        return self._buffer.lookup("world", "body", t)
 
 
 class KeyframePlayer:

@@ -303,8 +303,12 @@ class World:
     @property
     def T_w_b(self) -> np.ndarray:
         """(4, 4) the body pose in the world (from MuJoCo's body frame after kinematics)."""
-        R_w_b = self.data.xmat[self.body_id].reshape(3, 3)
-        return se3.make(R_w_b.copy(), self.data.xpos[self.body_id].copy())
+        # MuJoCo's own rotation matrix: built directly, without se3.make's validation, as
+        # this is read at every pose sample (200 Hz).
+        T = np.eye(4)
+        T[:3, :3] = self.data.xmat[self.body_id].reshape(3, 3)
+        T[:3, 3] = self.data.xpos[self.body_id]
+        return T
 
     @property
     def T_w_c(self) -> np.ndarray:
@@ -354,8 +358,9 @@ class World:
         T_w_b = se3.check_transform(T_w_b, "T_w_b")
         a = self._qpos_adr
         self.data.qpos[a : a + 3] = T_w_b[:3, 3]
-        # vnav [x, y, z, w] -> MuJoCo [w, x, y, z]
-        self.data.qpos[a + 3 : a + 7] = quat.xyzw_to_wxyz(quat.from_matrix(T_w_b[:3, :3]))
+        # MuJoCo's own conversion, into its [w, x, y, z] order (the tests read the pose back
+        # against SciPy); fast, as a keyframe flight calls it at every physics step.
+        mujoco.mju_mat2Quat(self.data.qpos[a + 3 : a + 7], T_w_b[:3, :3].ravel())
         self.data.qvel[self._qvel_adr : self._qvel_adr + 6] = 0.0
         mujoco.mj_forward(self.model, self.data)
 

@@ -157,6 +157,19 @@ def test_from_matrix_matches_mju_mat2quat(rng):
         same_rotation_quat(q_vnav, quat.wxyz_to_xyzw(res), atol=1e-12)
 
 
+def test_from_matrix_assume_valid_skips_only_the_check(rng):
+    R = so3.exp(rotation_vectors(rng, N))
+    q = quat.from_matrix(R, assume_valid=True)
+    for R_i, q_vnav in zip(R, q, strict=True):
+        res = np.zeros(4)
+        mujoco.mju_mat2Quat(res, R_i.reshape(9))
+        same_rotation_quat(q_vnav, quat.wxyz_to_xyzw(res), atol=1e-12)
+    with pytest.raises(ValueError, match=r"shape \(\.\.\., 3, 3\); got \(4, 4\)"):
+        quat.from_matrix(np.eye(4), assume_valid=True)
+    with pytest.raises(ValueError):  # without it, a matrix that is not a rotation is refused
+        quat.from_matrix(2.0 * np.eye(3))
+
+
 def test_from_axis_angle_matches_mju_axisangle2quat(rng):
     axes = unit_vectors(rng, N) * rng.uniform(0.1, 5.0, (N, 1))  # not unit: vnav normalises
     angles = rng.uniform(-2 * np.pi, 2 * np.pi, N)

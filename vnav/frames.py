@@ -381,8 +381,9 @@ def _matrix(a, shape: tuple[int, ...]) -> FloatArray:
 
 
 def _components(T: FloatArray) -> FloatArray:
-    """(7, N) components of a stack of transforms (quaternion from ``vnav.quat``)."""
-    q = quat.from_matrix(T[:, :3, :3])
+    """(7, N) components of a stack of transforms already validated (quaternion from
+    ``vnav.quat``)."""
+    q = quat.from_matrix(T[:, :3, :3], assume_valid=True)
     return np.concatenate([q.T, T[:, :3, 3].T])
 
 

@@ -421,7 +421,7 @@ def to_matrix(q: ArrayLike, *, normalize: bool = False) -> FloatArray:
     return out.reshape(*q.shape[:-1], 3, 3)
 
 
-def from_matrix(R: ArrayLike) -> FloatArray:
+def from_matrix(R: ArrayLike, *, assume_valid: bool = False) -> FloatArray:
     """Unit quaternion ``[x, y, z, w]``, w >= 0, of a rotation matrix.
 
     Robust for every rotation: of the four expressions ``4w^2 = 1 + tr R``,
@@ -434,6 +434,10 @@ def from_matrix(R: ArrayLike) -> FloatArray:
     ----------
     R : array_like, shape (..., 3, 3)
         Rotation matrices (validated with ``vnav.so3.check_rotation``).
+    assume_valid : bool
+        The caller vouches that ``R`` holds rotations already checked (as SciPy's
+        ``Rotation.from_matrix(..., assume_valid=True)``): only its shape is checked. For a
+        matrix that is not a rotation the result is meaningless.
 
     Returns
     -------
@@ -443,11 +447,17 @@ def from_matrix(R: ArrayLike) -> FloatArray:
     Raises
     ------
     ValueError
-        If ``R`` is not a rotation (see ``vnav.so3.check_rotation``).
+        If ``R`` is not a rotation (see ``vnav.so3.check_rotation``), or with
+        ``assume_valid``, if its shape is not (..., 3, 3).
     """
     from vnav.so3 import check_rotation
 
-    R = check_rotation(R)
+    if assume_valid:
+        R = np.asarray(R, dtype=np.float64)
+        if R.ndim < 2 or R.shape[-2:] != (3, 3):
+            raise ValueError(f"R must have shape (..., 3, 3); got {R.shape}")
+    else:
+        R = check_rotation(R)
     R00, R01, R02 = R[..., 0, 0], R[..., 0, 1], R[..., 0, 2]
     R10, R11, R12 = R[..., 1, 0], R[..., 1, 1], R[..., 1, 2]
     R20, R21, R22 = R[..., 2, 0], R[..., 2, 1], R[..., 2, 2]
