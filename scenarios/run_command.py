@@ -52,7 +52,14 @@ class Signalled(BaseException):
         self.signum = signum
 
 
+_caught: list[int] = []
+"""Signals received during the run. The handler raises at once; if that exception lands where
+Python swallows it (a ``__del__``, a weakref callback: "Exception ignored in ..."), the next
+camera tick raises it again (``Progress``)."""
+
+
 def _raise_signalled(signum: int, frame: object) -> None:
+    _caught.append(signum)
     raise Signalled(signum)
 
 
@@ -123,6 +130,8 @@ class Progress:
         self.label, self.enabled = label, enabled and sys.stderr.isatty()
 
     def __call__(self, done: int, total: int) -> None:
+        if _caught:  # a signal whose exception was swallowed: stop now
+            raise Signalled(_caught[0])
         if not self.enabled:
             return
         width = 30
@@ -342,6 +351,7 @@ def run(args: argparse.Namespace) -> int:
     except InputError as exc:
         _error(str(exc))
         return EXIT_BAD_INPUT
+    _caught.clear()
     previous = {s: signal.signal(s, _raise_signalled) for s in (signal.SIGTERM, signal.SIGHUP)}
     try:
         with outputs.directory_lock(out_dir):
@@ -358,6 +368,7 @@ def run(args: argparse.Namespace) -> int:
     finally:
         for signum, handler in previous.items():
             signal.signal(signum, handler)
+        _caught.clear()
     if not args.quiet:
         say(final_summary(results, out_dir))
     return max((status for _, status, _ in results), default=EXIT_PASSED)
