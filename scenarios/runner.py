@@ -242,14 +242,16 @@ class _Flow:
 
     def _sample(self) -> None:
         """Take pose sample ``j`` now and send it."""
-        w = self.world
-        stamp_s, T_w_b = w.time_s, w.T_w_b
+        self._send(self.world.time_s, self.world.T_w_b)
+        self._j += 1
+
+    def _send(self, stamp_s: float, T_w_b: np.ndarray) -> None:
+        """Keep the true pose at ``stamp_s`` and send it, with the pose noise, to the estimator."""
         self._truth_new.append((stamp_s, T_w_b))
         sent = _noisy_pose(T_w_b, self.spec, self._noise_rng)
         self._arrivals.append(self.streams.send_pose(stamp_s, sent))
         self._stamps.append(stamp_s)
         self._sent.append(sent)
-        self._j += 1
 
     def _deliver(self) -> list[Delivered]:
         if not (self.streams.images_in_flight or self.receiver.waiting):
@@ -258,6 +260,8 @@ class _Flow:
 
     def advance_to(self, step: int) -> list[Delivered]:
         """Step the physics to ``step``, sampling poses on the way; the images delivered."""
+        if isinstance(self.driver, KeyframePlayer):
+            return self._advance_keyframes(step)
         out: list[Delivered] = []
         while self._step < step:
             n = min(self._next_sample_step(), step) - self._step
@@ -267,6 +271,27 @@ class _Flow:
                 self._sample()
                 out += self._deliver()
         return out
+
+    def _advance_keyframes(self, step: int) -> list[Delivered]:
+        """``advance_to`` for a keyframe flight, which has no dynamics: the world is placed
+        once, at ``step``, and the samples on the way are the keyframes' poses at their stamps
+        (what the world would report there), looked up together."""
+        if self._step >= step:
+            return []
+        t0_s, step0 = self.world.time_s, self._step
+        steps = []
+        while self._next_sample_step() <= step:
+            steps.append(self._next_sample_step())
+            self._j += 1
+        self.driver.step(step - step0)
+        self._step = step
+        if steps:
+            # The player sets the time to t0 + n dt: a sample at ``step`` gets exactly the
+            # world's time, the exposure stamp of an image taken there.
+            stamps = [t0_s + (s - step0) * self.dt for s in steps]
+            for stamp_s, T_w_b in zip(stamps, self.driver.keyframes.poses(stamps), strict=True):
+                self._send(stamp_s, T_w_b)
+        return self._deliver()
 
     def expose(self, image: _Image) -> list[Delivered]:
         """The image just rendered leaves, stamped at exposure; the images delivered."""

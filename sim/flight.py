@@ -574,6 +574,11 @@ class KeyframeTrajectory:
         t = min(max(float(t_s), float(self.times_s[0])), float(self.times_s[-1]))
         return self._buffer.lookup("world", "body", t)
 
+    def poses(self, t_s: np.ndarray) -> np.ndarray:
+        """(N, 4, 4) ``T_w_b`` at each of the times ``t_s`` (N,), in one vectorised lookup."""
+        t = np.clip(np.asarray(t_s, dtype=np.float64), self.times_s[0], self.times_s[-1])
+        return self._buffer.lookup("world", "body", t)
+
 
 class KeyframePlayer:
     """Writes a ``KeyframeTrajectory`` into the world's free joint each step (no physics)."""
