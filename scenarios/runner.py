@@ -48,8 +48,9 @@ __all__ = ["STAGES", "TickObserver", "run_scenario"]
 
 logger = logging.getLogger(__name__)
 
-STAGES = ("physics", "render", "detect", "localize", "log")
-"""The per-tick stages timed in ``RunResult.timing_s`` (``setup`` is once per run)."""
+STAGES = ("physics", "streams", "render", "detect", "localize", "log")
+"""The per-tick stages timed in ``RunResult.timing_s`` (``setup`` is once per run): ``streams``
+is the sensor streams' and the pose buffers' share (sampling, sending, delivering, looking up)."""
 
 
 class TickObserver(Protocol):
@@ -144,6 +145,7 @@ def _run_ticks(
     def evaluate(delivered: list[Delivered]) -> None:
         nonlocal done
         for d in delivered:
+            image_timing = flow.image_timing(d)
             t0 = time.perf_counter()
             image: _Image = d.payload
             record = evaluate_tick(
@@ -153,7 +155,7 @@ def _run_ticks(
                 world.camera,
                 d.T_w_b_at_exposure,
                 spec.scene.zfar_m,
-                flow.image_timing(d),
+                image_timing,
             )
             result.ticks.append(record)
             t1 = time.perf_counter()
@@ -166,8 +168,8 @@ def _run_ticks(
                 progress(done, n_ticks)
 
     for k in range(n_ticks):
-        t0 = time.perf_counter()
         evaluate(flow.advance_to(flow.step_of(k / spec.camera_rate_hz)))
+        t0 = time.perf_counter()
         if camera_track:
             world.set_camera_position_b(_interpolate(camera_track, world.time_s))
         t1 = time.perf_counter()
@@ -180,9 +182,9 @@ def _run_ticks(
         timing["detect"] += t3 - t2
         truth = _truth(k, world, flow.driver, cones_w)
         evaluate(flow.expose(_Image(truth, detections, image.rgb, image.depth)))
-    t0 = time.perf_counter()
     evaluate(flow.drain())
-    timing["physics"] += time.perf_counter() - t0
+    timing["physics"] += flow.physics_s
+    timing["streams"] += flow.streams_s
     result.poses = flow.pose_stream()
 
 
@@ -225,6 +227,8 @@ class _Flow:
         self.receiver = Receiver(t.camera_clock_offset_s, cache_s=max(10.0, 2.0 * wait_s))
         self.truth = FrameBuffer(cache_s=spec.end_s + wait_s + 10.0)  # the whole run
         self._wait_s = wait_s + 1.0
+        self.physics_s = 0.0  # seconds in the driver's steps
+        self.streams_s = 0.0  # seconds in everything else here
         self._step = 0
         self._j = 0  # the next pose sample
         self._truth_new: list[tuple[float, np.ndarray]] = []  # not yet in self.truth
@@ -258,18 +262,27 @@ class _Flow:
             return []  # poses wait in the link until an image needs them
         return self.streams.deliver(self.world.time_s, self.receiver)
 
+    def _drive(self, n: int) -> None:
+        t0 = time.perf_counter()
+        self.driver.step(n)
+        self.physics_s += time.perf_counter() - t0
+
     def advance_to(self, step: int) -> list[Delivered]:
         """Step the physics to ``step``, sampling poses on the way; the images delivered."""
+        t0 = time.perf_counter()
+        physics0 = self.physics_s
         if isinstance(self.driver, KeyframePlayer):
-            return self._advance_keyframes(step)
-        out: list[Delivered] = []
-        while self._step < step:
-            n = min(self._next_sample_step(), step) - self._step
-            self.driver.step(n)
-            self._step += n
-            if self._step == self._next_sample_step():
-                self._sample()
-                out += self._deliver()
+            out = self._advance_keyframes(step)
+        else:
+            out = []
+            while self._step < step:
+                n = min(self._next_sample_step(), step) - self._step
+                self._drive(n)
+                self._step += n
+                if self._step == self._next_sample_step():
+                    self._sample()
+                    out += self._deliver()
+        self.streams_s += time.perf_counter() - t0 - (self.physics_s - physics0)
         return out
 
     def _advance_keyframes(self, step: int) -> list[Delivered]:
@@ -283,7 +296,7 @@ class _Flow:
         while self._next_sample_step() <= step:
             steps.append(self._next_sample_step())
             self._j += 1
-        self.driver.step(step - step0)
+        self._drive(step - step0)
         self._step = step
         if steps:
             # The player sets the time to t0 + n dt: a sample at ``step`` gets exactly the
@@ -295,8 +308,11 @@ class _Flow:
 
     def expose(self, image: _Image) -> list[Delivered]:
         """The image just rendered leaves, stamped at exposure; the images delivered."""
+        t0 = time.perf_counter()
         self.streams.send_image(self.world.time_s, image)
-        return self._deliver()
+        out = self._deliver()
+        self.streams_s += time.perf_counter() - t0
+        return out
 
     def drain(self) -> list[Delivered]:
         """Run on until every image sent has been evaluated."""
@@ -312,16 +328,18 @@ class _Flow:
 
     def image_timing(self, d: Delivered) -> ImageTiming:
         """The stamps of a delivered image and the body's true motion since the newest pose."""
+        t0 = time.perf_counter()
         motion_m = motion_rad = 0.0
-        if self._truth_new:  # one batch into the buffer: far cheaper than one per sample
-            stamps, poses = zip(*self._truth_new, strict=True)
-            self.truth.set_transform(WORLD, BODY, np.array(stamps), np.array(poses))
-            self._truth_new.clear()
         if d.latest_stamp_s is not None and d.latest_stamp_s != d.exposure_pose_s:
+            if self._truth_new:  # in one batch, only when needed: far cheaper than per sample
+                stamps, poses = zip(*self._truth_new, strict=True)
+                self.truth.set_transform(WORLD, BODY, np.array(stamps), np.array(poses))
+                self._truth_new.clear()
             T_a = self.truth.lookup(WORLD, BODY, d.exposure_pose_s)
             T_b = self.truth.lookup(WORLD, BODY, d.latest_stamp_s)
             motion_m = float(np.linalg.norm(T_b[:3, 3] - T_a[:3, 3]))
             motion_rad = float(np.linalg.norm(so3.log(T_a[:3, :3].T @ T_b[:3, :3])))
+        self.streams_s += time.perf_counter() - t0
         return ImageTiming(
             stamp_cam_s=d.stamp_cam_s,
             exposure_pose_s=d.exposure_pose_s,
