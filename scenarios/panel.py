@@ -7,7 +7,11 @@ At the time cursor the recording shows, as numbers (VNAV lecture 1):
 - cone 0 as the camera sees it and through the chain ``p_c -> p_b = T_b_c p_c ->
   p_w = T_w_b p_b`` (chapter 0), next to the naive ``t_w_b + p_c``;
 - the attitude ``R_w_b`` as roll, pitch, yaw (chapter 4) with the gimbal-lock flag, as a
-  quaternion (chapter 6, x y z w) and as axis-angle (chapter 5, Rodrigues' formula).
+  quaternion (chapter 6, x y z w) and as axis-angle (chapter 5, Rodrigues' formula);
+- the image's time (docs/CONVENTIONS.md, "Time and stamps"): its exposure stamp on the camera
+  clock and on the pose clock, its arrival, the stamp of the pose it was given and of the
+  newest pose received by then, with the body's true motion in between; for an image that
+  was neither late nor stamped on another clock (a synchronous run), one line in the header.
 
 All of it is the simulator's truth at that tick (the estimator's noisy pose is not shown).
 """
@@ -18,11 +22,11 @@ import math
 
 import numpy as np
 
-from scenarios.records import TickRecord
+from scenarios.records import ImageTiming, TickRecord
 from vnav import quat
 from vnav.estimators import naive
 
-__all__ = ["state_text"]
+__all__ = ["SYNCHRONOUS_NOTE", "state_text"]
 
 
 def _number(x: float, decimals: int, width: int) -> str:
@@ -40,6 +44,47 @@ def _matrix_rows(T: np.ndarray) -> list[str]:
 
 def _vector(p: np.ndarray, decimals: int = 2, width: int = 7) -> str:
     return "[" + " ".join(_number(x, decimals, width) for x in p) + "]"
+
+
+def _ms(dt_s: float) -> str:
+    return f"{1e3 * dt_s + 0.0:.0f} ms"
+
+
+SYNCHRONOUS_NOTE = "image processed at its exposure: no latency, the newest pose is its pose"
+"""What the panel's header says of an image that was neither late nor stamped on another clock
+(a synchronous run): its time needs no block of its own."""
+
+
+def _synchronous(timing: ImageTiming) -> bool:
+    return (
+        timing.image_latency_s == 0.0
+        and timing.stamp_cam_s == timing.exposure_pose_s
+        and not timing.latest_minus_exposure_s
+    )
+
+
+def _time_lines(timing: ImageTiming) -> list[str]:
+    """The image's stamps on both clocks, its arrival, the stamps of the pose it was given and
+    of the newest pose by then, and the body's true motion between those two."""
+    offset_s = timing.exposure_pose_s - timing.stamp_cam_s
+    lead_s = timing.latest_minus_exposure_s
+    lines = [
+        f"time    exposure  {timing.stamp_cam_s:.3f} s camera clock = "
+        f"{timing.exposure_pose_s:.3f} s pose clock "
+        f"(t_pose = t_cam {'-' if offset_s < 0.0 else '+'} {_ms(abs(offset_s))})",
+        f"        arrival   {timing.arrival_s:.3f} s, {_ms(timing.image_latency_s)} after the "
+        "exposure",
+    ]
+    used = f"        poses     used: {timing.exposure_pose_s:.3f} s, the exposure stamp"
+    if timing.latest_pose_s is None or lead_s is None:
+        return [*lines, used + "   newest: none received by the arrival"]
+    side = "ahead of" if lead_s >= 0.0 else "behind"
+    return [
+        *lines,
+        f"{used}   newest: {timing.latest_pose_s:.3f} s, {_ms(abs(lead_s))} {side} it",
+        f"        motion    between the two the body moved {timing.true_motion_m:.3f} m and "
+        f"turned {math.degrees(timing.true_motion_rad):.1f} deg",
+    ]
 
 
 def state_text(record: TickRecord, quat_xyzw: np.ndarray, cone0_w: np.ndarray) -> str:
@@ -86,4 +131,9 @@ def state_text(record: TickRecord, quat_xyzw: np.ndarray, cone0_w: np.ndarray) -
         f"{_number(math.degrees(angle), 1, 6)} deg  (R = I + sin(a) K + (1 - cos(a)) K^2)",
     ]
     header = f"**tick {record.tick}, t = {record.t_s:.2f} s** (simulator truth)"
+    if record.timing is not None and _synchronous(record.timing):
+        # One line in the header: the panel keeps its height in the common case.
+        header += f"; time: {SYNCHRONOUS_NOTE}"
+    elif record.timing is not None:
+        lines += ["", *_time_lines(record.timing)]
     return header + "\n\n```\n" + "\n".join(lines) + "\n```\n"

@@ -16,21 +16,34 @@ docs/CONVENTIONS.md; "in F" is the named transform frame an entity is drawn in):
     world/cones/mesh, truth        in world: the cones' MuJoCo geoms; true base centres
     world/cones/estimate/<method>  in world: Points3D per method, every tick
     world/cones/error/<method>     in world: segment from the true cone to each estimate
+    world/cones/newest_pose/estimate, error   in world: the depth_image estimate made with the
+                                   newest pose at the image's arrival, and its segment from
+                                   the true cone (runs with latency only)
     world/rays, rays/ground_hits   in world: camera centre -> base pixel's ray -> z = 0
     world/naive_offset             in world: the drone's position + p_c (the naive mistake)
     world/depth_cloud, trajectory  in world: depth image back-projected; the flown path
     metrics/error/<method>         Scalars, metres (NaN, a gap, where a method gave nothing)
     metrics/allowed/<method>       Scalars: the contract's bound at the matched ranges
+    metrics/newest_pose/error      Scalars, metres: that estimate's error (latency only)
     metrics/range_m                Scalars, metres
     attitude/rpy_deg, quat_xyzw    roll/pitch/yaw (deg), sign-continuous quaternion of R_w_b
     attitude/gimbal_lock, quat_sign  StateChange lanes
     coordinates/cone0_<frame>      cone 0 in world, body, camera (truth) and its estimate
-    state                          TextDocument every tick: poses, p_c -> p_b -> p_w, attitude
+    time/<quantity>/pose_samples   sim_time only (latency only): the body's yaw (deg) and
+                                   position (m) from every pose sample sent, at its stamp;
+    time/<quantity>/exposure       the pose given with each image, at its exposure;
+    time/<quantity>/arrival        the newest pose received, at each image's arrival
+    state                          TextDocument every tick: poses, p_c -> p_b -> p_w, attitude,
+                                   the image's stamps
     plots/error_vs_range           image (matplotlib), logged at the end (static)
     plots/depth_scale              the depth colour scale, logged at the end (static)
     description                    TextDocument (markdown)
 
-Timelines: ``tick`` (camera tick index) and ``sim_time`` (simulated seconds). Transforms are
+Timelines: ``tick`` (camera tick index) and ``sim_time`` (simulated seconds, on the pose
+clock). Everything about an image, the image itself first, is logged at its tick and at its
+true exposure time (``TickRecord.t_s``), not at its arrival: the recording carries the
+scene as the camera saw it. The pose samples and the images' arrivals are logged on
+``sim_time`` alone, at their own stamps. Transforms are
 logged parent-from-child (Rerun's default relation), which is exactly vnav's
 ``T_parent_child``, between named frames: ``world/body`` carries ``T_w_b`` from ``body`` to
 ``world``, ``world/body/camera`` ``T_b_c`` from ``camera`` to ``body`` (the same graph as
@@ -55,22 +68,27 @@ import rerun as rr
 
 from scenarios.panel import state_text
 from scenarios.plots import depth_scale_png, error_against_range_png
-from scenarios.records import RunResult, TickRecord
+from scenarios.records import PoseStream, RunResult, TickRecord
 from scenarios.spec import ScenarioSpec
 from scenarios.viewer import (
     AXIS_COLORS,
     AXIS_LENGTH_M,
     CONE0_SERIES,
+    EXPOSURE_POSE_COLOR,
     FRAME,
     IMAGE_PLANE_M,
+    NEWEST_POSE_COLOR,
+    NEWEST_POSE_METHOD,
+    POSE_SAMPLE_COLOR,
     RAY_COLOR,
+    STREAM_QUANTITIES,
     TRUTH_COLOR,
     blueprint,
     describe,
     entity,
     eye_for,
 )
-from vnav import quat
+from vnav import quat, so3
 from vnav.camera import PinholeCamera, depth_to_world_points
 from vnav.methods import METHOD_NAMES, METHODS, method
 
@@ -247,6 +265,7 @@ class Recording:
         self._spec: ScenarioSpec | None = None
         self._far_m = np.inf
         self._mount_moves = False
+        self._latency = False
         self._cones_w = np.zeros((0, 3))
         self._last_quat: np.ndarray | None = None
         self._depth_p95_m: list[float] = []
@@ -259,8 +278,13 @@ class Recording:
         self._encoder = ThreadPoolExecutor(max_workers=1, thread_name_prefix="vnav-encode")
         self._spec, self._camera, self._far_m = spec, camera, spec.scene.zfar_m
         self._mount_moves = spec.flight.moves_camera
+        # A synchronous run's newest pose is its exposure pose: drawing its estimate again
+        # and plotting a pose stream with no gap would only clutter the views.
+        self._latency = not spec.timing.synchronous
         self._cones_w = np.array(spec.scene.cones_w, dtype=np.float64).reshape(-1, 3)
         _log_static(self.rec, spec, seed, camera, scenery)
+        if self._latency:
+            _log_latency_static(self.rec)
 
     def on_tick(self, record: TickRecord, rgb: np.ndarray, depth_m: np.ndarray | None) -> None:
         """Queue one camera tick; send the queue as columns every ``FLUSH_EVERY_TICKS``.
@@ -304,6 +328,8 @@ class Recording:
             rr.EncodedImage(contents=error_against_range_png(result), media_type="image/png"),
             static=True,
         )
+        if self._latency and result.poses is not None:
+            _send_pose_samples(rec, result.poses)
         depth_max_m = _depth_scale_m(result, self._depth_p95_m)
         rec.log(
             entity.DEPTH,
@@ -327,7 +353,8 @@ class Recording:
                 look_target_w,
                 self._spec.view,
                 T_w_b=result.ticks[-1].T_w_b if result.ticks else None,
-                error_top_m=_error_tops_m(result),
+                error_top_m=_error_tops_m(result, self._latency),
+                latency=self._latency,
             )
         )
         self._close()
@@ -367,6 +394,9 @@ class Recording:
         _send_rays(send, rows, self._camera, self._far_m)
         _send_attitude(send, rows, quats)
         _send_cone0(send, rows, self._cones_w[0])
+        if self._latency:
+            _send_newest_pose(send, rows, self._cones_w)
+            _send_stream_markers(self.rec, rows)
         send(
             entity.STATE,
             rows,
@@ -401,13 +431,16 @@ def _depth_scale_m(result: RunResult, depth_p95_m: list[float]) -> float:
     return DEPTH_SCALE_STEP_M * float(np.ceil(top_m / DEPTH_SCALE_STEP_M))
 
 
-def _error_tops_m(result: RunResult) -> dict[str, float | None]:
+def _error_tops_m(result: RunResult, newest_pose: bool = False) -> dict[str, float | None]:
     """Top of each method's error plot: a little above its largest error or bound (so the
     grey bound stays in view), or None if the method gave no estimate; and of the range plot
-    (key ``entity.RANGE``)."""
+    (key ``entity.RANGE``). With ``newest_pose`` the ``NEWEST_POSE_METHOD`` plot also holds
+    the newest-pose estimate's errors."""
     tops: dict[str, float | None] = {}
     for m in METHODS:
         errors = result.errors(m.name)
+        if newest_pose and m.name == NEWEST_POSE_METHOD:
+            errors = np.concatenate([errors, result.latest_pose_errors()[0]])
         if not errors.size:
             tops[m.name] = None
             continue
@@ -582,6 +615,54 @@ def _log_styles(rec: rr.RecordingStream) -> None:
     )
     rec.log(entity.DETECTIONS, rr.Boxes2D.from_fields(colors=[(255, 220, 0)]), static=True)
     rec.log(entity.KEYPOINTS, rr.Points2D.from_fields(radii=2.5), static=True)
+
+
+def _log_latency_static(rec: rr.RecordingStream) -> None:
+    """Frames and styles of what only a run with latency draws: the newest-pose estimate and
+    the pose stream against the image stamps."""
+    for path in (entity.NEWEST_ESTIMATE, entity.NEWEST_ERROR_SEGMENT):
+        _in_frame(rec, path, FRAME.WORLD)
+    rec.log(
+        entity.NEWEST_ESTIMATE,
+        rr.Points3D.from_fields(colors=[NEWEST_POSE_COLOR], radii=0.08),
+        static=True,
+    )
+    rec.log(
+        entity.NEWEST_ERROR_SEGMENT,
+        rr.LineStrips3D.from_fields(colors=[NEWEST_POSE_COLOR], radii=LINE_UI_POINTS),
+        static=True,
+    )
+    rec.log(
+        entity.NEWEST_ERROR,
+        rr.SeriesLines(colors=[NEWEST_POSE_COLOR], names=["newest-pose error"]),
+        static=True,
+    )
+    for quantity in STREAM_QUANTITIES:
+        n = _STREAM_WIDTH[quantity]
+        # Yaw is one grey line; position has the x, y, z colours of every other plot.
+        colors = [POSE_SAMPLE_COLOR] if n == 1 else AXIS_COLORS
+        names = ["yaw"] if n == 1 else ["x", "y", "z"]
+        rec.log(
+            entity.stream(quantity, "pose_samples"),
+            rr.SeriesLines(colors=colors, names=[f"pose samples: {x}" for x in names]),
+            # Small dots on the line: the samples are discrete, 1 / pose_rate_hz apart.
+            rr.SeriesPoints(colors=colors, markers=["circle"] * n, marker_sizes=[1.5] * n),
+            static=True,
+        )
+        for series, color, marker, what in (
+            ("exposure", EXPOSURE_POSE_COLOR, "circle", "pose at the exposure stamp"),
+            ("arrival", NEWEST_POSE_COLOR, "cross", "newest pose at arrival"),
+        ):
+            rec.log(
+                entity.stream(quantity, series),
+                rr.SeriesPoints(
+                    colors=[color] * n,
+                    markers=[marker] * n,
+                    marker_sizes=[5.0] * n,
+                    names=[f"{what}: {x}" for x in names],
+                ),
+                static=True,
+            )
 
 
 # ---------------------------------------------------------------------- per camera tick
@@ -794,3 +875,75 @@ def _send_cone0(send: _Sender, rows: list[_Buffered], cone0_w: np.ndarray) -> No
             [r for r, _ in pairs],
             rr.Scalars.columns(scalars=np.array([p for _, p in pairs]).reshape(-1, 3)),
         )
+
+
+def _send_newest_pose(send: _Sender, rows: list[_Buffered], cones_w: np.ndarray) -> None:
+    """The newest-pose ``depth_image`` estimates, their segments from the true cones and their
+    mean error per tick (NaN, a gap, where there is none)."""
+    newest = [[d for d in r.record.detections if d.latest_w is not None] for r in rows]
+    points = [np.array([d.latest_w for d in ds], dtype=np.float64).reshape(-1, 3) for ds in newest]
+    send(
+        entity.NEWEST_ESTIMATE,
+        rows,
+        rr.Points3D.columns(positions=np.concatenate(points)).partition([len(p) for p in points]),
+    )
+    # latest_w is only made for a matched detection: every one has a true cone.
+    segments = [[np.array([cones_w[d.cone_index], d.latest_w]) for d in ds] for ds in newest]
+    send(entity.NEWEST_ERROR_SEGMENT, rows, _strips(segments))
+    errors = []
+    for ds in newest:
+        scored = [d.latest_error_m for d in ds if d.latest_error_m is not None]
+        errors.append(np.mean(scored) if scored else np.nan)
+    send(entity.NEWEST_ERROR, rows, rr.Scalars.columns(scalars=errors))
+
+
+_STREAM_WIDTH = {"yaw_deg": 1, "position_m": 3}
+"""Scalars per sample of each pose-stream quantity."""
+
+
+def _stream_values(T_w_b: np.ndarray) -> dict[str, np.ndarray]:
+    """The pose-stream quantities of body poses (N, 4, 4): yaw in degrees (N,), as the
+    attitude plot reads it (``so3.to_rpy``), and the position in metres (N, 3)."""
+    T_w_b = np.asarray(T_w_b, dtype=np.float64).reshape(-1, 4, 4)
+    yaw_deg = np.degrees(so3.to_rpy(T_w_b[:, :3, :3], warn=False)[:, 2])
+    return {"yaw_deg": yaw_deg, "position_m": T_w_b[:, :3, 3]}
+
+
+def _send_on_sim_time(
+    rec: rr.RecordingStream, series: str, stamps_s: list[float] | np.ndarray, T_w_b: np.ndarray
+) -> None:
+    """One pose-stream series: each quantity of the poses ``T_w_b`` at ``stamps_s`` on the
+    ``sim_time`` timeline alone (a pose sample or an arrival has no tick)."""
+    if not len(stamps_s):
+        return
+    index = [rr.TimeColumn("sim_time", duration=np.asarray(stamps_s, dtype=np.float64))]
+    for quantity, values in _stream_values(T_w_b).items():
+        rec.send_columns(
+            entity.stream(quantity, series),
+            indexes=index,
+            columns=rr.Scalars.columns(scalars=values),
+        )
+
+
+def _send_stream_markers(rec: rr.RecordingStream, rows: list[_Buffered]) -> None:
+    """At each image's exposure the pose the estimator was given; at its arrival the newest
+    pose received by then (what a pipeline ignoring stamps would have used)."""
+    timed = [r.record for r in rows if r.record.timing is not None]
+    _send_on_sim_time(
+        rec,
+        "exposure",
+        [t.timing.exposure_pose_s for t in timed],
+        np.array([t.T_w_b_est for t in timed]),
+    )
+    newest = [t.timing for t in timed if t.timing.T_w_b_latest is not None]
+    _send_on_sim_time(
+        rec,
+        "arrival",
+        [t.arrival_s for t in newest],
+        np.array([t.T_w_b_latest for t in newest]),
+    )
+
+
+def _send_pose_samples(rec: rr.RecordingStream, poses: PoseStream) -> None:
+    """Every pose sample the estimator was sent, at its stamp, as one column batch."""
+    _send_on_sim_time(rec, "pose_samples", poses.stamps_s, poses.T_w_b)

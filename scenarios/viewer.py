@@ -23,7 +23,7 @@ import rerun.blueprint as rrb
 from scenarios.schema import VIEW_NAMES
 from scenarios.spec import ScenarioSpec
 from vnav import so3
-from vnav.methods import METHODS, PREFERENCE
+from vnav.methods import METHODS, PREFERENCE, method
 
 if TYPE_CHECKING:
     from scenarios.records import RunResult
@@ -32,9 +32,16 @@ __all__ = [
     "AXIS_COLORS",
     "AXIS_LENGTH_M",
     "CONE0_SERIES",
+    "EXPOSURE_POSE_COLOR",
     "FRAME",
     "IMAGE_PLANE_M",
+    "NEWEST_POSE_COLOR",
+    "NEWEST_POSE_METHOD",
+    "POSE_SAMPLE_COLOR",
     "RAY_COLOR",
+    "STREAM_QUANTITIES",
+    "STREAM_SERIES",
+    "STREAM_WINDOW_S",
     "TRUTH_COLOR",
     "VIEWS",
     "blueprint",
@@ -64,6 +71,10 @@ def _cone0(frame_name: str) -> str:
     return f"coordinates/cone0_{frame_name}"
 
 
+def _stream(quantity: str, series: str) -> str:
+    return f"time/{quantity}/{series}"
+
+
 entity = SimpleNamespace(
     WORLD="world",
     BODY="world/body",
@@ -85,6 +96,9 @@ entity = SimpleNamespace(
     QUAT="attitude/quat_xyzw",
     GIMBAL_LOCK="attitude/gimbal_lock",
     QUAT_SIGN="attitude/quat_sign",
+    NEWEST_ESTIMATE="world/cones/newest_pose/estimate",
+    NEWEST_ERROR_SEGMENT="world/cones/newest_pose/error",
+    NEWEST_ERROR="metrics/newest_pose/error",
     STATE="state",
     ERROR_VS_RANGE="plots/error_vs_range",
     DEPTH_SCALE="plots/depth_scale",
@@ -94,8 +108,13 @@ entity = SimpleNamespace(
     estimate=_estimate,
     error_segment=_error_segment,
     cone0=_cone0,
+    stream=_stream,
 )
-"""Every entity path of a recording (``entity.error(method)`` and the like for families)."""
+"""Every entity path of a recording (``entity.error(method)`` and the like for families).
+
+``entity.stream(quantity, series)`` is a plot of the pose stream against the image stamps
+(runs with latency only): ``quantity`` one of ``STREAM_QUANTITIES``, ``series`` one of
+``STREAM_SERIES``."""
 
 FRAME = SimpleNamespace(WORLD="world", BODY="body", CAMERA="camera", IMAGE="image")
 """Named transform frames: ``T_w_b`` maps body into world, ``T_b_c`` camera into body, and the
@@ -113,6 +132,24 @@ RAY_COLOR = (255, 210, 60)
 """The viewing ray through each detection and its ground hit."""
 AXIS_COLORS = [(230, 80, 80), (80, 200, 80), (80, 120, 240)]
 """x, y, z (and roll, pitch, yaw) in every plot."""
+NEWEST_POSE_COLOR = (255, 130, 0)
+"""Orange: what the newest pose at an image's arrival gives, in 3D and in the plots (no
+method uses it; a pipeline ignoring stamps would)."""
+EXPOSURE_POSE_COLOR = method("depth_image").color_rgb
+"""The pose looked up at the exposure stamp: the colour of the estimate it makes."""
+POSE_SAMPLE_COLOR = (190, 190, 190)
+
+NEWEST_POSE_METHOD = "depth_image"
+"""The method whose estimate is also made with the newest pose (``DetectionRecord.latest_w``)."""
+
+STREAM_QUANTITIES: tuple[str, ...] = ("yaw_deg", "position_m")
+"""The pose stream is plotted as the body's yaw (degrees) and its position x, y, z (metres)."""
+STREAM_SERIES: tuple[str, ...] = ("pose_samples", "exposure", "arrival")
+"""Per quantity: every pose sample at its stamp; at each image's exposure the pose it was
+given; at each image's arrival the newest pose received by then."""
+STREAM_WINDOW_S = (-0.35, 0.15)
+"""The pose-stream plots show this window around the time cursor, seconds: wide enough for a
+few camera ticks at 10 Hz, narrow enough that 50 ms of latency is a visible gap."""
 
 
 VIEWS: dict[str, int] = {name: i for i, name in enumerate(VIEW_NAMES)}
@@ -127,6 +164,7 @@ def blueprint(
     *,
     T_w_b=None,
     error_top_m: dict[str, float | None] | None = None,
+    latency: bool = False,
 ) -> rrb.Blueprint:
     """The default layout: images and plots on the left; the world, a close-up of the drone
     and the state panel on the right.
@@ -146,6 +184,10 @@ def blueprint(
     error_top_m : dict of str to float or None, optional
         Top of each method's error plot, metres (None: the method gave no estimate), and of
         the range plot under the key ``entity.RANGE``.
+    latency : bool
+        The run delivered its images late (its ``[timing]`` is not synchronous): the error
+        tab also plots the newest-pose estimate's error and the pose stream against the image
+        stamps, and the time panel starts on ``sim_time`` (a pose sample has no tick).
     """
     if view not in VIEWS:
         raise ValueError(f"view must be one of {list(VIEWS)}, got {view!r}")
@@ -162,18 +204,27 @@ def blueprint(
     )
     return rrb.Blueprint(
         rrb.Horizontal(
-            rrb.Vertical(_image_tabs(), _lower_tabs(view, error_top_m or {}), row_shares=[4, 5]),
+            # With latency the plots and the state panel (its time block) get more room.
+            rrb.Vertical(
+                _image_tabs(),
+                _lower_tabs(view, error_top_m or {}, latency),
+                row_shares=[4, 6] if latency else [4, 5],
+            ),
             rrb.Vertical(
                 rrb.Horizontal(world, _close_up(T_w_b), column_shares=[3, 2]),
                 rrb.Tabs(
                     rrb.TextDocumentView(name="state at the time cursor", origin=entity.STATE),
                     rrb.TextDocumentView(name="scenario", origin=entity.DESCRIPTION),
                 ),
-                row_shares=[3, 2],
+                row_shares=[1, 1] if latency else [3, 2],
             ),
             column_shares=[2, 3],
         ),
-        rrb.TimePanel(state="collapsed", play_state="following"),
+        rrb.TimePanel(
+            state="collapsed",
+            play_state="following",
+            timeline="sim_time" if latency else "tick",
+        ),
         collapse_panels=True,
     )
 
@@ -234,7 +285,7 @@ def _image_tabs() -> rrb.Tabs:
     return rrb.Tabs(camera, depth)
 
 
-def _series(name: str, paths: list[str], y_range=None) -> rrb.TimeSeriesView:
+def _series(name: str, paths: list[str], y_range=None, time_range=None) -> rrb.TimeSeriesView:
     """A time-series plot whose title names its curves (a legend would cover the data)."""
     return rrb.TimeSeriesView(
         name=name,
@@ -242,20 +293,45 @@ def _series(name: str, paths: list[str], y_range=None) -> rrb.TimeSeriesView:
         contents=[f"+ /{p}" for p in paths],
         axis_y=rrb.ScalarAxis(range=y_range) if y_range is not None else None,
         plot_legend=rrb.PlotLegend(visible=False),
+        time_ranges=time_range,
     )
 
 
-def _error_plot(name: str, tops_m: dict[str, float | None]) -> rrb.TimeSeriesView:
-    """One checked method's mean error per tick, with the contract's bound in grey."""
+def _error_plot(
+    name: str, tops_m: dict[str, float | None], newest_pose: bool = False
+) -> rrb.TimeSeriesView:
+    """One checked method's mean error per tick, with the contract's bound in grey (and, if
+    ``newest_pose``, the newest-pose estimate's error in orange)."""
     top_m = tops_m.get(name)
+    paths = [entity.error(name), entity.allowed(name)]
     if name in tops_m and top_m is None:
         title = f"{name} error (m): no estimate in this run"
     else:
         title = f"{name} error (m), grey: the contract's bound"
+    if newest_pose:
+        paths.append(entity.NEWEST_ERROR)
+        title = f"{name} error (m), grey: bound, orange: with the newest pose"
+    return _series(title, paths, y_range=(0.0, top_m) if top_m is not None else None)
+
+
+_STREAM_TITLES = {
+    "yaw_deg": "pose yaw (deg) per sample; o: at exposure, x: newest at arrival",
+    "position_m": "pose x y z (m) per sample; o: at exposure, x: newest at arrival",
+}
+
+
+def _stream_plot(quantity: str) -> rrb.TimeSeriesView:
+    """One quantity of the pose stream around the time cursor (``STREAM_WINDOW_S``)."""
+    start_s, end_s = STREAM_WINDOW_S
+    window = rrb.VisibleTimeRange(
+        "sim_time",
+        start=rrb.TimeRangeBoundary.cursor_relative(seconds=start_s),
+        end=rrb.TimeRangeBoundary.cursor_relative(seconds=end_s),
+    )
     return _series(
-        title,
-        [entity.error(name), entity.allowed(name)],
-        y_range=(0.0, top_m) if top_m is not None else None,
+        _STREAM_TITLES[quantity],
+        [entity.stream(quantity, series) for series in STREAM_SERIES],
+        time_range=window,
     )
 
 
@@ -274,12 +350,31 @@ def _from_zero(tops: dict[str, float | None], key: str) -> tuple[float, float] |
     return (0.0, top) if top is not None else None
 
 
-def _lower_tabs(view: str, error_top_m: dict[str, float | None]) -> rrb.Tabs:
-    """The tabs below the images: ``VIEWS`` first (in order), then the other plots."""
-    errors = rrb.Vertical(
-        *[_error_plot(name, error_top_m) for name in PREFERENCE],
-        name="position error",
-    )
+def _lower_tabs(view: str, error_top_m: dict[str, float | None], latency: bool) -> rrb.Tabs:
+    """The tabs below the images: ``VIEWS`` first (in order), then the other plots.
+
+    With ``latency`` the error tab shows the lesson of time: the depth_image error beside the
+    newest pose's, and the pose stream around the time cursor with each image's exposure and
+    arrival; the other methods' errors move to a tab of their own after ``VIEWS``.
+    """
+    others = [name for name in PREFERENCE if name != NEWEST_POSE_METHOD]
+    extra = []
+    if latency:
+        errors = rrb.Vertical(
+            _error_plot(NEWEST_POSE_METHOD, error_top_m, newest_pose=True),
+            *[_stream_plot(q) for q in STREAM_QUANTITIES],
+            name="position error, time",
+        )
+        extra.append(
+            rrb.Vertical(
+                *[_error_plot(name, error_top_m) for name in others], name=", ".join(others)
+            )
+        )
+    else:
+        errors = rrb.Vertical(
+            *[_error_plot(name, error_top_m) for name in PREFERENCE],
+            name="position error",
+        )
     coordinates = rrb.Grid(
         *[_series(_CONE0_TITLES[f], [entity.cone0(f)]) for f in CONE0_SERIES],
         name="cone 0 in each frame",
@@ -306,6 +401,7 @@ def _lower_tabs(view: str, error_top_m: dict[str, float | None]) -> rrb.Tabs:
     tabs = {"errors": errors, "coordinates": coordinates, "attitude": attitude}
     return rrb.Tabs(
         *[tabs[name] for name in VIEW_NAMES],
+        *extra,
         rrb.Spatial2DView(name="error against range", origin=entity.ERROR_VS_RANGE),
         rrb.Vertical(
             _series("naive error (m)", [entity.error("naive")], _from_zero(error_top_m, "naive")),
@@ -373,5 +469,29 @@ def describe(spec: ScenarioSpec, seed: int) -> str:
         "segment from the true cone, and a line from the drone to the naive estimate.",
         "",
         f"Estimates: {estimates}. Truth: white.",
+        "",
+        _describe_timing(spec),
     ]
     return "\n".join(lines)
+
+
+def _describe_timing(spec: ScenarioSpec) -> str:
+    """One paragraph on the run's clocks and links, and what the viewer draws of them."""
+    t = spec.timing
+    if t.synchronous:
+        return (
+            "Time: synchronous, each image is processed at its exposure with the pose of that "
+            "instant (no latency, no clock offset)."
+        )
+    return (
+        f"Time: an image arrives {1e3 * t.image_latency_s:g} ms after its exposure, stamped "
+        f"on the camera clock: t_pose = t_cam + {1e3 * t.camera_clock_offset_s:g} ms on the "
+        f"pose clock. Poses are sampled at {t.pose_rate_hz:g} Hz and "
+        f"arrive {1e3 * t.pose_latency_s:g} ms late, each arrival with "
+        f"{1e3 * t.jitter_s:g} ms of jitter. Each image stays on the time line at its "
+        "exposure. **Orange**: the depth_image estimate made with the newest pose received "
+        "when the image arrived (what a pipeline ignoring stamps computes), with a segment "
+        "from the true cone; the pose-stream plots show every pose sample (grey) at its stamp, "
+        "the pose used at each exposure (blue circle) and the newest pose at each arrival "
+        "(orange cross)."
+    )
