@@ -465,3 +465,198 @@ def test_depth_for_display_keeps_depth_to_a_64th_and_draws_no_return_as_far():
     assert np.all(np.abs(shown_m - depth_m) <= depth_m / 64 + 0.5 / DEPTH_METER)
     far = depth_for_display_mm(np.array([70.0, np.inf, np.nan]))
     assert np.all(far == np.iinfo(np.uint16).max)  # the sky is far, not 0 m (nearest)
+
+
+# ------------------------------------------------------------------ time: stamps and latency
+
+
+def _latency_run(builtin_runs):
+    """The built-in run whose images arrive late (its [timing] is not synchronous)."""
+    run = builtin_runs["latency"]
+    assert not run.spec.timing.synchronous
+    return run
+
+
+def _timed_rows(rrd, path: str) -> list[dict]:
+    """The rows of ``path`` logged on a timeline (static style rows left out)."""
+    return [r for r in read_rows(rrd, path) if "sim_time" in r]
+
+
+def _yaw_deg(T_w_b: np.ndarray) -> np.ndarray:
+    """Yaw of body poses (N, 4, 4) in degrees, by SciPy (intrinsic z-y'-x'')."""
+    from scipy.spatial.transform import Rotation
+
+    R_w_b = np.asarray(T_w_b, dtype=np.float64).reshape(-1, 4, 4)[:, :3, :3]
+    return Rotation.from_matrix(R_w_b).as_euler("ZYX", degrees=True)[:, 0]
+
+
+def test_each_image_logged_at_its_exposure_time(recorded):
+    """The image is on sim_time at its true exposure: its camera-clock stamp plus the
+    scenario's clock offset (not its arrival), and on tick at its tick."""
+    spec, result, rrd, _ = recorded
+    rows = [r for r in read_rows(rrd, "world/body/camera/image") if "tick" in r]
+    assert [r["tick"] for r in rows] == [f.tick for f in result.ticks]
+    offset_s = spec.timing.camera_clock_offset_s
+    for row, f in zip(rows, result.ticks, strict=True):
+        exposure_s = f.timing.stamp_cam_s + offset_s
+        assert row["sim_time"] == pytest.approx(exposure_s * 1e9, abs=1e3)
+        assert f.t_s == pytest.approx(exposure_s, abs=1e-9)
+        if not spec.timing.synchronous:  # it arrived later than where it is drawn
+            assert f.timing.arrival_s > exposure_s
+
+
+def test_newest_pose_drawn_only_for_runs_with_latency(recorded):
+    """A synchronous run's newest pose is its exposure pose: no second estimate, no error
+    series for it, no pose-stream plots, and the panel's header says so in one line. A run
+    with latency has all of them and a time block in its panel instead."""
+    spec, result, rrd, _ = recorded
+    paths = ("/world/cones/newest_pose/**", "/metrics/newest_pose/**", "/time/**")
+    panels = [r["TextDocument:text"][0] for r in read_rows(rrd, "state") if "tick" in r]
+    synchronous_note = "image processed at its exposure: no latency"
+    assert len(panels) == len(result.ticks)
+    if spec.timing.synchronous:
+        for path in paths:
+            assert read_rows(rrd, path) == [], path
+        assert all(t.timing.latest_minus_exposure_s in (0.0, None) for t in result.ticks)
+        assert all(synchronous_note in p.split("\n")[0] for p in panels)
+        assert all("camera clock" not in p for p in panels)
+    else:
+        for path in paths:
+            assert _timed_rows(rrd, path), path
+        assert all(synchronous_note not in p and "camera clock" in p for p in panels)
+
+
+def test_newest_pose_estimate_is_the_same_ray_moved_by_the_stale_pose(builtin_runs):
+    """Both estimates come from one detection and one depth image, so the camera-frame point
+    is the same: the newest-pose one is the exposure one moved by T_w_b_latest T_w_b_est^-1.
+    Computed here from the logged depth_image points, held against the logged orange points,
+    their segments from the true cones and the plotted error."""
+    run = _latency_run(builtin_runs)
+    cones_w = np.array(run.spec.scene.cones_w)
+    newest = {r["tick"]: r for r in _timed_rows(run.rrd, "world/cones/newest_pose/estimate")}
+    segments = {r["tick"]: r for r in _timed_rows(run.rrd, "world/cones/newest_pose/error")}
+    errors = {r["tick"]: r for r in _timed_rows(run.rrd, "metrics/newest_pose/error")}
+    exposure = {r["tick"]: r for r in _timed_rows(run.rrd, "world/cones/estimate/depth_image")}
+    assert sorted(newest) == sorted(errors) == [f.tick for f in run.result.ticks]
+    largest_apart_m = 0.0
+    for f in run.result.ticks:
+        scored = [d for d in f.detections if d.latest_w is not None]
+        points = np.array(newest[f.tick]["Points3D:positions"] or []).reshape(-1, 3)
+        strips = np.array(segments[f.tick]["LineStrips3D:strips"] or []).reshape(-1, 2, 3)
+        assert len(points) == len(strips) == len(scored)
+        if not scored:
+            assert np.isnan(errors[f.tick]["Scalars:scalars"][0])
+            continue
+        # Every newest-pose estimate is of a detection that also has a depth_image estimate.
+        logged_w = np.array(exposure[f.tick]["Points3D:positions"]).reshape(-1, 3)
+        T_stale = f.timing.T_w_b_latest @ se3.invert(f.T_w_b_est)
+        expected_w = []
+        for d in scored:
+            k = np.argmin(np.linalg.norm(logged_w - d.estimates_w["depth_image"], axis=1))
+            expected_w.append(se3.apply(T_stale, logged_w[k].astype(np.float64)))
+        assert np.allclose(points, expected_w, atol=1e-4)
+        assert np.allclose(points, [d.latest_w for d in scored], atol=FLOAT32_ATOL_M)
+        assert np.allclose(strips[:, 0], cones_w[[d.cone_index for d in scored]], atol=1e-6)
+        assert np.allclose(strips[:, 1], points, atol=1e-6)
+        lengths_m = np.linalg.norm(strips[:, 1] - strips[:, 0], axis=1)
+        assert errors[f.tick]["Scalars:scalars"][0] == pytest.approx(
+            float(np.mean(lengths_m)), abs=FLOAT32_ATOL_M
+        )
+        apart_m = np.linalg.norm(points - [d.estimates_w["depth_image"] for d in scored], axis=1)
+        largest_apart_m = max(largest_apart_m, float(apart_m.max()))
+    # The fast yaw's lesson: about range |omega| dt = 6 m * 1.7 rad/s * 0.05 s apart.
+    assert largest_apart_m > 0.3
+
+
+def test_pose_samples_plotted_at_their_stamps(builtin_runs):
+    """Every pose sample the estimator was sent is on sim_time at its stamp (one column, on no
+    tick): its yaw (SciPy's) and its position."""
+    run = _latency_run(builtin_runs)
+    poses = run.result.poses
+    for quantity, expected in (
+        ("yaw_deg", _yaw_deg(poses.T_w_b)[:, None]),
+        ("position_m", poses.T_w_b[:, :3, 3]),
+    ):
+        rows = _timed_rows(run.rrd, f"time/{quantity}/pose_samples")
+        assert all("tick" not in r for r in rows)
+        stamps_ns = np.array([r["sim_time"] for r in rows])
+        assert len(stamps_ns) == len(poses.stamps_s)
+        assert np.allclose(stamps_ns, poses.stamps_s * 1e9, atol=1e3)
+        values = np.array([r["Scalars:scalars"] for r in rows])
+        assert np.allclose(values, expected, atol=1e-9)
+    # The samples are the stream's: 1 / pose_rate_hz apart.
+    assert np.allclose(np.diff(poses.stamps_s), 1.0 / run.spec.timing.pose_rate_hz, atol=1e-9)
+
+
+def test_exposure_and_arrival_marked_on_the_pose_stream(builtin_runs):
+    """Each image's exposure is marked with the pose it was given, its arrival with the newest
+    pose received by then: the arrival comes image_latency_s (plus jitter) after the exposure,
+    and the newest pose is a sample of the stream, stamped ahead of the exposure."""
+    run = _latency_run(builtin_runs)
+    ticks, poses, timing = run.result.ticks, run.result.poses, run.spec.timing
+    exposure = _timed_rows(run.rrd, "time/yaw_deg/exposure")
+    arrival = _timed_rows(run.rrd, "time/yaw_deg/arrival")
+    arrival_xyz = _timed_rows(run.rrd, "time/position_m/arrival")
+    assert len(exposure) == len(arrival) == len(arrival_xyz) == len(ticks)
+    exposure_s = np.array([r["sim_time"] for r in exposure]) / 1e9
+    arrival_s = np.array([r["sim_time"] for r in arrival]) / 1e9
+    assert np.allclose(exposure_s, [f.t_s for f in ticks], atol=1e-6)
+    assert np.allclose(arrival_s, [f.timing.arrival_s for f in ticks], atol=1e-6)
+    # Late by the configured latency; jitter is Gaussian with jitter_s: 5 sigma is generous.
+    late_s = arrival_s - exposure_s
+    assert np.all(np.abs(late_s - timing.image_latency_s) < 5.0 * timing.jitter_s + 1e-6)
+    assert np.allclose(
+        [r["Scalars:scalars"][0] for r in exposure],
+        _yaw_deg(np.array([f.T_w_b_est for f in ticks])),
+        atol=1e-9,
+    )
+    for row, row_xyz, f in zip(arrival, arrival_xyz, ticks, strict=True):
+        j = int(np.argmin(np.abs(poses.stamps_s - f.timing.latest_pose_s)))
+        assert poses.stamps_s[j] == pytest.approx(f.timing.latest_pose_s, abs=1e-12)
+        assert poses.arrivals_s[j] <= f.timing.arrival_s  # it had arrived
+        assert row["Scalars:scalars"][0] == pytest.approx(_yaw_deg(poses.T_w_b[j])[0], abs=1e-9)
+        assert np.allclose(row_xyz["Scalars:scalars"], poses.T_w_b[j][:3, 3], atol=1e-9)
+        # Newest: no sample stamped after it had arrived by then.
+        later = poses.stamps_s > f.timing.latest_pose_s
+        assert np.all(poses.arrivals_s[later] > f.timing.arrival_s)
+        assert f.timing.latest_pose_s > f.t_s  # ahead of the exposure pose
+
+
+_TIME_BLOCK = re.compile(
+    rf"exposure\s+({_NUMBER}) s camera clock = ({_NUMBER}) s pose clock "
+    r"\(t_pose = t_cam ([+-]) (\d+) ms\)\n"
+    rf"\s+arrival\s+({_NUMBER}) s, (\d+) ms after the exposure\n"
+    rf"\s+poses\s+used: ({_NUMBER}) s, the exposure stamp\s+newest: ({_NUMBER}) s, "
+    r"(\d+) ms ahead of it\n"
+    rf"\s+motion\s+between the two the body moved ({_NUMBER}) m and turned ({_NUMBER}) deg"
+)
+
+
+def test_state_panel_time_block_matches_the_stamps(builtin_runs):
+    """The latency run's panel shows, per tick, the stamps of the records: exposure on both
+    clocks (their difference the scenario's clock offset), arrival and latency, the pose
+    used and the newest pose with its lead, and the true motion in between."""
+    run = _latency_run(builtin_runs)
+    panels = {
+        r["tick"]: r["TextDocument:text"][0] for r in read_rows(run.rrd, "state") if "tick" in r
+    }
+    offset_ms = 1e3 * run.spec.timing.camera_clock_offset_s
+    for f in run.result.ticks:
+        match = _TIME_BLOCK.search(panels[f.tick])
+        assert match, panels[f.tick]
+        cam_s, pose_s, sign, shown_offset_ms, arr_s, late_ms, used_s, new_s, lead_ms = (
+            match.groups()[:9]
+        )
+        t = f.timing
+        assert float(cam_s) == pytest.approx(t.stamp_cam_s, abs=5e-4 + 1e-9)
+        assert float(pose_s) == pytest.approx(f.t_s, abs=5e-4 + 1e-9)
+        assert float(sign + shown_offset_ms) == pytest.approx(offset_ms, abs=0.5 + 1e-9)
+        assert float(arr_s) == pytest.approx(t.arrival_s, abs=5e-4 + 1e-9)
+        assert float(late_ms) == pytest.approx(1e3 * (t.arrival_s - f.t_s), abs=0.5 + 1e-9)
+        assert float(used_s) == pytest.approx(f.t_s, abs=5e-4 + 1e-9)
+        assert float(new_s) == pytest.approx(t.latest_pose_s, abs=5e-4 + 1e-9)
+        assert float(lead_ms) == pytest.approx(1e3 * t.latest_minus_exposure_s, abs=0.5 + 1e-9)
+        assert float(match.group(10)) == pytest.approx(t.true_motion_m, abs=5e-4 + 1e-9)
+        assert float(match.group(11)) == pytest.approx(
+            np.degrees(t.true_motion_rad), abs=0.05 + 1e-9
+        )
