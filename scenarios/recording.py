@@ -649,16 +649,17 @@ def _log_latency_static(rec: rr.RecordingStream) -> None:
             rr.SeriesPoints(colors=colors, markers=["circle"] * n, marker_sizes=[1.5] * n),
             static=True,
         )
-        for series, color, marker, what in (
-            ("exposure", EXPOSURE_POSE_COLOR, "circle", "pose at the exposure stamp"),
-            ("arrival", NEWEST_POSE_COLOR, "cross", "newest pose at arrival"),
+        # A cross of a circle's size reads thinner: drawn larger so the two weigh alike.
+        for series, color, marker, size, what in (
+            ("exposure", EXPOSURE_POSE_COLOR, "circle", 5.0, "pose at the exposure stamp"),
+            ("arrival", NEWEST_POSE_COLOR, "cross", 7.0, "newest pose at arrival"),
         ):
             rec.log(
                 entity.stream(quantity, series),
                 rr.SeriesPoints(
                     colors=[color] * n,
                     markers=[marker] * n,
-                    marker_sizes=[5.0] * n,
+                    marker_sizes=[size] * n,
                     names=[f"{what}: {x}" for x in names],
                 ),
                 static=True,

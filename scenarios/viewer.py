@@ -132,8 +132,8 @@ RAY_COLOR = (255, 210, 60)
 """The viewing ray through each detection and its ground hit."""
 AXIS_COLORS = [(230, 80, 80), (80, 200, 80), (80, 120, 240)]
 """x, y, z (and roll, pitch, yaw) in every plot."""
-NEWEST_POSE_COLOR = (255, 130, 0)
-"""Orange: what the newest pose at an image's arrival gives, in 3D and in the plots (no
+NEWEST_POSE_COLOR = (150, 90, 255)
+"""Violet: what the newest pose at an image's arrival gives, in 3D and in the plots (no
 method uses it; a pipeline ignoring stamps would)."""
 EXPOSURE_POSE_COLOR = method("depth_image").color_rgb
 """The pose looked up at the exposure stamp: the colour of the estimate it makes."""
@@ -301,7 +301,7 @@ def _error_plot(
     name: str, tops_m: dict[str, float | None], newest_pose: bool = False
 ) -> rrb.TimeSeriesView:
     """One checked method's mean error per tick, with the contract's bound in grey (and, if
-    ``newest_pose``, the newest-pose estimate's error in orange)."""
+    ``newest_pose``, the newest-pose estimate's error in violet)."""
     top_m = tops_m.get(name)
     paths = [entity.error(name), entity.allowed(name)]
     if name in tops_m and top_m is None:
@@ -310,7 +310,7 @@ def _error_plot(
         title = f"{name} error (m), grey: the contract's bound"
     if newest_pose:
         paths.append(entity.NEWEST_ERROR)
-        title = f"{name} error (m), grey: bound, orange: with the newest pose"
+        title = f"{name} error (m), grey: bound, violet: with the newest pose"
     return _series(title, paths, y_range=(0.0, top_m) if top_m is not None else None)
 
 
@@ -489,9 +489,9 @@ def _describe_timing(spec: ScenarioSpec) -> str:
         f"pose clock. Poses are sampled at {t.pose_rate_hz:g} Hz and "
         f"arrive {1e3 * t.pose_latency_s:g} ms late, each arrival with "
         f"{1e3 * t.jitter_s:g} ms of jitter. Each image stays on the time line at its "
-        "exposure. **Orange**: the depth_image estimate made with the newest pose received "
+        "exposure. **Violet**: the depth_image estimate made with the newest pose received "
         "when the image arrived (what a pipeline ignoring stamps computes), with a segment "
         "from the true cone; the pose-stream plots show every pose sample (grey) at its stamp, "
         "the pose used at each exposure (blue circle) and the newest pose at each arrival "
-        "(orange cross)."
+        "(violet cross)."
     )

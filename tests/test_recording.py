@@ -529,7 +529,7 @@ def test_newest_pose_drawn_only_for_runs_with_latency(recorded):
 def test_newest_pose_estimate_is_the_same_ray_moved_by_the_stale_pose(builtin_runs):
     """Both estimates come from one detection and one depth image, so the camera-frame point
     is the same: the newest-pose one is the exposure one moved by T_w_b_latest T_w_b_est^-1.
-    Computed here from the logged depth_image points, held against the logged orange points,
+    Computed here from the logged depth_image points, held against the logged violet points,
     their segments from the true cones and the plotted error."""
     run = _latency_run(builtin_runs)
     cones_w = np.array(run.spec.scene.cones_w)
