@@ -7,7 +7,9 @@ Everything here is a viewer concern, declared once and shared by the recording
 - ``FRAME``: the named transform frames (the same names as ``vnav.frames`` and
   docs/CONVENTIONS.md: world, body, camera, and the image plane);
 - ``AXIS_LENGTH_M``: how long each frame's drawn axes are (world > body > camera);
-- colours: each method's from ``vnav.methods``, the truth's, the rays', the x/y/z axes';
+- colours: each method's from ``vnav.methods``, the truth's, the rays', the x/y/z axes',
+  the newest pose's (runs with latency: ``NEWEST_POSE_COLOR``);
+- ``STREAM_*``: the pose stream's plots against the image stamps (runs with latency);
 - ``blueprint``: the default layout; ``eye_for``: where the 3D view looks from;
 - ``describe``: the markdown shown beside the recording.
 """
