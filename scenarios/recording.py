@@ -511,6 +511,17 @@ def _log_static(
     )
     for path in (entity.IMAGE, entity.DEPTH, entity.DETECTIONS, entity.KEYPOINTS):
         _in_frame(rec, path, FRAME.IMAGE)
+    _log_world_contents(rec, spec, scenery)
+    rec.log(
+        entity.DESCRIPTION,
+        rr.TextDocument(describe(spec, seed), media_type="text/markdown"),
+        static=True,
+    )
+    _log_styles(rec)
+
+
+def _log_world_contents(rec: rr.RecordingStream, spec: ScenarioSpec, scenery: Scenery) -> None:
+    """What lives in the world frame: its entities named in it, the cone meshes and truth."""
     world_paths = [
         entity.CONES,
         entity.TRUTH,
@@ -535,12 +546,6 @@ def _log_static(
         ),
         static=True,
     )
-    rec.log(
-        entity.DESCRIPTION,
-        rr.TextDocument(describe(spec, seed), media_type="text/markdown"),
-        static=True,
-    )
-    _log_styles(rec)
 
 
 def _log_styles(rec: rr.RecordingStream) -> None:
@@ -575,6 +580,12 @@ def _log_styles(rec: rr.RecordingStream) -> None:
         series[entity.cone0(name)] = (AXIS_COLORS, [f"{a} ({name})" for a in "xyz"])
     for path, (colors, names) in series.items():
         rec.log(path, rr.SeriesLines(colors=colors, names=names), static=True)
+    _log_state_lanes(rec)
+    _log_3d_styles(rec)
+
+
+def _log_state_lanes(rec: rr.RecordingStream) -> None:
+    """The discrete flags' lanes: their values, labels and colours."""
     rec.log(
         entity.GIMBAL_LOCK,
         rr.StateConfiguration(
@@ -593,6 +604,10 @@ def _log_styles(rec: rr.RecordingStream) -> None:
         ),
         static=True,
     )
+
+
+def _log_3d_styles(rec: rr.RecordingStream) -> None:
+    """Colours and sizes of the 3D and image entities logged every tick."""
     rec.log(
         entity.DEPTH_CLOUD,
         rr.Points3D.from_fields(colors=[(150, 150, 200)], radii=0.04),
