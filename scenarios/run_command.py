@@ -297,12 +297,19 @@ def run_one(spec: ScenarioSpec, args: argparse.Namespace, out_dir: Path) -> tupl
     recording (None when nothing was written)."""
     start = time.perf_counter()
     try:
-        outcome = pipeline.run(
-            spec,
-            seed=args.seed,
-            out_dir=out_dir,
-            progress=Progress(spec.name, enabled=not args.quiet),
-        )
+        try:
+            outcome = pipeline.run(
+                spec,
+                seed=args.seed,
+                out_dir=out_dir,
+                progress=Progress(spec.name, enabled=not args.quiet),
+            )
+        except Exception as exc:
+            # A signal whose exception landed inside a library that turned it into another
+            # error (or swallowed it, and something then failed): the signal is the cause.
+            if _caught:
+                raise Signalled(_caught[0]) from exc
+            raise
     except SimulationError as exc:
         _error(f"{spec.name}: could not complete: the simulation diverged: {exc}")
         return EXIT_INCOMPLETE, None

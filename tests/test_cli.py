@@ -484,6 +484,24 @@ def test_diverging_simulation_exits_3(tmp_path, capsys, monkeypatch):
     assert sorted(p.name for p in tmp_path.iterdir()) == [".vnav-demo.lock"]
 
 
+def test_a_signal_turned_into_another_error_still_ends_as_the_signal(tmp_path, capsys, monkeypatch):
+    """A library that catches the signal's exception and raises its own error (or swallows it
+    and then fails) must not turn SIGHUP into "internal error", exit 3."""
+    import signal
+
+    from scenarios import run_command
+
+    def caught_then_failed(*args, **kwargs):
+        run_command._caught.append(signal.SIGHUP)  # what the handler records
+        raise RuntimeError("a library's own error after the signal")
+
+    monkeypatch.setattr(scenarios.pipeline, "run", caught_then_failed)
+    assert main(["run", "orbit", "--out", str(tmp_path), "--quiet"]) == 128 + signal.SIGHUP
+    assert capsys.readouterr().err.strip().splitlines() == [
+        "vnav-demo: error: stopped by SIGHUP; no partial file was kept"
+    ]
+
+
 @pytest.mark.parametrize("signame", ["SIGTERM", "SIGHUP"])
 def test_sigterm_and_sighup_end_the_run_like_ctrl_c(tmp_path, signame):
     """A signal mid-run: exit 128 + N, nothing partial kept, the previous pair untouched."""
@@ -504,7 +522,7 @@ def test_sigterm_and_sighup_end_the_run_like_ctrl_c(tmp_path, signame):
     assert list(tmp_path.glob(".orbit.rrd.*.partial")), "the run never started writing"
     proc.send_signal(signum)
     _, err = proc.communicate(timeout=60)
-    assert proc.returncode == 128 + signum
+    assert proc.returncode == 128 + signum, err
     assert err.strip().splitlines() == [
         f"vnav-demo: error: stopped by {signame}; no partial file was kept"
     ]
