@@ -31,6 +31,7 @@ import numpy as np
 
 from scenarios.records import DetectionRecord, RunResult
 from vnav.methods import CONTRACT_DOMAIN, METHODS, method
+from vnav.uncertainty import nees_band, nees_p_value
 
 __all__ = [
     "KINDS",
@@ -301,6 +302,8 @@ def _shown(kind: CheckKind, check: Check, value: float, run: RunResult) -> str:
     op = "<=" if kind.at_most else ">="
     if kind.unit is Unit.BOUND:
         return _shown_bound(check, value, op, run)
+    if kind.name == "consistent":
+        return _shown_consistent(check, value, op, run)
     return f"{_in_unit(value, kind.unit)} (must be {op} {_in_unit(check.limit, kind.unit)})"
 
 
@@ -327,6 +330,18 @@ def _shown_bound(check: Check, value: float, op: str, run: RunResult) -> str:
     return (
         f"{statistic} {_number(value * scale)}{unit} "
         f"(must be {op} {_number(check.limit * scale)}{unit})"
+    )
+
+
+def _shown_consistent(check: Check, value: float, op: str, run: RunResult) -> str:
+    """A ``consistent`` figure with the mean NEES it comes from and its band."""
+    values, dofs = run.nees(check.method)
+    dof = float(np.mean(dofs))
+    low, high = nees_band(dof, values.size, 1.0 - check.limit)
+    return (
+        f"mean NEES {_number(float(np.mean(values)))} over {values.size} ({_number(dof)} dof; "
+        f"band {_number(low)}-{_number(high)}): p = {_number(value)} "
+        f"(must be {op} {_number(check.limit)})"
     )
 
 
@@ -418,6 +433,20 @@ def _error_bound(run: RunResult, check: Check) -> float | NoData:
         return _no_estimates(run, check.method, contract_only=True)
     ratio = errors / bound.allowed_m(run.ranges_for(check.method, contract_only=True))
     return _max(ratio) if bound.statistic == "max" else _median(ratio)
+
+
+@check_kind("consistent", operator.ge, Unit.FRACTION)
+def _consistent(run: RunResult, check: Check) -> float | NoData:
+    """chi-square probability of ``method``'s mean NEES, two-sided, >= limit (0.05: in the 95% band)
+
+    The normalised estimation error squared of each matched estimate against its covariance
+    (``vnav.uncertainty.nees``); their sum is chi-square with the sum of their degrees of
+    freedom when the covariances are right, and the figure is the probability of a mean at
+    least this far from its expected value (Bar-Shalom, Li & Kirubarajan 2001, sec. 5.4)."""
+    values, dofs = run.nees(check.method)
+    if not values.size:
+        return _no_estimates(run, check.method, contract_only=False)
+    return nees_p_value(float(np.mean(values)), float(np.mean(dofs)), values.size)
 
 
 @check_kind("detection_rate", operator.ge, Unit.FRACTION, uses_method=False)

@@ -3,10 +3,12 @@
 This is where a tick's estimates meet the ground truth; it needs the truth as numbers, not
 the simulator that produced them (``scenarios.runner`` reads them out of MuJoCo)::
 
-    estimate p_w per method   <- vnav.localize.localize(det, camera, T_w_b_est, T_b_c, depth)
+    estimate p_w per method   <- vnav.localize.localize(det, camera, T_w_b_est, T_b_c_est, depth)
+             and its covariance  (with the noise and pose covariances the estimator is told)
     match                     <- each detection's best estimate to the nearest true cone,
                                  on the ground plane (vnav.metrics.match_nearest)
-    compare  error = |p_w - truth|, range, contract domain (vnav.methods.CONTRACT_DOMAIN)
+    compare  error = |p_w - truth|, its NEES against the covariance, range, contract domain
+             (vnav.methods.CONTRACT_DOMAIN)
     latest   the depth_image estimate again with the newest pose received when the image
              arrived (what a pipeline ignoring stamps does), its error and the first-order
              prediction of that error from the body's true motion, |dp| + range |dtheta|
@@ -27,6 +29,8 @@ from vnav.detect import ConeDetection
 from vnav.estimators import estimate_from_depth
 from vnav.localize import ConeEstimates, localize
 from vnav.methods import CONTRACT_DOMAIN
+from vnav.sensor_noise import NOISELESS, SensorNoise
+from vnav.uncertainty import nees
 
 __all__ = ["MATCH_GATE_M", "TickTruth", "evaluate_tick"]
 
@@ -72,6 +76,11 @@ def evaluate_tick(
     T_w_b_est: np.ndarray,
     far_m: float,
     timing: ImageTiming | None = None,
+    *,
+    T_b_c_est: np.ndarray | None = None,
+    noise: SensorNoise = NOISELESS,
+    cov_T_w_b: np.ndarray | None = None,
+    cov_T_b_c: np.ndarray | None = None,
 ) -> TickRecord:
     """Localise every detection with the estimator's pose and compare with the truth.
 
@@ -92,6 +101,13 @@ def evaluate_tick(
         The image's stamps and the newest pose received when it arrived: with it, every
         matched detection also gets the ``depth_image`` estimate made with that pose
         (``DetectionRecord.latest_w``), its error and its predicted error.
+    T_b_c_est : ndarray, shape (4, 4), optional
+        The camera mount the estimator is told (the truth's, ``truth.T_b_c``, by default).
+    noise : SensorNoise
+        The image and depth noise the estimator is told.
+    cov_T_w_b, cov_T_b_c : ndarray, shape (6, 6), optional
+        The covariances the estimator is told for ``T_w_b_est`` and ``T_b_c_est``
+        (``vnav.localize``).
 
     Returns
     -------
@@ -104,8 +120,20 @@ def evaluate_tick(
     locked = bool(so3.gimbal_locked(R_w_b))
     rpy_rad = so3.to_rpy(R_w_b, warn=False)
     in_view = cones_fully_in_view(truth.cones_w, camera, T_w_c, CONTRACT_DOMAIN.min_height_px)
+    T_b_c_est = truth.T_b_c if T_b_c_est is None else T_b_c_est
     estimates = [
-        localize(d, camera, T_w_b_est, truth.T_b_c, depth=depth_m, far_m=far_m) for d in detections
+        localize(
+            d,
+            camera,
+            T_w_b_est,
+            T_b_c_est,
+            depth=depth_m,
+            far_m=far_m,
+            noise=noise,
+            cov_T_w_b=cov_T_w_b,
+            cov_T_b_c=cov_T_b_c,
+        )
+        for d in detections
     ]
     cone_of = _match(estimates, truth.cones_w)
     T_c_w = se3.invert(T_w_c)
@@ -115,7 +143,8 @@ def evaluate_tick(
     ]
     if timing is not None and timing.T_w_b_latest is not None:
         records = [
-            _with_latest(r, timing, T_w_b_est, truth, camera, depth_m, far_m) for r in records
+            _with_latest(r, timing, T_w_b_est, T_b_c_est, truth, camera, depth_m, far_m)
+            for r in records
         ]
     return TickRecord(
         tick=truth.tick,
@@ -137,6 +166,7 @@ def _with_latest(
     record: DetectionRecord,
     timing: ImageTiming,
     T_w_b_est: np.ndarray,
+    T_b_c_est: np.ndarray,
     truth: TickTruth,
     camera: PinholeCamera,
     depth_m: np.ndarray | None,
@@ -157,7 +187,7 @@ def _with_latest(
         p_w = record.estimates_w.get("depth_image")
     else:
         p_w = estimate_from_depth(
-            record.detection, depth_m, camera, T_w_b_latest @ truth.T_b_c, far_m=far_m
+            record.detection, depth_m, camera, T_w_b_latest @ T_b_c_est, far_m=far_m
         )
     if p_w is None:
         return record
@@ -192,13 +222,26 @@ def _compare(
     """One detection's record: its estimates and, if matched, their errors and the range."""
     estimates_w = {m: p for m, p in estimates.items() if p is not None}
     no_estimate = dict(estimates.no_estimate)
+    covariances_w = dict(estimates.cov_w_by_method)
     if cone_index is None:
-        return DetectionRecord(detection, estimates_w, no_estimate=no_estimate)
+        return DetectionRecord(
+            detection, estimates_w, no_estimate=no_estimate, covariances_w=covariances_w
+        )
     p_true_w = cones_w[cone_index]
     p_c_true = se3.apply(T_c_w, p_true_w)
     range_m = float(np.linalg.norm(p_c_true))
     errors_m = {m: float(metrics.position_error(p_true_w, p)[0]) for m, p in estimates_w.items()}
+    nees_by_method = {m: nees(p - p_true_w, covariances_w[m]) for m, p in estimates_w.items()}
     in_contract = cone_index in in_view and CONTRACT_DOMAIN.contains_range(range_m)
     return DetectionRecord(
-        detection, estimates_w, cone_index, errors_m, range_m, p_c_true, in_contract, no_estimate
+        detection,
+        estimates_w,
+        cone_index,
+        errors_m,
+        range_m,
+        p_c_true,
+        in_contract,
+        no_estimate,
+        covariances_w=covariances_w,
+        nees=nees_by_method,
     )

@@ -16,6 +16,8 @@ docs/CONVENTIONS.md; "in F" is the named transform frame an entity is drawn in):
     world/cones/mesh, truth        in world: the cones' MuJoCo geoms; true base centres
     world/cones/estimate/<method>  in world: Points3D per method, every tick
     world/cones/error/<method>     in world: segment from the true cone to each estimate
+    world/cones/uncertainty/<method>  in world: Ellipsoids3D, each checked estimate's
+                                   3-sigma covariance ellipsoid (wireframe)
     world/cones/newest_pose/estimate, error   in world: the depth_image estimate made with the
                                    newest pose at the image's arrival, and its segment from
                                    the true cone (runs with latency only)
@@ -26,6 +28,8 @@ docs/CONVENTIONS.md; "in F" is the named transform frame an entity is drawn in):
     metrics/allowed/<method>       Scalars: the contract's bound at the matched ranges
     metrics/newest_pose/error      Scalars, metres: that estimate's error (latency only)
     metrics/range_m                Scalars, metres
+    metrics/nees/<method>          Scalars: the mean NEES of the tick's matched estimates
+                                   (expected: their degrees of freedom, 3; ground_plane 2)
     attitude/rpy_deg, quat_xyzw    roll/pitch/yaw (deg), sign-continuous quaternion of R_w_b
     attitude/gimbal_lock, quat_sign  StateChange lanes
     coordinates/cone0_<frame>      cone 0 in world, body, camera (truth) and its estimate
@@ -90,7 +94,7 @@ from scenarios.viewer import (
 )
 from vnav import quat, so3
 from vnav.camera import PinholeCamera, depth_to_world_points
-from vnav.methods import METHOD_NAMES, METHODS, method
+from vnav.methods import METHOD_NAMES, METHODS, PREFERENCE, method
 
 if TYPE_CHECKING:
     from sim.mesh import Scenery, TriangleMesh
@@ -391,6 +395,7 @@ class Recording:
         _send_detections(send, rows)
         _send_estimates(send, rows, self._cones_w)
         _send_errors(send, rows)
+        _send_uncertainty(send, rows)
         _send_rays(send, rows, self._camera, self._far_m)
         _send_attitude(send, rows, quats)
         _send_cone0(send, rows, self._cones_w[0])
@@ -532,6 +537,7 @@ def _log_world_contents(rec: rr.RecordingStream, spec: ScenarioSpec, scenery: Sc
     ]
     world_paths += [entity.estimate(m) for m in METHOD_NAMES]
     world_paths += [entity.error_segment(m) for m in METHOD_NAMES]
+    world_paths += [entity.ellipsoid(m) for m in PREFERENCE]
     for path in world_paths:
         _in_frame(rec, path, FRAME.WORLD)
     rec.log(entity.CONES, _mesh(scenery.cones_w), static=True)
@@ -571,6 +577,19 @@ def _log_styles(rec: rr.RecordingStream) -> None:
             rr.LineStrips3D.from_fields(colors=[m.color_rgb], radii=LINE_UI_POINTS),
             static=True,
         )
+        rec.log(
+            entity.nees(m.name),
+            rr.SeriesLines(colors=[m.color_rgb], names=[f"{m.name} NEES"]),
+            static=True,
+        )
+        if m.bound is not None:
+            rec.log(
+                entity.ellipsoid(m.name),
+                rr.Ellipsoids3D.from_fields(
+                    colors=[m.color_rgb], line_radii=LINE_UI_POINTS, fill_mode="MajorWireframe"
+                ),
+                static=True,
+            )
     series = {
         entity.RANGE: ([(200, 200, 200)], ["range"]),
         entity.RPY: (AXIS_COLORS, ["roll", "pitch", "yaw"]),
@@ -792,6 +811,51 @@ def _send_estimates(send: _Sender, rows: list[_Buffered], cones_w: np.ndarray) -
             for r in rows
         ]
         send(entity.error_segment(name), rows, _strips(segments))
+
+
+ELLIPSOID_SIGMA = 3.0
+"""The drawn ellipsoid's half-axes, in standard deviations: 3 sigma holds 97% of a 3-D
+Gaussian's mass."""
+
+
+def ellipsoid_axes(cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``ELLIPSOID_SIGMA``-sigma half-sizes (3,) and the rotation (3, 3) of a covariance's
+    ellipsoid: its eigenvectors as a right-handed frame, the square roots of its eigenvalues
+    along them (a rank-deficient covariance gives a flat ellipsoid)."""
+    eigenvalues, vectors = np.linalg.eigh(cov)
+    if np.linalg.det(vectors) < 0.0:
+        vectors[:, 2] *= -1.0
+    return ELLIPSOID_SIGMA * np.sqrt(np.maximum(eigenvalues, 0.0)), vectors
+
+
+def _send_uncertainty(send: _Sender, rows: list[_Buffered]) -> None:
+    """Per checked method, each estimate's covariance ellipsoid; per method, the mean NEES of
+    the tick's matched estimates (NaN, a gap, where it has none)."""
+    for name in PREFERENCE:
+        per_tick = [
+            [
+                (d.estimates_w[name], *ellipsoid_axes(d.covariances_w[name]))
+                for d in r.record.detections
+                if name in d.covariances_w
+            ]
+            for r in rows
+        ]
+        flat = [e for tick in per_tick for e in tick]
+        send(
+            entity.ellipsoid(name),
+            rows,
+            rr.Ellipsoids3D.columns(
+                centers=np.array([c for c, _, _ in flat]).reshape(-1, 3),
+                half_sizes=np.array([h for _, h, _ in flat]).reshape(-1, 3),
+                quaternions=quat.from_matrix(np.array([R for _, _, R in flat]).reshape(-1, 3, 3)),
+            ).partition([len(t) for t in per_tick]),
+        )
+    for name in METHOD_NAMES:
+        values = []
+        for r in rows:
+            scored = [d.nees[name][0] for d in r.record.detections if name in d.nees]
+            values.append(float(np.mean(scored)) if scored else np.nan)
+        send(entity.nees(name), rows, rr.Scalars.columns(scalars=values))
 
 
 def _send_errors(send: _Sender, rows: list[_Buffered]) -> None:

@@ -56,6 +56,12 @@ class DetectionRecord:
     predicted_latest_error_m : float or None
         The first-order prediction of that error from the body's true motion between the
         exposure and the newest pose's stamp: ``|dp| + range |dtheta|`` (``ImageTiming``).
+    covariances_w : dict of str to ndarray, shape (3, 3)
+        Each estimate's world covariance, m^2 (``vnav.localize``), for the methods in
+        ``estimates_w``.
+    nees : dict of str to tuple of (float, int)
+        Per method with an error: the normalised estimation error squared against the matched
+        cone and its degrees of freedom, the covariance's rank (``vnav.uncertainty.nees``).
     """
 
     detection: ConeDetection
@@ -69,6 +75,8 @@ class DetectionRecord:
     latest_w: np.ndarray | None = None
     latest_error_m: float | None = None
     predicted_latest_error_m: float | None = None
+    covariances_w: dict[str, np.ndarray] = field(default_factory=dict)
+    nees: dict[str, tuple[float, int]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -270,6 +278,13 @@ class RunResult:
         return np.array(
             [d.errors_m[method] for d in self._scored(method, contract_only)], dtype=np.float64
         )
+
+    def nees(self, method: str) -> tuple[np.ndarray, np.ndarray]:
+        """NEES values of ``method`` over matched detections and their degrees of freedom,
+        shapes (K,) and (K,)."""
+        pairs = [d.nees[method] for t in self.ticks for d in t.detections if method in d.nees]
+        a = np.array(pairs, dtype=np.float64).reshape(-1, 2)
+        return a[:, 0], a[:, 1].astype(np.int64)
 
     def latest_pose_errors(self) -> tuple[np.ndarray, np.ndarray]:
         """The latest-pose ``depth_image`` errors and their first-order predictions, metres,

@@ -2,7 +2,8 @@
 
 Statistics follow evo (``vnav.metrics.error_stats``): rmse, mean, median, std, min, max, count,
 all in metres, over all matched detections and per 5 m bin of range (``by_range``).
-Statistics of an empty series are ``null``; ``no_estimate`` counts, per method, the matched
+Statistics of an empty series are ``null``; ``nees`` says whether each method's covariances
+match its errors (``nees_summary``); ``no_estimate`` counts, per method, the matched
 detections it gave no estimate for, by reason (``vnav.estimators.NoEstimate``). Each check
 has an ``outcome``: ``passed``, ``failed``, ``no data`` (nothing to judge, with its
 ``reason``: fails the run) or ``skipped`` (a default check whose method cannot apply to the
@@ -25,8 +26,9 @@ from scenarios.checks import CheckResult
 from scenarios.records import RunResult
 from vnav import metrics
 from vnav.methods import METHOD_NAMES
+from vnav.uncertainty import nees_band
 
-REPORT_VERSION = 4
+REPORT_VERSION = 5
 """2: ``camera_ticks`` (was ``frames``): the word frame means a coordinate frame only;
 ``recording`` names the ``.rrd`` file and its Rerun recording id.
 3: each check has an ``outcome`` (passed, failed, no data, skipped), a ``unit``, the figure
@@ -34,7 +36,10 @@ REPORT_VERSION = 4
 whether no check failed or lacked data (``scenarios.checks.Outcome``).
 4: ``timing`` (the scenario's sensor clocks) and ``pose_lookup``: the ``depth_image`` errors with
 the pose looked up at the exposure stamp and with the newest pose received when the image
-arrived, the latter's first-order prediction, image latencies and the newest pose's lead."""
+arrived, the latter's first-order prediction, image latencies and the newest pose's lead.
+5: per method ``nees``: the normalised estimation error squared of its estimates against their
+covariances (count, mean, mean degrees of freedom, the 95% chi-square band of the mean and
+whether the mean lies in it); ``noise``, the scenario's sensor noise."""
 
 
 def _finite_or_none(value: float) -> float | int | None:
@@ -65,6 +70,7 @@ def build(
             "position_error_m": _stats(run.errors(m)),
             "by_range": _by_range(run, m),
             "no_estimate": _no_estimate(run, m),
+            "nees": nees_summary(run, m),
         }
         for m in METHOD_NAMES
     }
@@ -85,6 +91,7 @@ def build(
         "cones_w": [list(c) for c in spec.scene.cones_w],
         "methods": methods,
         "timing": dataclasses.asdict(spec.timing),
+        "noise": dataclasses.asdict(spec.noise),
         "pose_lookup": pose_lookup(run),
         "checks": [
             {**c.as_dict(), "value": None if c.value is None else _finite_or_none(c.value)}
@@ -92,6 +99,23 @@ def build(
         ],
         "recording": recording,
         "timing_s": {k: round(v, 4) for k, v in run.timing_s.items()},
+    }
+
+
+def nees_summary(run: RunResult, method: str) -> dict[str, Any]:
+    """``method``'s NEES over matched detections: count, mean, mean degrees of freedom, the
+    95% chi-square band of the mean for that count and whether the mean lies in it."""
+    values, dofs = run.nees(method)
+    if not values.size:
+        return {"count": 0, "mean": None, "dof": None, "band": None, "consistent": None}
+    mean, dof = float(np.mean(values)), float(np.mean(dofs))
+    low, high = nees_band(dof, values.size, 0.95)
+    return {
+        "count": int(values.size),
+        "mean": _finite_or_none(mean),
+        "dof": round(dof, 6),
+        "band": [round(low, 6), round(high, 6)],
+        "consistent": bool(low <= mean <= high),
     }
 
 

@@ -4,18 +4,22 @@ One camera tick of ``run_scenario``::
 
     fly      step the physics (or the keyframes) to the tick's time     <- sim.flight
     truth    T_w_b, T_b_c, cones_w                                      <- sim.world.World
-    render   rgb, depth, one pass                                       <- sim.render.Renderer
+    render   rgb, depth, one pass, plus the scenario's image and depth noise
+                                                     <- sim.render.Renderer, sim.noise
     detect   detections                                                 <- vnav.detect
     evaluate estimates per method, matched and compared with the truth  <- scenarios.evaluate
     observe  the tick's record and images go to the observer (the recording, if any)
 
-The estimator is given ``T_w_b_est``: the true pose, plus the scenario's pose noise if any
-(drawn from the run's seed), so a seed fixes the whole run. This module runs MuJoCo but knows
+The estimator is given ``T_w_b_est``: the true pose, plus the scenario's pose noise if any,
+and the camera mount with the scenario's mount error; it is told the noise figures and the
+poses' covariances, and gives each estimate a covariance. Every draw comes from the run's
+seed, so a seed fixes the whole run. This module runs MuJoCo but knows
 nothing of Rerun: whatever is done with each tick is the observer's business.
 """
 
 from __future__ import annotations
 
+import bisect
 import logging
 import math
 import time
@@ -37,12 +41,14 @@ from sim.flight import (
     OrbitTrajectory,
 )
 from sim.mesh import Scenery, scenery
+from sim.noise import mount_error, noisy_depth, noisy_rgb
 from sim.render import Renderer
 from sim.world import World
 from vnav import quat, se3, so3
 from vnav.camera import PinholeCamera
 from vnav.detect import detect_cones
 from vnav.frames import FrameBuffer
+from vnav.sensor_noise import SensorNoise, body_pose_covariance, mount_covariance
 
 __all__ = ["STAGES", "TickObserver", "run_scenario"]
 
@@ -140,6 +146,8 @@ def _run_ticks(
     flow = _Flow(spec, world, result.seed)
     camera_track = _camera_track(spec)
     cones_w = world.cones_w
+    noise = spec.noise
+    far_m = spec.scene.zfar_m
     done = 0
 
     def evaluate(delivered: list[Delivered]) -> None:
@@ -156,6 +164,10 @@ def _run_ticks(
                 d.T_w_b_at_exposure,
                 spec.scene.zfar_m,
                 image_timing,
+                T_b_c_est=flow.mount_error @ image.truth.T_b_c,
+                noise=flow.sensor_noise,
+                cov_T_w_b=flow.pose_covariance(d),
+                cov_T_b_c=flow.cov_T_b_c,
             )
             result.ticks.append(record)
             t1 = time.perf_counter()
@@ -174,14 +186,20 @@ def _run_ticks(
             world.set_camera_position_b(_interpolate(camera_track, world.time_s))
         t1 = time.perf_counter()
         image = renderer.render(depth=True)
+        rgb = noisy_rgb(image.rgb, noise.pixel_std_px, flow.image_rng)
+        depth = image.depth
+        if depth is not None and noise.depth_noisy:
+            depth = noisy_depth(
+                depth, noise.depth_std_m, noise.depth_std_per_m2, far_m, flow.depth_rng
+            )
         t2 = time.perf_counter()
-        detections = detect_cones(image.rgb)
+        detections = detect_cones(rgb)
         t3 = time.perf_counter()
         timing["physics"] += t1 - t0
         timing["render"] += t2 - t1
         timing["detect"] += t3 - t2
         truth = _truth(k, world, flow.driver, cones_w)
-        evaluate(flow.expose(_Image(truth, detections, image.rgb, image.depth)))
+        evaluate(flow.expose(_Image(truth, detections, rgb, depth)))
     evaluate(flow.drain())
     timing["physics"] += flow.physics_s
     timing["streams"] += flow.streams_s
@@ -212,9 +230,20 @@ class _Flow:
         self.driver = _driver(world, spec)
         self.dt = float(world.model.opt.timestep)
         t = spec.timing
-        # Independent streams of randomness: pose noise and arrival jitter.
-        noise_seq, jitter_seq = np.random.SeedSequence(seed).spawn(2)
+        # Independent streams of randomness: pose noise, arrival jitter, image and depth noise,
+        # the mount's error (children 0 and 1 are those of runs before the others existed).
+        noise_seq, jitter_seq, image_seq, depth_seq, mount_seq = np.random.SeedSequence(seed).spawn(
+            5
+        )
         self._noise_rng = np.random.default_rng(noise_seq)
+        self.image_rng = np.random.default_rng(image_seq)
+        self.depth_rng = np.random.default_rng(depth_seq)
+        n = spec.noise
+        self.mount_error = mount_error(
+            n.extrinsic_std_m, n.extrinsic_std_deg, np.random.default_rng(mount_seq)
+        )
+        self.cov_T_b_c = mount_covariance(n.extrinsic_std_m, math.radians(n.extrinsic_std_deg))
+        self.sensor_noise = SensorNoise(n.pixel_std_px, n.depth_std_m, n.depth_std_per_m2)
         self.streams = Streams(
             pose_latency_s=t.pose_latency_s,
             image_latency_s=t.image_latency_s,
@@ -325,6 +354,27 @@ class _Flow:
                 )
             out += self.advance_to(self._next_sample_step())
         return out
+
+    def pose_covariance(self, d: Delivered) -> np.ndarray:
+        """The covariance the estimator is told for ``d.T_w_b_at_exposure``, (6, 6).
+
+        Each sample's noise is independent; the pose interpolated at a fraction ``a`` between
+        two samples carries ``(1 - a) xi_0 + a xi_1`` to first order, so its covariance is the
+        sample's times ``(1 - a)^2 + a^2`` (1 on a sample, 1/2 half-way).
+        """
+        n = self.spec.noise
+        if not n.pose_noisy:
+            return np.zeros((6, 6))
+        t = d.exposure_pose_s
+        j = bisect.bisect_left(self._stamps, t - 1e-9)
+        a = 0.0
+        if j < len(self._stamps) and abs(self._stamps[j] - t) > 1e-9 and j > 0:
+            t0, t1 = self._stamps[j - 1], self._stamps[j]
+            a = (t - t0) / (t1 - t0)
+        factor = (1.0 - a) ** 2 + a * a
+        return factor * body_pose_covariance(
+            d.T_w_b_at_exposure, n.position_std_m, math.radians(n.attitude_std_deg)
+        )
 
     def image_timing(self, d: Delivered) -> ImageTiming:
         """The stamps of a delivered image and the body's true motion since the newest pose."""

@@ -165,7 +165,7 @@ TOP: tuple[Key, ...] = (
     Key("camera", "any", "table: the onboard camera", None),
     Key("cones", "any", "array of tables: the cones", REQUIRED),
     Key("flight", "any", "table: how the drone flies", REQUIRED),
-    Key("noise", "any", "table: error on the pose the estimator is given", None),
+    Key("noise", "any", "table: sensor noise (pose, image, depth, camera mount)", None),
     Key("timing", "any", "table: sensor clocks, rates and latencies", None),
     Key("checks", "any", "array of tables: pass/fail criteria", None),
 )
@@ -222,6 +222,15 @@ FLIGHT_MODES: dict[str, tuple[Key, ...]] = {
 NOISE: tuple[Key, ...] = (
     Key("position_std_m", "number", "error added to the body position, m", 0.0, 0.0, 100.0),
     Key("attitude_std_deg", "number", "error added to the attitude, deg", 0.0, 0.0, 180.0),
+    Key(
+        "pixel_std_px", "number", "noise on each image colour value, 0-255 levels", 0.0, 0.0, 128.0
+    ),
+    Key("depth_std_m", "number", "depth noise: sigma = depth_std_m + ...", 0.0, 0.0, 10.0),
+    Key("depth_std_per_m2", "number", "... + depth_std_per_m2 * z^2, 1/m", 0.0, 0.0, 1.0),
+    Key("extrinsic_std_m", "number", "error on the declared camera mount T_b_c, m", 0.0, 0.0, 1.0),
+    Key(
+        "extrinsic_std_deg", "number", "error on the declared mount's rotation, deg", 0.0, 0.0, 45.0
+    ),
 )
 MAX_LATENCY_S = 5.0
 """Largest latency, clock offset and jitter of ``[timing]``, seconds."""

@@ -119,10 +119,52 @@ class OrbitFlight:
 
 @dataclass(frozen=True)
 class Noise:
-    """Errors added to the body pose the estimator is given (the truth is untouched)."""
+    """Sensor noise: errors on what the estimator is given (the truth is untouched).
+
+    Every draw comes from the run's seed. The estimator is told these figures (as a real
+    one is told its sensors' data sheets) and propagates them into each estimate's covariance.
+
+    Attributes
+    ----------
+    position_std_m : float
+        Per pose sample, a Gaussian error on the body position, each world axis, metres.
+    attitude_std_deg : float
+        Per pose sample, a Gaussian rotation vector in the body frame, each axis, degrees
+        (``R_w_b @ exp(dtheta_b)``).
+    pixel_std_px : float
+        Gaussian noise added to each colour value of each rendered image, in 8-bit levels
+        (0-255), clipped to that range.
+    depth_std_m, depth_std_per_m2 : float
+        Gaussian noise on each depth pixel, ``sigma = depth_std_m + depth_std_per_m2 * z**2``
+        (stereo-like growth with range).
+    extrinsic_std_m, extrinsic_std_deg : float
+        One draw per run: the camera mount given to the estimator is
+        ``exp([rho, phi]^) @ T_b_c`` (a left perturbation, docs/CONVENTIONS.md "Uncertainty"),
+        each component of ``rho`` (metres) and ``phi`` (degrees here) Gaussian.
+    """
 
     position_std_m: float = 0.0
     attitude_std_deg: float = 0.0
+    pixel_std_px: float = 0.0
+    depth_std_m: float = 0.0
+    depth_std_per_m2: float = 0.0
+    extrinsic_std_m: float = 0.0
+    extrinsic_std_deg: float = 0.0
+
+    @property
+    def pose_noisy(self) -> bool:
+        """Whether the pose stream carries noise."""
+        return self.position_std_m > 0.0 or self.attitude_std_deg > 0.0
+
+    @property
+    def depth_noisy(self) -> bool:
+        """Whether the depth image carries noise."""
+        return self.depth_std_m > 0.0 or self.depth_std_per_m2 > 0.0
+
+    @property
+    def extrinsic_noisy(self) -> bool:
+        """Whether the declared camera mount is off."""
+        return self.extrinsic_std_m > 0.0 or self.extrinsic_std_deg > 0.0
 
 
 @dataclass(frozen=True)

@@ -69,6 +69,14 @@ def _error_segment(method: str) -> str:
     return f"world/cones/error/{method}"
 
 
+def _ellipsoid(method: str) -> str:
+    return f"world/cones/uncertainty/{method}"
+
+
+def _nees(method: str) -> str:
+    return f"metrics/nees/{method}"
+
+
 def _cone0(frame_name: str) -> str:
     return f"coordinates/cone0_{frame_name}"
 
@@ -109,6 +117,8 @@ entity = SimpleNamespace(
     allowed=_allowed,
     estimate=_estimate,
     error_segment=_error_segment,
+    ellipsoid=_ellipsoid,
+    nees=_nees,
     cone0=_cone0,
     stream=_stream,
 )
@@ -405,6 +415,16 @@ def _lower_tabs(view: str, error_top_m: dict[str, float | None], latency: bool) 
         *[tabs[name] for name in VIEW_NAMES],
         *extra,
         rrb.Spatial2DView(name="error against range", origin=entity.ERROR_VS_RANGE),
+        rrb.Vertical(
+            *[
+                _series(
+                    f"{name} NEES (expected {2 if name == 'ground_plane' else 3}: its dof)",
+                    [entity.nees(name)],
+                )
+                for name in PREFERENCE
+            ],
+            name="NEES",
+        ),
         rrb.Vertical(
             _series("naive error (m)", [entity.error("naive")], _from_zero(error_top_m, "naive")),
             _series(

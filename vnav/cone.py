@@ -101,6 +101,18 @@ class ConeModel:
         """
         return 0.5 * self.base_width_m * 4.0 / math.pi * math.log(1.0 + math.sqrt(2.0))
 
+    @property
+    def base_axis_distance_std_m(self) -> float:
+        """Standard deviation of that distance over the unknown yaw, metres.
+
+        ``E[(a / cos psi)^2] = a^2 (4 / pi) tan(pi / 4) = 4 a^2 / pi``, so the variance is
+        ``4 a^2 / pi - base_axis_distance_m^2`` (0.117 a = 2.2 cm for the standard cone): the
+        along-bearing uncertainty every estimate that steps from the plate's edge to its
+        centre carries (``vnav.covariance``).
+        """
+        a = 0.5 * self.base_width_m
+        return math.sqrt(max(4.0 * a * a / math.pi - self.base_axis_distance_m**2, 0.0))
+
 
 TRAFFIC_CONE = ConeModel()
 """A 0.70 m road cone on a 0.38 m square base, the size of a common 28-inch cone."""

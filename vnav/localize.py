@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from vnav import se3
+from vnav import covariance, se3
 from vnav.camera import PinholeCamera, check_depth_image
 from vnav.cone import TRAFFIC_CONE, ConeModel
 from vnav.detect import ConeDetection, check_detection
@@ -25,7 +25,12 @@ from vnav.estimators import (
     naive,
 )
 from vnav.methods import METHOD_NAMES, PREFERENCE
+from vnav.sensor_noise import NOISELESS, SensorNoise
 from vnav.silhouette import SilhouetteView
+from vnav.uncertainty import compose
+
+_ZERO_6 = np.zeros((6, 6))
+_ZERO_6.flags.writeable = False
 
 __all__ = ["ConeEstimates", "localize"]
 
@@ -45,15 +50,20 @@ class ConeEstimates(Mapping[str, "np.ndarray | None"]):
     no_estimate : mapping of str to NoEstimate, optional
         Why a method gave no estimate (``vnav.estimators.NoEstimate``), for methods whose
         estimate is None; ``localize`` gives one for each.
+    cov_w_by_method : mapping of str to ndarray, shape (3, 3), optional
+        The covariance of each estimate in the world frame, m^2 (``vnav.covariance``);
+        ``localize`` gives one for every estimate.
 
     Raises
     ------
     ValueError
-        On a name that is not a method, or a reason given beside an estimate.
+        On a name that is not a method, a reason given beside an estimate, or a covariance
+        given for a method without an estimate.
     """
 
     p_w_by_method: Mapping[str, np.ndarray | None]
     no_estimate: Mapping[str, NoEstimate] = field(default_factory=dict)
+    cov_w_by_method: Mapping[str, np.ndarray] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         unknown = sorted((set(self.p_w_by_method) | set(self.no_estimate)) - set(METHOD_NAMES))
@@ -66,6 +76,10 @@ class ConeEstimates(Mapping[str, "np.ndarray | None"]):
         if both:
             raise ValueError(f"no_estimate gives a reason for methods with an estimate: {both}")
         object.__setattr__(self, "no_estimate", dict(self.no_estimate))
+        stray = [m for m in self.cov_w_by_method if self.p_w_by_method.get(m) is None]
+        if stray:
+            raise ValueError(f"cov_w_by_method gives a covariance for methods without one: {stray}")
+        object.__setattr__(self, "cov_w_by_method", dict(self.cov_w_by_method))
 
     def __getitem__(self, name: str) -> np.ndarray | None:
         return self.p_w_by_method[name]
@@ -85,6 +99,12 @@ class ConeEstimates(Mapping[str, "np.ndarray | None"]):
         """``{method name: p_w or None}`` in the order of ``METHOD_NAMES``."""
         return dict(self.p_w_by_method)
 
+    def covariance(self, name: str) -> np.ndarray | None:
+        """The 3x3 world covariance of method ``name``'s estimate, m^2, or None without one."""
+        if name not in METHOD_NAMES:
+            raise ValueError(f"unknown method {name!r}; valid: {list(METHOD_NAMES)}")
+        return self.cov_w_by_method.get(name)
+
     @property
     def best(self) -> np.ndarray | None:
         """The first available estimate in ``vnav.methods.PREFERENCE`` order, or None."""
@@ -103,6 +123,10 @@ def localize(
     depth: np.ndarray | None = None,
     cone: ConeModel = TRAFFIC_CONE,
     far_m: float = np.inf,
+    *,
+    noise: SensorNoise = NOISELESS,
+    cov_T_w_b: np.ndarray | None = None,
+    cov_T_b_c: np.ndarray | None = None,
 ) -> ConeEstimates:
     """Every estimate of one detected cone's base centre in the world frame.
 
@@ -120,6 +144,11 @@ def localize(
     cone : ConeModel
     far_m : float
         Depth at or beyond which a pixel has no return.
+    noise : SensorNoise
+        The image and depth noise (``vnav.sensor_noise``); default none.
+    cov_T_w_b, cov_T_b_c : ndarray, shape (6, 6), optional
+        Left-perturbation covariances of the body pose and of the camera mount
+        (docs/CONVENTIONS.md, "Uncertainty"); default zero (known exactly).
 
     Returns
     -------
@@ -130,7 +159,9 @@ def localize(
         the cone may be outside the image (apex or base missing, the depth-image axis fit
         unconstrained), and no estimate is better than a wrong one. Inputs are still validated
         first. The naive estimate is built from the best one (``ConeEstimates.best``) in camera
-        coordinates.
+        coordinates. Every estimate comes with its covariance (``cov_w_by_method``): the
+        camera pose's (``cov_T_w_b`` and ``cov_T_b_c`` composed), the keypoints' and the
+        depth's, first order (``vnav.covariance``).
 
     Raises
     ------
@@ -157,10 +188,27 @@ def localize(
     }
     no_estimate = {m: r for m, r in found.items() if isinstance(r, NoEstimate)}
     p_w_by_method = {m: p for m, p in found.items() if m not in no_estimate}
-    best = _best(p_w_by_method)
-    if best is not None:
-        p_c = np.array(view.camera_coordinates(best))
-        p_w_by_method["naive"] = naive(p_c, T_w_b[:3, 3])
-    else:
+    if not p_w_by_method:
         no_estimate["naive"] = NoEstimate.NO_OTHER_ESTIMATE
-    return ConeEstimates(p_w_by_method, no_estimate)
+        return ConeEstimates({}, no_estimate)
+    cov_T_w_b = _ZERO_6 if cov_T_w_b is None else cov_T_w_b
+    _, cov_T_w_c = compose(T_w_b, cov_T_w_b, T_b_c, _ZERO_6 if cov_T_b_c is None else cov_T_b_c)
+    cov_w: dict[str, np.ndarray] = {}
+    if "depth_image" in p_w_by_method:
+        cov_w["depth_image"] = covariance.depth_image_cov(
+            T_w_c, cov_T_w_c, p_w_by_method["depth_image"], detection.area_px // 2, noise
+        )
+    if "ground_plane" in p_w_by_method:
+        cov_w["ground_plane"] = covariance.ground_plane_cov(
+            view, camera, T_w_c, cov_T_w_c, p_w_by_method["ground_plane"], noise, cone
+        )
+    if "known_height" in p_w_by_method:
+        cov_w["known_height"] = covariance.known_height_cov(
+            view, camera, T_w_c, cov_T_w_c, p_w_by_method["known_height"], noise, cone
+        )
+    best_method = next(m for m in PREFERENCE if m in p_w_by_method)
+    best = p_w_by_method[best_method]
+    p_c = np.array(view.camera_coordinates(best))
+    p_w_by_method["naive"] = naive(p_c, T_w_b[:3, 3])
+    cov_w["naive"] = covariance.naive_cov(T_w_b, cov_T_w_b, T_w_c[:3, :3].T, cov_w[best_method])
+    return ConeEstimates(p_w_by_method, no_estimate, cov_w)

@@ -1,0 +1,163 @@
+"""What the estimator knows about its sensors' noise: the figures it propagates into each
+estimate's covariance (``vnav.localize``).
+
+A real estimator is told its sensors' data sheets; here they are the scenario's ``[noise]``
+table. Three kinds of figure:
+
+- **the image**: Gaussian noise on each 8-bit colour value, and how far the detector's
+  keypoints (the apex and the bottom pixel of a cone's silhouette) then lie from the true
+  projections, ``keypoint_cov``. Both keypoints are measured from the silhouette, so they
+  carry its quantisation even without noise; the figures are measured against the
+  simulator's truth (``KEYPOINT_STD_PX``, and ``tests/test_sensor_noise.py`` checks them on
+  fresh renders).
+- **the depth image**: Gaussian per pixel, ``sigma = depth_std_m + depth_std_per_m2 * z**2``.
+- **the poses**: the body pose stream and the declared camera mount, as 6x6 covariances of a
+  left perturbation ``xi = [rho, phi]`` (docs/CONVENTIONS.md, "Uncertainty"):
+  ``body_pose_covariance``, ``mount_covariance``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from vnav.uncertainty import adjoint
+
+__all__ = [
+    "KEYPOINT_STD_PX",
+    "MAX_CALIBRATED_PIXEL_STD",
+    "SensorNoise",
+    "body_pose_covariance",
+    "keypoint_cov",
+    "keypoint_std_px",
+    "mount_covariance",
+]
+
+KEYPOINT_STD_PX: dict[str, tuple[tuple[float, float, float], ...]] = {
+    # image noise std (levels), along the image vertical (px), across it (px)
+    "apex": ((0.0, 0.40, 0.14), (8.0, 0.40, 0.14), (10.0, 0.52, 0.16), (12.0, 0.82, 0.22)),
+    "bottom": ((0.0, 0.28, 0.14), (8.0, 0.28, 0.14), (10.0, 0.28, 0.16), (12.0, 0.36, 0.22)),
+}
+"""Standard deviation of each keypoint's error from the true projection, pixels, along and
+across the image of the vertical at the cone, against the image noise.
+
+Measured on 150 random views per noise level (range 3-20 m, 1.5-8 m high, any bearing) with
+the default detector thresholds: the apex (``vnav.silhouette.apex_pixel``) against the
+projection of the true apex, the bottom pixel (``SilhouetteView.bottom``) against the
+projection of the plate's true bottom edge in the plane of the camera and the cone's axis.
+Without noise the error is the silhouette's quantisation; noise up to about 8 levels flips no
+pixel across the detector's colour thresholds and changes nothing; beyond it the thin tip
+loses pixels first. Between the rows the figures are interpolated linearly."""
+
+MAX_CALIBRATED_PIXEL_STD = 12.0
+"""The highest image noise (8-bit levels) at which the keypoint figures were measured; at 15
+levels the default detector already splits or loses most cones."""
+
+
+def keypoint_std_px(kind: str, pixel_std: float) -> tuple[float, float]:
+    """``(along, across)`` standard deviations of a keypoint, pixels (``KEYPOINT_STD_PX``).
+
+    Parameters
+    ----------
+    kind : {"apex", "bottom"}
+    pixel_std : float
+        Image noise, 8-bit levels, >= 0; beyond ``MAX_CALIBRATED_PIXEL_STD`` the last row's
+        figures are scaled by ``pixel_std / MAX_CALIBRATED_PIXEL_STD`` (an extrapolation:
+        nothing was measured there).
+
+    Raises
+    ------
+    ValueError
+        For an unknown kind or a negative or non-finite noise.
+    """
+    if kind not in KEYPOINT_STD_PX:
+        raise ValueError(f"keypoint kind must be one of {sorted(KEYPOINT_STD_PX)}, got {kind!r}")
+    if not (math.isfinite(pixel_std) and pixel_std >= 0.0):
+        raise ValueError(f"pixel_std must be a finite number >= 0, got {pixel_std!r}")
+    rows = KEYPOINT_STD_PX[kind]
+    levels = [r[0] for r in rows]
+    if pixel_std > levels[-1]:
+        scale = pixel_std / levels[-1]
+        return rows[-1][1] * scale, rows[-1][2] * scale
+    along = float(np.interp(pixel_std, levels, [r[1] for r in rows]))
+    across = float(np.interp(pixel_std, levels, [r[2] for r in rows]))
+    return along, across
+
+
+def keypoint_cov(kind: str, pixel_std: float, down_uv: np.ndarray) -> np.ndarray:
+    """Covariance of a keypoint, px^2, (2, 2): ``keypoint_std_px`` along and across
+    ``down_uv``, the image of the downward vertical at the cone (any length, not zero)."""
+    along, across = keypoint_std_px(kind, pixel_std)
+    du, dv = float(down_uv[0]), float(down_uv[1])
+    norm = math.hypot(du, dv)
+    if not norm > 0.0:
+        raise ValueError("down_uv must be a non-zero image direction")
+    du, dv = du / norm, dv / norm
+    a2, c2 = along * along, across * across
+    # a2 d d^T + c2 p p^T with p = (-dv, du).
+    return np.array(
+        [
+            [a2 * du * du + c2 * dv * dv, (a2 - c2) * du * dv],
+            [(a2 - c2) * du * dv, a2 * dv * dv + c2 * du * du],
+        ]
+    )
+
+
+@dataclass(frozen=True)
+class SensorNoise:
+    """The image and depth noise the estimator is told about.
+
+    Attributes
+    ----------
+    pixel_std : float
+        Gaussian noise on each 8-bit colour value of the image, levels.
+    depth_std_m : float
+        Depth noise at zero range, metres.
+    depth_std_per_m2 : float
+        Its growth with the square of the depth, 1/m.
+    """
+
+    pixel_std: float = 0.0
+    depth_std_m: float = 0.0
+    depth_std_per_m2: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("pixel_std", "depth_std_m", "depth_std_per_m2"):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0.0):
+                raise ValueError(f"SensorNoise.{name} must be a finite number >= 0, got {value!r}")
+
+    def depth_std_at(self, z_m: float | np.ndarray) -> float | np.ndarray:
+        """Depth noise at planar depth ``z_m``, metres (same shape)."""
+        return self.depth_std_m + self.depth_std_per_m2 * z_m * z_m
+
+
+NOISELESS = SensorNoise()
+
+
+def body_pose_covariance(
+    T_w_b: np.ndarray, position_std_m: float, attitude_std_rad: float
+) -> np.ndarray:
+    """The 6x6 left-perturbation covariance of a body pose with position and attitude noise.
+
+    The noisy pose is ``(R_w_b exp(dtheta_b), t_w_b + dp_w)`` with ``dp_w ~ N(0, s_p^2 I)``
+    and ``dtheta_b ~ N(0, s_a^2 I)``: to first order the right perturbation
+    ``T exp(eta^)``, ``eta = [R^T dp_w, dtheta_b]`` with covariance ``diag(s_p^2 I, s_a^2 I)``
+    (a rotated isotropic covariance stays isotropic), and ``xi = Ad(T) eta`` (Barfoot &
+    Furgale 2014, eq. 12).
+
+    Returns
+    -------
+    ndarray, shape (6, 6)
+    """
+    eta = np.diag([position_std_m**2] * 3 + [attitude_std_rad**2] * 3)
+    Ad = adjoint(T_w_b)
+    return Ad @ eta @ Ad.T
+
+
+def mount_covariance(std_m: float, std_rad: float) -> np.ndarray:
+    """The 6x6 covariance of the declared camera mount: ``diag(s_m^2 I, s_r^2 I)``, the
+    left perturbation ``sim.noise.noisy_mount`` draws."""
+    return np.diag([std_m**2] * 3 + [std_rad**2] * 3)
