@@ -6,6 +6,7 @@ import dataclasses
 import math
 import operator
 import re
+from statistics import NormalDist
 
 import numpy as np
 import pytest
@@ -30,7 +31,15 @@ def test_every_registered_check_kind_is_accepted_by_the_parser_and_documented(ki
 
 
 def _detection(
-    cone_index, errors_m, range_m, in_contract, p_w, p_c_true, no_estimate=None, latest=None
+    cone_index,
+    errors_m,
+    range_m,
+    in_contract,
+    p_w,
+    p_c_true,
+    no_estimate=None,
+    latest=None,
+    nees=None,
 ):
     mask = np.ones((2, 2), dtype=bool)
     blob = ConeDetection(
@@ -56,6 +65,7 @@ def _detection(
         # (latest-pose error, its prediction), metres
         latest_error_m=None if latest is None else latest[0],
         predicted_latest_error_m=None if latest is None else latest[1],
+        nees=nees or {},
     )
 
 
@@ -113,6 +123,7 @@ def run() -> RunResult:
                         {"depth_image": [1.02, 0.0, 0.0], "naive": [6.0, 0.0, 0.0]},
                         [0.0, 1.0, 5.0],
                         latest=(0.27, 0.3),
+                        nees={"depth_image": (2.0, 3)},
                     ),
                     _detection(
                         1,
@@ -122,6 +133,7 @@ def run() -> RunResult:
                         {"depth_image": [3.0, 3.0, 0.0]},
                         [2.0, 0.0, 30.0],
                         latest=(0.5, 0.0),  # no motion: not judged
+                        nees={"depth_image": (4.0, 3)},
                     ),
                 ],
                 gimbal_locked=True,
@@ -146,6 +158,10 @@ FIGURES = {
     "matched_cones": 2.0,
     # |0.12 / 0.1 - 1| = 0.2 and |0.27 / 0.3 - 1| = 0.1; the third had no motion
     "latency_prediction": 0.15,
+    # NEES 2 and 4 of 3 dof each: mean 3, sum 6 of chi-square(6). Wilson-Hilferty: the cube
+    # root of 6 / 6 is 1, its mean 1 - 2/54, its sd sqrt(2/54), so z = sqrt(2/54) and the
+    # two-sided probability 2 (1 - Phi(z)) (SciPy's exact figure, 0.847, in test_uncertainty).
+    "consistent": 2.0 * (1.0 - NormalDist().cdf(math.sqrt(2.0 / 54.0))),
 }
 
 

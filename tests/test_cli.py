@@ -400,7 +400,7 @@ def test_disk_full_on_a_small_filesystem_exits_3_and_keeps_the_previous_pair(tmp
     try:
         mounted = (
             subprocess.run(
-                ["mount", "-t", "tmpfs", "-o", "size=600k", "tmpfs", str(out)], capture_output=True
+                ["mount", "-t", "tmpfs", "-o", "size=1000k", "tmpfs", str(out)], capture_output=True
             ).returncode
             == 0
         )
@@ -412,7 +412,7 @@ def test_disk_full_on_a_small_filesystem_exits_3_and_keeps_the_previous_pair(tmp
             "test_injected_short_recording covers the same path"
         )
     try:
-        before = _first_pair(out)  # about 250 KB: fits once, not twice
+        before = _first_pair(out)  # about 650 KB: fits once, not twice
         status = main(["run", "frame-problem", "--out", str(out), "--quiet", "--seed", "2"])
         err = capsys.readouterr().err
         assert status == 3

@@ -318,6 +318,8 @@ def test_rays_pass_from_the_camera_through_each_detection(recorded):
         if not len(strips):
             continue
         world = _world_at(spec, f)
+        # The rays are the estimator's: from the camera where its (noisy) pose puts it.
+        world.set_pose(f.T_w_b_est)
         T_w_c = mujoco_T_w_c(world)
         fy = (H / 2) / np.tan(np.radians(world.model.cam_fovy[world.camera_id]) / 2)
         assert np.allclose(strips[:, 0], T_w_c[:3, 3], atol=FLOAT32_ATOL_M)
