@@ -17,6 +17,7 @@ the simulator that produced them (``scenarios.runner`` reads them out of MuJoCo)
 from __future__ import annotations
 
 import dataclasses
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -121,20 +122,18 @@ def evaluate_tick(
     rpy_rad = so3.to_rpy(R_w_b, warn=False)
     in_view = cones_fully_in_view(truth.cones_w, camera, T_w_c, CONTRACT_DOMAIN.min_height_px)
     T_b_c_est = truth.T_b_c if T_b_c_est is None else T_b_c_est
-    estimates = [
-        localize(
-            d,
-            camera,
-            T_w_b_est,
-            T_b_c_est,
-            depth=depth_m,
-            far_m=far_m,
-            noise=noise,
-            cov_T_w_b=cov_T_w_b,
-            cov_T_b_c=cov_T_b_c,
-        )
-        for d in detections
-    ]
+    estimate = functools.partial(
+        localize,
+        camera=camera,
+        T_w_b=T_w_b_est,
+        T_b_c=T_b_c_est,
+        depth=depth_m,
+        far_m=far_m,
+        noise=noise,
+        cov_T_w_b=cov_T_w_b,
+        cov_T_b_c=cov_T_b_c,
+    )
+    estimates = [estimate(d) for d in detections]
     cone_of = _match(estimates, truth.cones_w)
     T_c_w = se3.invert(T_w_c)
     records = [

@@ -146,8 +146,6 @@ def _run_ticks(
     flow = _Flow(spec, world, result.seed)
     camera_track = _camera_track(spec)
     cones_w = world.cones_w
-    noise = spec.noise
-    far_m = spec.scene.zfar_m
     done = 0
 
     def evaluate(delivered: list[Delivered]) -> None:
@@ -185,13 +183,7 @@ def _run_ticks(
         if camera_track:
             world.set_camera_position_b(_interpolate(camera_track, world.time_s))
         t1 = time.perf_counter()
-        image = renderer.render(depth=True)
-        rgb = noisy_rgb(image.rgb, noise.pixel_std_px, flow.image_rng)
-        depth = image.depth
-        if depth is not None and noise.depth_noisy:
-            depth = noisy_depth(
-                depth, noise.depth_std_m, noise.depth_std_per_m2, far_m, flow.depth_rng
-            )
+        rgb, depth = flow.render(renderer)
         t2 = time.perf_counter()
         detections = detect_cones(rgb)
         t3 = time.perf_counter()
@@ -354,6 +346,18 @@ class _Flow:
                 )
             out += self.advance_to(self._next_sample_step())
         return out
+
+    def render(self, renderer: Renderer) -> tuple[np.ndarray, np.ndarray | None]:
+        """The camera's image and depth now, with the scenario's image and depth noise."""
+        n = self.spec.noise
+        image = renderer.render(depth=True)
+        rgb = noisy_rgb(image.rgb, n.pixel_std_px, self.image_rng)
+        depth = image.depth
+        if depth is not None and n.depth_noisy:
+            depth = noisy_depth(
+                depth, n.depth_std_m, n.depth_std_per_m2, self.spec.scene.zfar_m, self.depth_rng
+            )
+        return rgb, depth
 
     def pose_covariance(self, d: Delivered) -> np.ndarray:
         """The covariance the estimator is told for ``d.T_w_b_at_exposure``, (6, 6).

@@ -362,6 +362,21 @@ def _from_zero(tops: dict[str, float | None], key: str) -> tuple[float, float] |
     return (0.0, top) if top is not None else None
 
 
+def _nees_tab() -> rrb.Vertical:
+    """Each checked method's NEES per tick, against its expected value (its degrees of
+    freedom: 3, or 2 for ground_plane, whose estimates lie on z = 0 by construction)."""
+    return rrb.Vertical(
+        *[
+            _series(
+                f"{name} NEES (expected {2 if name == 'ground_plane' else 3}: its dof)",
+                [entity.nees(name)],
+            )
+            for name in PREFERENCE
+        ],
+        name="NEES",
+    )
+
+
 def _lower_tabs(view: str, error_top_m: dict[str, float | None], latency: bool) -> rrb.Tabs:
     """The tabs below the images: ``VIEWS`` first (in order), then the other plots.
 
@@ -415,16 +430,7 @@ def _lower_tabs(view: str, error_top_m: dict[str, float | None], latency: bool) 
         *[tabs[name] for name in VIEW_NAMES],
         *extra,
         rrb.Spatial2DView(name="error against range", origin=entity.ERROR_VS_RANGE),
-        rrb.Vertical(
-            *[
-                _series(
-                    f"{name} NEES (expected {2 if name == 'ground_plane' else 3}: its dof)",
-                    [entity.nees(name)],
-                )
-                for name in PREFERENCE
-            ],
-            name="NEES",
-        ),
+        _nees_tab(),
         rrb.Vertical(
             _series("naive error (m)", [entity.error("naive")], _from_zero(error_top_m, "naive")),
             _series(

@@ -25,13 +25,12 @@ import math
 
 import numpy as np
 
-from vnav import so3
 from vnav.camera import PinholeCamera
 from vnav.cone import ConeModel
 from vnav.estimators import NoEstimate, _known_height, _solve_known_height
 from vnav.sensor_noise import SensorNoise, keypoint_cov
 from vnav.silhouette import SilhouetteView, triangle_fraction
-from vnav.uncertainty import point_from_ground, transform_point
+from vnav.uncertainty import point_from_ground, se3_exp, transform_point
 
 __all__ = [
     "DEPTH_FIT_FLOOR",
@@ -112,33 +111,6 @@ def ground_plane_cov(
     return cov + _plate_cov(p_w, view.t, cone)
 
 
-def _known_height_point(
-    R: np.ndarray,
-    t: np.ndarray,
-    camera: PinholeCamera,
-    apex_uv: tuple[float, float],
-    bottom_uv: tuple[float, float],
-    cone: ConeModel,
-) -> np.ndarray:
-    """``estimators._known_height``'s solve for given keypoints and camera pose, (3,)."""
-
-    def ray(u: float, v: float) -> tuple[float, float, float]:
-        d_c = np.array([(u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy, 1.0])
-        d_w = R @ (d_c / np.linalg.norm(d_c))
-        return float(d_w[0]), float(d_w[1]), float(d_w[2])
-
-    solution = _solve_known_height(
-        (float(t[0]), float(t[1]), float(t[2])),
-        ray(*apex_uv),
-        ray(*bottom_uv),
-        cone.height_m,
-        cone.base_axis_distance_m,
-    )
-    if solution is None:
-        return np.full(3, np.nan)
-    return np.array(solution[0])
-
-
 def _rotated_estimate(
     view: SilhouetteView,
     camera: PinholeCamera,
@@ -149,10 +121,7 @@ def _rotated_estimate(
     """``known_height``'s whole estimate with the camera pose turned by ``exp(phi^)`` (a left
     perturbation): the keypoints move too, since the apex fit and the bottom pixel follow
     the image of the vertical, which the attitude sets."""
-    T = T_w_c.copy()
-    C = so3.exp(phi)
-    T[:3, :3] = C @ T_w_c[:3, :3]
-    T[:3, 3] = C @ T_w_c[:3, 3]
+    T = se3_exp(np.concatenate([np.zeros(3), phi])) @ T_w_c
     p = _known_height(SilhouetteView(view.detection, camera, T), cone)
     return np.full(3, np.nan) if isinstance(p, NoEstimate) else p
 
@@ -180,19 +149,20 @@ def known_height_cov(
     apex = view.apex(d, triangle_fraction(elevation, cone))
     assert apex is not None
     bottom = view.axis_exit(d, apex)
-    R, t = T_w_c[:3, :3], T_w_c[:3, 3]
-    au, av, bu, bv = float(apex[0]), float(apex[1]), float(bottom[0]), float(bottom[1])
+    H, s = cone.height_m, cone.base_axis_distance_m
 
-    def at(px: tuple[float, float, float, float], R_: np.ndarray, t_: np.ndarray) -> np.ndarray:
-        return _known_height_point(R_, t_, camera, (px[0], px[1]), (px[2], px[3]), cone)
+    def at(px: list[float]) -> np.ndarray:
+        """The same solve as ``estimators._known_height`` for moved keypoints."""
+        solution = _solve_known_height(view.t, view.ray(px[0], px[1]), view.ray(px[2], px[3]), H, s)
+        return np.full(3, np.nan) if solution is None else np.array(solution[0])
 
-    base = (au, av, bu, bv)
+    base = [float(apex[0]), float(apex[1]), float(bottom[0]), float(bottom[1])]
     J_px = np.empty((3, 4))
     for i in range(4):
         hi, lo = list(base), list(base)
         hi[i] += _PX_STEP
         lo[i] -= _PX_STEP
-        J_px[:, i] = (at(tuple(hi), R, t) - at(tuple(lo), R, t)) / (2.0 * _PX_STEP)
+        J_px[:, i] = (at(hi) - at(lo)) / (2.0 * _PX_STEP)
     J_xi = np.empty((3, 6))
     J_xi[:, :3] = np.eye(3)
     for i in range(3):
@@ -261,6 +231,6 @@ def naive_cov(
     """Covariance of the naive estimate ``t_w_b + p_c``, (3, 3), m^2: the body position's
     (``[I, -t^]`` of the left perturbation) plus the best estimate's, turned into camera
     axes. Reported for completeness: the naive estimate's error is its mistake, not noise."""
-    t = T_w_b[:3, 3]
-    G = np.hstack([np.eye(3), -so3.skew(t)])
-    return G @ cov_T_w_b @ G.T + R_c_w @ cov_best_w @ R_c_w.T
+    # The body origin's covariance: p_b = 0 through the body pose.
+    _, cov_t_w_b = transform_point(T_w_b, cov_T_w_b, np.zeros(3), np.zeros((3, 3)))
+    return cov_t_w_b + R_c_w @ cov_best_w @ R_c_w.T

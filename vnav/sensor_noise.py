@@ -28,6 +28,7 @@ from vnav.uncertainty import adjoint
 __all__ = [
     "KEYPOINT_STD_PX",
     "MAX_CALIBRATED_PIXEL_STD",
+    "NOISELESS",
     "SensorNoise",
     "body_pose_covariance",
     "keypoint_cov",
@@ -135,6 +136,7 @@ class SensorNoise:
 
 
 NOISELESS = SensorNoise()
+"""No image or depth noise: ``localize``'s default."""
 
 
 def body_pose_covariance(
@@ -159,5 +161,5 @@ def body_pose_covariance(
 
 def mount_covariance(std_m: float, std_rad: float) -> np.ndarray:
     """The 6x6 covariance of the declared camera mount: ``diag(s_m^2 I, s_r^2 I)``, the
-    left perturbation ``sim.noise.noisy_mount`` draws."""
+    left perturbation ``sim.noise.mount_error`` draws."""
     return np.diag([std_m**2] * 3 + [std_rad**2] * 3)
