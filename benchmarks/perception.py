@@ -2,6 +2,10 @@
 
 Uses a 640x480 image rendered by the simulator (one cone 8 m ahead, the default camera); the
 figures are the median and the best of ``--repeat`` timed calls, in milliseconds.
+``localize`` runs with the built-in ``uncertainty`` scenario's noise (pose stream, image and
+depth), every estimate with its covariance; ``localize_points`` is the same call with
+``with_covariance=False``. The two are timed interleaved, call by call, so that the ratio
+``covariance_overhead`` (target at most 1.3) compares like with like on a busy machine.
 """
 
 from __future__ import annotations
@@ -13,21 +17,38 @@ from collections.abc import Callable
 
 import numpy as np
 
-TARGETS_MS = {"detect_cones": 3.0, "localize": None, "depth_to_world_points": 10.0}
+from vnav.sensor_noise import SensorNoise
+
+TARGETS_MS = {
+    "detect_cones": 3.0,
+    "localize": None,
+    "localize_points": None,
+    "depth_to_world_points": 10.0,
+}
+COVARIANCE_OVERHEAD_TARGET = 1.3
+"""``localize`` with covariances over ``localize`` without, median time: at most this."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--repeat", type=int, default=200, help="timed calls per figure")
+    parser.add_argument("--repeat", type=int, default=1000, help="timed calls per figure")
 
 
 def _time_ms(fn: Callable[[], object], repeat: int) -> tuple[float, float]:
-    fn()  # warm-up
-    samples = []
+    (median_ms, best_ms), *_ = _time_interleaved_ms([fn], repeat)
+    return median_ms, best_ms
+
+
+def _time_interleaved_ms(fns: list[Callable[[], object]], repeat: int) -> list[tuple[float, float]]:
+    """``(median, best)`` in ms of each of ``fns``, called in turn ``repeat`` times."""
+    for fn in fns:
+        fn()  # warm-up
+    samples: list[list[float]] = [[] for _ in fns]
     for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        samples.append((time.perf_counter() - t0) * 1e3)
-    return statistics.median(samples), min(samples)
+        for fn, out in zip(fns, samples, strict=True):
+            t0 = time.perf_counter()
+            fn()
+            out.append((time.perf_counter() - t0) * 1e3)
+    return [(statistics.median(out), min(out)) for out in samples]
 
 
 def _frame() -> dict:
@@ -44,12 +65,27 @@ def _frame() -> dict:
     return {"world": world, "rgb": frame.rgb, "depth": frame.depth, "far_m": far_m}
 
 
+def _uncertainty_noise(T_w_b: np.ndarray) -> tuple[SensorNoise, np.ndarray]:
+    """The built-in ``uncertainty`` scenario's sensor noise and pose covariance at ``T_w_b``."""
+    from scenarios.builtin import load
+    from vnav.sensor_noise import body_pose_covariance
+
+    spec_noise = load("uncertainty").noise
+    noise = SensorNoise(
+        spec_noise.pixel_std_px, spec_noise.depth_std_m, spec_noise.depth_std_per_m2
+    )
+    cov = body_pose_covariance(
+        T_w_b, spec_noise.position_std_m, np.radians(spec_noise.attitude_std_deg)
+    )
+    return noise, cov
+
+
 def run(args: argparse.Namespace) -> dict:
     from vnav.camera import depth_to_world_points
     from vnav.detect import detect_cones
     from vnav.localize import localize
 
-    repeat = getattr(args, "repeat", 200)
+    repeat = getattr(args, "repeat", 1000)
     f = _frame()
     world, rgb, depth, far_m = f["world"], f["rgb"], f["depth"], f["far_m"]
     detections = detect_cones(rgb)
@@ -58,26 +94,51 @@ def run(args: argparse.Namespace) -> dict:
     det = detections[0]
     cam, T_w_b, T_b_c, T_w_c = world.camera, world.T_w_b, world.T_b_c, world.T_w_c
 
-    calls: dict[str, Callable[[], object]] = {
-        "detect_cones": lambda: detect_cones(rgb),
-        "localize": lambda: localize(det, cam, T_w_b, T_b_c, depth, far_m=far_m),
-        "depth_to_world_points": lambda: depth_to_world_points(depth, cam, T_w_c, far_m=far_m),
-    }
+    noise, cov_T_w_b = _uncertainty_noise(T_w_b)
+
+    def localize_call(with_covariance: bool) -> Callable[[], object]:
+        return lambda: localize(
+            det,
+            cam,
+            T_w_b,
+            T_b_c,
+            depth,
+            far_m=far_m,
+            noise=noise,
+            cov_T_w_b=cov_T_w_b,
+            with_covariance=with_covariance,
+        )
+
     figures: dict[str, object] = {
         "image": f"{rgb.shape[1]}x{rgb.shape[0]}",
         "cone_area_px": det.area_px,
         "repeat": repeat,
     }
+    timed = {
+        "detect_cones": _time_ms(lambda: detect_cones(rgb), repeat),
+        "depth_to_world_points": _time_ms(
+            lambda: depth_to_world_points(depth, cam, T_w_c, far_m=far_m), repeat
+        ),
+    }
+    timed["localize"], timed["localize_points"] = _time_interleaved_ms(
+        [localize_call(True), localize_call(False)], repeat
+    )
     rows = []
-    for name, fn in calls.items():
-        median_ms, best_ms = _time_ms(fn, repeat)
+    for name in TARGETS_MS:
+        median_ms, best_ms = timed[name]
         figures[f"{name}_median_ms"] = median_ms
         figures[f"{name}_best_ms"] = best_ms
         target = TARGETS_MS[name]
         rows.append((name, median_ms, best_ms, "-" if target is None else f"<= {target:g}"))
+    overhead = timed["localize"][0] / timed["localize_points"][0]
+    figures["covariance_overhead"] = overhead
     if not getattr(args, "json", False):
         print(f"perception, {figures['image']} frame, cone {det.area_px} px, {repeat} calls")
         print(f"{'step':24s} {'median ms':>10s} {'best ms':>9s} {'target ms':>10s}")
         for name, median_ms, best_ms, target in rows:
             print(f"{name:24s} {median_ms:10.3f} {best_ms:9.3f} {target:>10s}")
+        print(
+            f"covariance overhead: localize / localize_points = {overhead:.2f} "
+            f"(target <= {COVARIANCE_OVERHEAD_TARGET:g})"
+        )
     return figures

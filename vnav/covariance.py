@@ -22,15 +22,16 @@ from noise cannot describe; they are covered by a floor of ``DEPTH_FIT_FLOOR`` f
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
 from vnav.camera import PinholeCamera
 from vnav.cone import ConeModel
-from vnav.estimators import NoEstimate, _known_height, _solve_known_height
+from vnav.estimators import _solve_known_height
 from vnav.sensor_noise import SensorNoise, keypoint_cov
 from vnav.silhouette import SilhouetteView, triangle_fraction
-from vnav.uncertainty import point_from_ground, se3_exp, transform_point
+from vnav.uncertainty import _point_from_ground, _point_jacobian
 
 __all__ = [
     "DEPTH_FIT_FLOOR",
@@ -47,13 +48,6 @@ DEPTH_FIT_FLOOR = (0.003, 0.001)
 0.12-0.25% of range over all three axes (``python -m benchmarks`` does not measure this; see
 ``tests/test_covariance.py``)."""
 
-_PX_STEP = 0.05
-"""Pixel step of the central differences of ``known_height_cov``, px (the solve is smooth
-over a pixel; 0.05 px keeps the truncation error far below the keypoint noise)."""
-
-_ANGLE_STEP = 1e-5
-"""Rotation step of the central differences of ``known_height_cov``, radians."""
-
 
 KNOWN_HEIGHT_MODEL_STD = 0.02
 """``known_height``'s own error along the bearing without noise, as a fraction of range:
@@ -63,23 +57,25 @@ not describe. Measured: RMS 1.9% (orbit) to 3.4% (approach) of range in the nois
 built-ins, biased away from the camera."""
 
 
-def _plate_cov(
+def _add_plate(
+    cov: np.ndarray,
     p_w: np.ndarray,
     t_w_c: tuple[float, float, float],
     cone: ConeModel,
     model_std_per_m: float = 0.0,
 ) -> np.ndarray:
-    """``(s_std^2 + (k range)^2) b b^T``: the base plate's unknown yaw and a method's own
-    error ``k`` per metre of range, along the horizontal bearing ``b``."""
-    bx, by = float(p_w[0]) - t_w_c[0], float(p_w[1]) - t_w_c[1]
-    norm = math.hypot(bx, by)
-    out = np.zeros((3, 3))
+    """``cov`` plus ``(s_std^2 + (k range)^2) b b^T``, in place: the base plate's unknown yaw
+    and a method's own error ``k`` per metre of range, along the horizontal bearing ``b``."""
+    x, y, z = (float(p_w[i]) - t_w_c[i] for i in range(3))
+    norm = math.hypot(x, y)
     if norm > 1e-9:
-        b = np.array([bx / norm, by / norm])
-        range_m = math.dist((float(p_w[0]), float(p_w[1]), float(p_w[2])), t_w_c)
-        var = cone.base_axis_distance_std_m**2 + (model_std_per_m * range_m) ** 2
-        out[:2, :2] = var * np.outer(b, b)
-    return out
+        bx, by = x / norm, y / norm
+        var = cone.base_axis_distance_std_m**2 + model_std_per_m**2 * (norm * norm + z * z)
+        cov[0, 0] += var * bx * bx
+        cov[0, 1] += var * bx * by
+        cov[1, 0] += var * bx * by
+        cov[1, 1] += var * by * by
+    return cov
 
 
 def ground_plane_cov(
@@ -101,29 +97,15 @@ def ground_plane_cov(
     vertical = view.vertical_at_blob()
     bottom = view.bottom(cone)
     down = vertical[0] if vertical is not None else np.array([0.0, 1.0])
-    _, cov = point_from_ground(
+    _, cov = _point_from_ground(
         camera,
         T_w_c,
-        bottom,
-        cov_uv=keypoint_cov("bottom", noise.pixel_std, down),
-        cov_T_w_c=cov_T_w_c,
+        float(bottom[0]),
+        float(bottom[1]),
+        keypoint_cov("bottom", noise.pixel_std, down),
+        cov_T_w_c,
     )
-    return cov + _plate_cov(p_w, view.t, cone)
-
-
-def _rotated_estimate(
-    view: SilhouetteView,
-    camera: PinholeCamera,
-    T_w_c: np.ndarray,
-    phi: np.ndarray,
-    cone: ConeModel,
-) -> np.ndarray:
-    """``known_height``'s whole estimate with the camera pose turned by ``exp(phi^)`` (a left
-    perturbation): the keypoints move too, since the apex fit and the bottom pixel follow
-    the image of the vertical, which the attitude sets."""
-    T = se3_exp(np.concatenate([np.zeros(3), phi])) @ T_w_c
-    p = _known_height(SilhouetteView(view.detection, camera, T), cone)
-    return np.full(3, np.nan) if isinstance(p, NoEstimate) else p
+    return _add_plate(cov, p_w, view.t, cone)
 
 
 def known_height_cov(
@@ -137,11 +119,10 @@ def known_height_cov(
 ) -> np.ndarray:
     """Covariance of ``known_height``'s estimate ``p_w``, (3, 3), m^2.
 
-    The estimate depends on the apex and bottom pixels and on the camera pose; its Jacobian
-    by central differences of the same least-squares solve (``_solve_known_height``): four
-    pixel coordinates and the three rotation components of a left perturbation of ``T_w_c``
-    (a translation ``rho`` moves the camera centre and with it the estimate one to one:
-    that block is the identity). Plus the plate's yaw along the bearing.
+    ``J Sigma J^T`` over the inputs ``[apex (u, v), bottom (u, v), xi]`` (``xi = [rho, phi]``
+    the left perturbation of ``T_w_c``), with ``Sigma`` block-diagonal (``keypoint_cov`` and
+    ``cov_T_w_c``) and ``J`` from ``_known_height_jacobian``. Plus the plate's yaw and the
+    method's own error (``KNOWN_HEIGHT_MODEL_STD``) along the bearing.
     """
     vertical = view.vertical_at_blob()
     assert vertical is not None  # known_height gave an estimate: the vertical exists
@@ -149,36 +130,114 @@ def known_height_cov(
     apex = view.apex(d, triangle_fraction(elevation, cone))
     assert apex is not None
     bottom = view.axis_exit(d, apex)
+    J = _known_height_jacobian(view, camera, T_w_c, apex, bottom, cone)
+    S = np.zeros((10, 10))
+    S[:2, :2] = keypoint_cov("apex", noise.pixel_std, d)
+    S[2:4, 2:4] = keypoint_cov("bottom", noise.pixel_std, d)
+    S[4:, 4:] = cov_T_w_c
+    return _add_plate(J @ S @ J.T, p_w, view.t, cone, KNOWN_HEIGHT_MODEL_STD)
+
+
+def _known_height_jacobian(
+    view: SilhouetteView,
+    camera: PinholeCamera,
+    T_w_c: np.ndarray,
+    apex: np.ndarray,
+    bottom: np.ndarray,
+    cone: ConeModel,
+) -> np.ndarray:
+    """``d p_w / d[apex (u, v), bottom (u, v), rho, phi]`` of ``_solve_known_height``, (3, 10).
+
+    The solve is the least-squares ``A x = r`` with ``A = [a, -g]``, ``x = (alpha, gamma)``,
+    ``r = (0, 0, H) + s b`` and ``p = c + gamma g + s b``, ``b`` the horizontal unit of ``g``.
+    Differentiating the normal equations ``N x = A^T r`` (``N = A^T A``, residual
+    ``e = A x - r``): ``N dx = -dA^T e + A^T (dr - dA x)``. Only ``gamma`` enters ``p``:
+
+    - ``da``: ``d gamma = k_a . da``, ``k_a = (alpha (a.a) g - (a.g)(e + alpha a)) / det N``,
+      so ``dp/da = g k_a^T`` (and ``k_a . a = 0``: the ray's length does not matter);
+    - ``dg``: with ``s D = s (I - b b^T) / |g_h|`` on the horizontal block (``db = D dg``,
+      ``D g = 0``), ``k_g = ((a.g)(s D a + gamma a) + (a.a)(e - gamma g)) / det N`` and
+      ``dp/dg = g k_g^T + gamma I + s D``.
+
+    Then a pixel: ``a = r / |r|`` with ``r = R_w_c K^-1 [u, v, 1]`` and ``p`` independent of
+    a ray's length, so ``dp/d(u, v) = J_a [r_0 / fx, r_1 / fy] / |r|`` (``r_i`` the columns of
+    ``R_w_c``); a left perturbation of ``T_w_c``: ``c -> c + rho + phi x c``,
+    ``a -> a + phi x a``, ``g -> g + phi x g``, so ``dp/drho = I`` and
+    ``dp/dphi = -(c^ + J_a a^ + J_g g^)``. (``tests/test_covariance.py`` checks this against
+    central differences of the solve.)
+
+    The keypoints are held where the image puts them: they also follow the image of the
+    vertical, which the believed attitude sets, but the apex is a tip and the bottom pixel
+    lies on the axis through it, a second-order effect (re-running the whole estimator on
+    turned poses gave the same Jacobian to 3 digits, except where a step moved a pixel across
+    the apex fit's window: a jump, not a slope).
+    """
     H, s = cone.height_m, cone.base_axis_distance_m
-
-    def at(px: list[float]) -> np.ndarray:
-        """The same solve as ``estimators._known_height`` for moved keypoints."""
-        solution = _solve_known_height(view.t, view.ray(px[0], px[1]), view.ray(px[2], px[3]), H, s)
-        return np.full(3, np.nan) if solution is None else np.array(solution[0])
-
-    base = [float(apex[0]), float(apex[1]), float(bottom[0]), float(bottom[1])]
-    J_px = np.empty((3, 4))
-    for i in range(4):
-        hi, lo = list(base), list(base)
-        hi[i] += _PX_STEP
-        lo[i] -= _PX_STEP
-        J_px[:, i] = (at(hi) - at(lo)) / (2.0 * _PX_STEP)
-    J_xi = np.empty((3, 6))
-    J_xi[:, :3] = np.eye(3)
+    c = view.t
+    a_t = view.ray(float(apex[0]), float(apex[1]))
+    g_t = view.ray(float(bottom[0]), float(bottom[1]))
+    solution = _solve_known_height(c, a_t, g_t, H, s)
+    assert solution is not None  # the estimator solved these same rays
+    _, alpha, gamma, _ = solution
+    # In plain floats: some 200 operations, where numpy would pay its per-call cost on ~30
+    # arrays of 3 to 9 numbers.
+    a, g = a_t, g_t
+    norm_h = math.hypot(g[0], g[1])
+    bx, by = g[0] / norm_h, g[1] / norm_h
+    r = (s * bx, s * by, H)
+    e = [alpha * a[i] - gamma * g[i] - r[i] for i in range(3)]
+    aa, ag, gg = _dot(a, a), _dot(a, g), _dot(g, g)
+    det = aa * gg - ag * ag
+    k_a = [(alpha * aa * g[i] - ag * (e[i] + alpha * a[i])) / det for i in range(3)]
+    k = s / norm_h
+    sD = ((k * (1.0 - bx * bx), -k * bx * by, 0.0), (-k * bx * by, k * (1.0 - by * by), 0.0))
+    sDa = (_dot(sD[0], a), _dot(sD[1], a), 0.0)
+    k_g = [(ag * (sDa[i] + gamma * a[i]) + aa * (e[i] - gamma * g[i])) / det for i in range(3)]
+    J_g = [[g[i] * k_g[j] + (gamma if i == j else 0.0) for j in range(3)] for i in range(3)]
+    for i in range(2):
+        for j in range(2):
+            J_g[i][j] += sD[i][j]
+    # The unit ray a = r / |r| of r = R_w_c K^-1 [u, v, 1]: p does not depend on a ray's
+    # length, so dp/dr = (dp/da) / |r|.
+    (r00, r01, _, _), (r10, r11, _, _), (r20, r21, _, _), _ = T_w_c.tolist()
+    col_u = (r00 / camera.fx, r10 / camera.fx, r20 / camera.fx)
+    col_v = (r01 / camera.fy, r11 / camera.fy, r21 / camera.fy)
+    n_a, n_b = _pixel_ray_length(camera, apex), _pixel_ray_length(camera, bottom)
+    apex_u, apex_v = _dot(k_a, col_u) / n_a, _dot(k_a, col_v) / n_a
+    k_a_x_a = _cross(k_a, a)
+    skew_c = ((0.0, -c[2], c[1]), (c[2], 0.0, -c[0]), (-c[1], c[0], 0.0))
+    rows = []
     for i in range(3):
-        phi = np.zeros(3)
-        phi[i] = _ANGLE_STEP
-        J_xi[:, 3 + i] = (
-            _rotated_estimate(view, camera, T_w_c, phi, cone)
-            - _rotated_estimate(view, camera, T_w_c, -phi, cone)
-        ) / (2.0 * _ANGLE_STEP)
-    cov_px = np.zeros((4, 4))
-    cov_px[:2, :2] = keypoint_cov("apex", noise.pixel_std, d)
-    cov_px[2:, 2:] = keypoint_cov("bottom", noise.pixel_std, d)
-    cov = J_px @ cov_px @ J_px.T + J_xi @ cov_T_w_c @ J_xi.T
-    if not np.isfinite(cov).all():  # a step left the solvable set: keep the pose's part only
-        cov = J_xi[:, :3] @ cov_T_w_c[:3, :3] @ J_xi[:, :3].T
-    return cov + _plate_cov(p_w, view.t, cone, KNOWN_HEIGHT_MODEL_STD)
+        row_g = J_g[i]
+        # Row i of J_a a^ + J_g g^: (row of J) x (its ray), as r^T v^ = (r x v)^T.
+        turn = _cross(row_g, g)
+        rows.append(
+            [
+                g[i] * apex_u,
+                g[i] * apex_v,
+                _dot(row_g, col_u) / n_b,
+                _dot(row_g, col_v) / n_b,
+                1.0 if i == 0 else 0.0,
+                1.0 if i == 1 else 0.0,
+                1.0 if i == 2 else 0.0,
+            ]
+            + [-(skew_c[i][j] + g[i] * k_a_x_a[j] + turn[j]) for j in range(3)]
+        )
+    return np.array(rows)
+
+
+def _dot(x: Sequence[float], y: Sequence[float]) -> float:
+    return x[0] * y[0] + x[1] * y[1] + x[2] * y[2]
+
+
+def _cross(x: Sequence[float], y: Sequence[float]) -> tuple[float, float, float]:
+    return (x[1] * y[2] - x[2] * y[1], x[2] * y[0] - x[0] * y[2], x[0] * y[1] - x[1] * y[0])
+
+
+def _pixel_ray_length(camera: PinholeCamera, uv: np.ndarray) -> float:
+    """``|K^-1 [u, v, 1]|``."""
+    x, y = (float(uv[0]) - camera.cx) / camera.fx, (float(uv[1]) - camera.cy) / camera.fy
+    return math.sqrt(x * x + y * y + 1.0)
 
 
 def depth_image_cov(
@@ -199,27 +258,35 @@ def depth_image_cov(
       the vertical part of its ray, not averaged: ``(s_z sin e)^2`` with ``e`` the elevation;
     - a floor ``DEPTH_FIT_FLOOR`` on every axis;
 
-    then the camera pose through ``vnav.uncertainty.transform_point`` (a pose error moves the
+    then the camera pose as ``vnav.uncertainty.transform_point`` adds it (a pose error moves the
     whole point cloud, and the fit with it, rigidly).
     """
-    t_w_c = T_w_c[:3, 3]
-    view_w = p_w - t_w_c
-    range_m = float(np.linalg.norm(view_w))
-    z_c = float(T_w_c[:3, 2] @ view_w)
-    s_z = float(noise.depth_std_at(z_c))
+    (_, _, r02, tx), (_, _, r12, ty), (_, _, r22, tz), _ = T_w_c.tolist()
+    px, py, pz = p_w.tolist()
+    x, y, z = px - tx, py - ty, pz - tz
+    range_m = math.sqrt(x * x + y * y + z * z)
+    s_z = float(noise.depth_std_at(r02 * x + r12 * y + r22 * z))
     floor = DEPTH_FIT_FLOOR[0] + DEPTH_FIT_FLOOR[1] * range_m
-    cov_w = np.diag([floor * floor] * 3)
-    horizontal = math.hypot(view_w[0], view_w[1])
+    f2 = floor * floor
+    var_b = var_z = 0.0
+    horizontal = math.hypot(x, y)
     if s_z > 0.0 and range_m > 0.0:
+        var_z = (s_z * z / range_m) ** 2
         if horizontal > 1e-9:
-            b = np.array([view_w[0], view_w[1]]) / horizontal
-            cov_w[:2, :2] += s_z * s_z / max(n_points, 1) * np.outer(b, b)
-        sin_e = abs(float(view_w[2])) / range_m
-        cov_w[2, 2] += (s_z * sin_e) ** 2
-    R_c_w = T_w_c[:3, :3].T
-    p_c = R_c_w @ view_w
-    _, cov = transform_point(T_w_c, cov_T_w_c, p_c, R_c_w @ cov_w @ R_c_w.T)
-    return cov
+            var_b = s_z * s_z / max(n_points, 1) / (horizontal * horizontal)
+    # The fit's world covariance (x, y scaled by 1 / |horizontal| in var_b), then the pose as
+    # transform_point adds it, with the point's own covariance already in world axes.
+    G = _point_jacobian((px, py, pz))
+    return (
+        np.array(
+            [
+                [f2 + var_b * x * x, var_b * x * y, 0.0],
+                [var_b * x * y, f2 + var_b * y * y, 0.0],
+                [0.0, 0.0, f2 + var_z],
+            ]
+        )
+        + G @ cov_T_w_c @ G.T
+    )
 
 
 def naive_cov(
@@ -231,6 +298,5 @@ def naive_cov(
     """Covariance of the naive estimate ``t_w_b + p_c``, (3, 3), m^2: the body position's
     (``[I, -t^]`` of the left perturbation) plus the best estimate's, turned into camera
     axes. Reported for completeness: the naive estimate's error is its mistake, not noise."""
-    # The body origin's covariance: p_b = 0 through the body pose.
-    _, cov_t_w_b = transform_point(T_w_b, cov_T_w_b, np.zeros(3), np.zeros((3, 3)))
-    return cov_t_w_b + R_c_w @ cov_best_w @ R_c_w.T
+    G = _point_jacobian(T_w_b[:3, 3].tolist())  # the body origin through the body pose
+    return G @ cov_T_w_b @ G.T + R_c_w @ cov_best_w @ R_c_w.T

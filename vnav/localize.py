@@ -27,7 +27,7 @@ from vnav.estimators import (
 from vnav.methods import METHOD_NAMES, PREFERENCE
 from vnav.sensor_noise import NOISELESS, SensorNoise
 from vnav.silhouette import SilhouetteView
-from vnav.uncertainty import compose
+from vnav.uncertainty import _compose_cov2, check_covariance
 
 _ZERO_6 = np.zeros((6, 6))
 _ZERO_6.flags.writeable = False
@@ -127,6 +127,7 @@ def localize(
     noise: SensorNoise = NOISELESS,
     cov_T_w_b: np.ndarray | None = None,
     cov_T_b_c: np.ndarray | None = None,
+    with_covariance: bool = True,
 ) -> ConeEstimates:
     """Every estimate of one detected cone's base centre in the world frame.
 
@@ -149,6 +150,9 @@ def localize(
     cov_T_w_b, cov_T_b_c : ndarray, shape (6, 6), optional
         Left-perturbation covariances of the body pose and of the camera mount
         (docs/CONVENTIONS.md, "Uncertainty"); default zero (known exactly).
+    with_covariance : bool
+        False skips the covariances (``cov_w_by_method`` is then empty): for a caller that
+        only wants the points.
 
     Returns
     -------
@@ -177,6 +181,8 @@ def localize(
     if depth is not None:
         check_depth_image(depth, camera)
     T_w_c = se3.check_pose(T_w_b @ T_b_c, "T_w_c")
+    cov_T_w_b = _ZERO_6 if cov_T_w_b is None else check_covariance(cov_T_w_b, (6, 6), "cov_T_w_b")
+    cov_T_b_c = _ZERO_6 if cov_T_b_c is None else check_covariance(cov_T_b_c, (6, 6), "cov_T_b_c")
     z_c = None if depth is None else depth_under_mask(detection, depth)
     if detection.touches_border:
         return ConeEstimates({}, dict.fromkeys(METHOD_NAMES, NoEstimate.BORDER))
@@ -191,12 +197,45 @@ def localize(
     if not p_w_by_method:
         no_estimate["naive"] = NoEstimate.NO_OTHER_ESTIMATE
         return ConeEstimates({}, no_estimate)
-    cov_T_w_b = _ZERO_6 if cov_T_w_b is None else cov_T_w_b
-    _, cov_T_w_c = compose(T_w_b, cov_T_w_b, T_b_c, _ZERO_6 if cov_T_b_c is None else cov_T_b_c)
+    best_method = next(m for m in PREFERENCE if m in p_w_by_method)
+    p_c = np.array(view.camera_coordinates(p_w_by_method[best_method]))
+    p_w_by_method["naive"] = naive(p_c, T_w_b[:3, 3])
+    if not with_covariance:
+        return ConeEstimates(p_w_by_method, no_estimate)
+    cov_w = _covariances(
+        p_w_by_method,
+        view,
+        camera,
+        T_w_b=T_w_b,
+        cov_T_w_b=cov_T_w_b,
+        T_w_c=T_w_c,
+        cov_T_w_c=_compose_cov2(T_w_b, cov_T_w_b, cov_T_b_c) if cov_T_b_c.any() else cov_T_w_b,
+        n_depth_points=detection.area_px // 2,
+        noise=noise,
+        cone=cone,
+    )
+    return ConeEstimates(p_w_by_method, no_estimate, cov_w)
+
+
+def _covariances(
+    p_w_by_method: dict[str, np.ndarray],
+    view: SilhouetteView,
+    camera: PinholeCamera,
+    *,
+    T_w_b: np.ndarray,
+    cov_T_w_b: np.ndarray,
+    T_w_c: np.ndarray,
+    cov_T_w_c: np.ndarray,
+    n_depth_points: int,
+    noise: SensorNoise,
+    cone: ConeModel,
+) -> dict[str, np.ndarray]:
+    """Each estimate's world covariance (``vnav.covariance``); the naive one's from the best
+    estimate's (``PREFERENCE``), as its point is."""
     cov_w: dict[str, np.ndarray] = {}
     if "depth_image" in p_w_by_method:
         cov_w["depth_image"] = covariance.depth_image_cov(
-            T_w_c, cov_T_w_c, p_w_by_method["depth_image"], detection.area_px // 2, noise
+            T_w_c, cov_T_w_c, p_w_by_method["depth_image"], n_depth_points, noise
         )
     if "ground_plane" in p_w_by_method:
         cov_w["ground_plane"] = covariance.ground_plane_cov(
@@ -206,9 +245,6 @@ def localize(
         cov_w["known_height"] = covariance.known_height_cov(
             view, camera, T_w_c, cov_T_w_c, p_w_by_method["known_height"], noise, cone
         )
-    best_method = next(m for m in PREFERENCE if m in p_w_by_method)
-    best = p_w_by_method[best_method]
-    p_c = np.array(view.camera_coordinates(best))
-    p_w_by_method["naive"] = naive(p_c, T_w_b[:3, 3])
+    best_method = next(m for m in PREFERENCE if m in cov_w)
     cov_w["naive"] = covariance.naive_cov(T_w_b, cov_T_w_b, T_w_c[:3, :3].T, cov_w[best_method])
-    return ConeEstimates(p_w_by_method, no_estimate, cov_w)
+    return cov_w

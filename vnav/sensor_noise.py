@@ -18,6 +18,8 @@ table. Three kinds of figure:
 
 from __future__ import annotations
 
+import functools
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -75,16 +77,25 @@ def keypoint_std_px(kind: str, pixel_std: float) -> tuple[float, float]:
     """
     if kind not in KEYPOINT_STD_PX:
         raise ValueError(f"keypoint kind must be one of {sorted(KEYPOINT_STD_PX)}, got {kind!r}")
-    if not (math.isfinite(pixel_std) and pixel_std >= 0.0):
+    if not (isinstance(pixel_std, int | float) and math.isfinite(pixel_std) and pixel_std >= 0.0):
         raise ValueError(f"pixel_std must be a finite number >= 0, got {pixel_std!r}")
+    return _keypoint_std_px(kind, float(pixel_std))
+
+
+@functools.lru_cache(maxsize=64)  # one noise level per run: every detection asks the same
+def _keypoint_std_px(kind: str, pixel_std: float) -> tuple[float, float]:
     rows = KEYPOINT_STD_PX[kind]
-    levels = [r[0] for r in rows]
-    if pixel_std > levels[-1]:
-        scale = pixel_std / levels[-1]
-        return rows[-1][1] * scale, rows[-1][2] * scale
-    along = float(np.interp(pixel_std, levels, [r[1] for r in rows]))
-    across = float(np.interp(pixel_std, levels, [r[2] for r in rows]))
-    return along, across
+    top_level, top_along, top_across = rows[-1]
+    if pixel_std > top_level:
+        scale = pixel_std / top_level
+        return top_along * scale, top_across * scale
+    # Linear interpolation between the rows (np.interp, in plain floats: a scalar is cheaper
+    # without numpy, and this runs for every keypoint of every detection).
+    for (lo, along_lo, across_lo), (hi, along_hi, across_hi) in itertools.pairwise(rows):
+        if pixel_std <= hi:
+            w = (pixel_std - lo) / (hi - lo)
+            return along_lo + w * (along_hi - along_lo), across_lo + w * (across_hi - across_lo)
+    return top_along, top_across  # a table of one row
 
 
 def keypoint_cov(kind: str, pixel_std: float, down_uv: np.ndarray) -> np.ndarray:

@@ -20,6 +20,7 @@ differences and every covariance against Monte Carlo samples pushed through the 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from statistics import NormalDist
 
 import numpy as np
@@ -91,6 +92,12 @@ def _vector(x: object, n: int, name: str) -> np.ndarray:
 # ------------------------------------------------------------------------ SE(3) tools
 
 
+def _skew(v: object) -> np.ndarray:
+    """``so3.skew`` of one 3-vector (a sequence of floats), unvalidated: for the hot paths."""
+    x, y, z = (float(c) for c in v)  # type: ignore[attr-defined]
+    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+
+
 def _left_jacobian(phi: np.ndarray) -> np.ndarray:
     """SO(3)'s left Jacobian ``J(phi)`` (B&F eq. 8), (3, 3)."""
     theta = float(np.linalg.norm(phi))
@@ -138,7 +145,7 @@ def adjoint(T: object) -> np.ndarray:
     out = np.zeros((6, 6))
     out[:3, :3] = C
     out[3:, 3:] = C
-    out[:3, 3:] = so3.skew(t) @ C
+    out[:3, 3:] = _skew(t) @ C
     return out
 
 
@@ -203,6 +210,8 @@ def compose(
     T2 = se3.check_transform(T_b_c, "T_b_c")
     S1 = check_covariance(cov_a_b, (6, 6), "cov_a_b")
     S2 = check_covariance(cov_b_c, (6, 6), "cov_b_c")
+    if order == 2:
+        return T1 @ T2, _compose_cov2(T1, S1, S2)
     Ad = adjoint(T1)
     S2p = Ad @ S2 @ Ad.T
     cov = S1 + S2p
@@ -221,6 +230,13 @@ def compose(
         B[p, p] = _dd2(S1[p, p], S2p[p, p])
         cov = cov + (A1 @ S2p + S2p @ A1.T + A2 @ S1 + S1 @ A2.T) / 12.0 + B / 4.0
     return T1 @ T2, 0.5 * (cov + cov.T)
+
+
+def _compose_cov2(T1: np.ndarray, S1: np.ndarray, S2: np.ndarray) -> np.ndarray:
+    """``compose``'s second-order covariance ``S1 + Ad(T1) S2 Ad(T1)^T`` on validated inputs."""
+    Ad = adjoint(T1)
+    cov = S1 + Ad @ S2 @ Ad.T
+    return 0.5 * (cov + cov.T)
 
 
 def invert(T: object, cov: object) -> tuple[np.ndarray, np.ndarray]:
@@ -243,12 +259,12 @@ def invert(T: object, cov: object) -> tuple[np.ndarray, np.ndarray]:
 # ------------------------------------------------------------------------ points
 
 
-def _point_jacobian(p: np.ndarray) -> np.ndarray:
+def _point_jacobian(p: Sequence[float]) -> np.ndarray:
     """``d(exp(xi^) p) / d xi`` at ``xi = 0``: ``[I, -p^]``, (3, 6) (B&F's ``p^odot``)."""
-    G = np.empty((3, 6))
-    G[:, :3] = np.eye(3)
-    G[:, 3:] = -so3.skew(p)
-    return G
+    x, y, z = p
+    return np.array(
+        [[1.0, 0.0, 0.0, 0.0, z, -y], [0.0, 1.0, 0.0, -z, 0.0, x], [0.0, 0.0, 1.0, y, -x, 0.0]]
+    )
 
 
 def _transform_point(
@@ -374,26 +390,49 @@ def point_from_ground(
     u, v = _vector(uv, 2, "uv")
     S_uv = check_covariance(cov_uv, (2, 2), "cov_uv")
     S_T = check_covariance(cov_T_w_c, (6, 6), "cov_T_w_c")
-    R, t = T[:3, :3], T[:3, 3]
-    d_w = R @ np.array([(u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy, 1.0])
-    if not t[2] > 0.0:
-        raise ValueError(f"the camera must be above the ground z = 0, got z = {t[2]:.6g} m")
-    if not d_w[2] < -1e-9 * float(np.linalg.norm(d_w)):
+    p_w, cov = _point_from_ground(camera, T, float(u), float(v), S_uv, S_T)
+    return p_w, 0.5 * (cov + cov.T)
+
+
+def _point_from_ground(
+    camera: PinholeCamera,
+    T: np.ndarray,
+    u: float,
+    v: float,
+    S_uv: np.ndarray,
+    S_T: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """``point_from_ground`` on validated inputs, in plain floats where numpy's per-call cost
+    would dominate (``localize`` runs it for every detection); the covariance is symmetric
+    to rounding, not symmetrised."""
+    (r00, r01, r02, tx), (r10, r11, r12, ty), (r20, r21, r22, tz), _ = T.tolist()
+    x, y = (u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy
+    dx, dy, dz = r00 * x + r01 * y + r02, r10 * x + r11 * y + r12, r20 * x + r21 * y + r22
+    if not tz > 0.0:
+        raise ValueError(f"the camera must be above the ground z = 0, got z = {tz:.6g} m")
+    if not dz < -1e-9 * math.sqrt(dx * dx + dy * dy + dz * dz):
         raise ValueError(
             f"the ray through pixel ({u:g}, {v:g}) does not reach the ground "
-            f"(its world z component is {d_w[2]:.3g}, not negative)"
+            f"(its world z component is {dz:.3g}, not negative)"
         )
-    lam = -t[2] / d_w[2]
-    p_w = t + lam * d_w
-    p_w[2] = 0.0
-    P = np.eye(3)
-    P[:, 2] -= d_w / d_w[2]
-    J_uv = lam * P @ np.column_stack([R[:, 0] / camera.fx, R[:, 1] / camera.fy])
-    J_xi = P @ _point_jacobian(p_w)
-    cov = J_uv @ S_uv @ J_uv.T + J_xi @ S_T @ J_xi.T
-    cov = 0.5 * (cov + cov.T)
-    cov[2, :] = cov[:, 2] = 0.0  # exact: P's third row is zero
-    return p_w, cov
+    lam = -tz / dz
+    px, py = tx + lam * dx, ty + lam * dy
+    # J = P [lam r_0 / fx, lam r_1 / fy, I, -p^] with P = I - d e_z^T / d_z, the projection
+    # along the ray onto the ground: its third row is zero, so the covariance's third row
+    # and column come out exactly zero. Row i of P J0 is J0's row i minus (d_i / d_z) row 2.
+    ku, kv = lam / camera.fx, lam / camera.fy
+    row2 = (ku * r20, kv * r21, 0.0, 0.0, 1.0, py, -px, 0.0)
+    qx, qy = dx / dz, dy / dz
+    u2, v2 = row2[0], row2[1]
+    J = np.array(
+        [
+            [ku * r00 - qx * u2, kv * r01 - qx * v2, 1.0, 0.0, -qx, -qx * py, qx * px, -py],
+            [ku * r10 - qy * u2, kv * r11 - qy * v2, 0.0, 1.0, -qy, -qy * py, qy * px, px],
+            [0.0] * 8,
+        ]
+    )
+    J_uv, J_xi = J[:, :2], J[:, 2:]
+    return np.array([px, py, 0.0]), J_uv @ S_uv @ J_uv.T + J_xi @ S_T @ J_xi.T
 
 
 # ------------------------------------------------------------------------ consistency
