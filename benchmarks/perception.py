@@ -123,22 +123,26 @@ def run(args: argparse.Namespace) -> dict:
     timed["localize"], timed["localize_points"] = _time_interleaved_ms(
         [localize_call(True), localize_call(False)], repeat
     )
-    rows = []
-    for name in TARGETS_MS:
-        median_ms, best_ms = timed[name]
+    for name, (median_ms, best_ms) in timed.items():
         figures[f"{name}_median_ms"] = median_ms
         figures[f"{name}_best_ms"] = best_ms
-        target = TARGETS_MS[name]
-        rows.append((name, median_ms, best_ms, "-" if target is None else f"<= {target:g}"))
-    overhead = timed["localize"][0] / timed["localize_points"][0]
-    figures["covariance_overhead"] = overhead
+    figures["covariance_overhead"] = timed["localize"][0] / timed["localize_points"][0]
     if not getattr(args, "json", False):
-        print(f"perception, {figures['image']} frame, cone {det.area_px} px, {repeat} calls")
-        print(f"{'step':24s} {'median ms':>10s} {'best ms':>9s} {'target ms':>10s}")
-        for name, median_ms, best_ms, target in rows:
-            print(f"{name:24s} {median_ms:10.3f} {best_ms:9.3f} {target:>10s}")
-        print(
-            f"covariance overhead: localize / localize_points = {overhead:.2f} "
-            f"(target <= {COVARIANCE_OVERHEAD_TARGET:g})"
-        )
+        _print_table(figures, timed)
     return figures
+
+
+def _print_table(figures: dict, timed: dict[str, tuple[float, float]]) -> None:
+    print(
+        f"perception, {figures['image']} frame, cone {figures['cone_area_px']} px, "
+        f"{figures['repeat']} calls"
+    )
+    print(f"{'step':24s} {'median ms':>10s} {'best ms':>9s} {'target ms':>10s}")
+    for name, target in TARGETS_MS.items():
+        median_ms, best_ms = timed[name]
+        shown = "-" if target is None else f"<= {target:g}"
+        print(f"{name:24s} {median_ms:10.3f} {best_ms:9.3f} {shown:>10s}")
+    print(
+        f"covariance overhead: localize / localize_points = {figures['covariance_overhead']:.2f} "
+        f"(target <= {COVARIANCE_OVERHEAD_TARGET:g})"
+    )

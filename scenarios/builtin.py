@@ -346,6 +346,8 @@ def uncertainty() -> Scenario:
         "its mean over the run must sit in the chi-square band around the degrees of "
         "freedom (3; ground_plane 2, whose estimate lies on z = 0 by construction).",
         "camera_rate_hz": 10.0,
+        "view": "nees",
+        "close_up": "cone",
         "camera": {"pitch_down_deg": 12.0},
         "cones": [{"position_w": [0.0, 0.0, 0.0]}],
         "flight": {"mode": "kinematic", "keyframes": keyframes},

@@ -61,6 +61,7 @@ place together with the report.
 
 from __future__ import annotations
 
+import math
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -95,6 +96,7 @@ from scenarios.viewer import (
 from vnav import quat, so3
 from vnav.camera import PinholeCamera, depth_to_world_points
 from vnav.methods import METHOD_NAMES, METHODS, PREFERENCE, method
+from vnav.uncertainty import nees_band
 
 if TYPE_CHECKING:
     from sim.mesh import Scenery, TriangleMesh
@@ -131,6 +133,10 @@ LINE_UI_POINTS = rr.Radius.ui_points(0.9)
 """Error segments and the naive offset: a width on screen, not in metres, so that they stay
 thin in the close-up and visible in the wide view."""
 RAY_UI_POINTS = rr.Radius.ui_points(0.7)
+
+ELLIPSOID_LINE = rr.Radius.ui_points(1.8)
+"""The ellipsoids' three principal ellipses: twice an error segment's width, so that they
+show around a cone a few metres away in the wide view."""
 
 CLOUD_STRIDE_PX = 16
 """Every 16th row and column of the depth image goes into the logged world cloud."""
@@ -272,6 +278,9 @@ class Recording:
         self._latency = False
         self._cones_w = np.zeros((0, 3))
         self._last_quat: np.ndarray | None = None
+        # Per method: the sum of its NEES values, their count and the sum of their degrees of
+        # freedom so far in the run (the running mean and its band span flushes).
+        self._nees_totals: dict[str, list[float]] = {m: [0.0, 0.0, 0.0] for m in METHOD_NAMES}
         self._depth_p95_m: list[float] = []
 
     # ------------------------------------------------------------------ TickObserver
@@ -351,12 +360,14 @@ class Recording:
             static=True,
         )
         eye_w, look_target_w = eye_for(self._spec, result)
+        close_up_cone_w = self._spec.scene.cones_w[0] if self._spec.close_up == "cone" else None
         rec.send_blueprint(
             blueprint(
                 eye_w,
                 look_target_w,
                 self._spec.view,
                 T_w_b=result.ticks[-1].T_w_b if result.ticks else None,
+                close_up_cone_w=close_up_cone_w,
                 error_top_m=_error_tops_m(result, self._latency),
                 latency=self._latency,
             )
@@ -395,7 +406,7 @@ class Recording:
         _send_detections(send, rows)
         _send_estimates(send, rows, self._cones_w)
         _send_errors(send, rows)
-        _send_uncertainty(send, rows)
+        _send_uncertainty(send, rows, self._nees_totals)
         _send_rays(send, rows, self._camera, self._far_m)
         _send_attitude(send, rows, quats)
         _send_cone0(send, rows, self._cones_w[0])
@@ -579,14 +590,28 @@ def _log_styles(rec: rr.RecordingStream) -> None:
         )
         rec.log(
             entity.nees(m.name),
-            rr.SeriesLines(colors=[m.color_rgb], names=[f"{m.name} NEES"]),
+            rr.SeriesLines(colors=[m.color_rgb], names=[f"{m.name} NEES"], widths=[0.7]),
+            static=True,
+        )
+        rec.log(
+            entity.nees_mean(m.name),
+            rr.SeriesLines(colors=[m.color_rgb], names=[f"{m.name} mean NEES"], widths=[2.5]),
+            static=True,
+        )
+        rec.log(
+            entity.nees_band(m.name),
+            rr.SeriesLines(
+                colors=[(160, 160, 160)] * 2,
+                names=["95% band, low", "95% band, high"],
+                widths=[1.0, 1.0],
+            ),
             static=True,
         )
         if m.bound is not None:
             rec.log(
                 entity.ellipsoid(m.name),
                 rr.Ellipsoids3D.from_fields(
-                    colors=[m.color_rgb], line_radii=LINE_UI_POINTS, fill_mode="MajorWireframe"
+                    colors=[m.color_rgb], line_radii=ELLIPSOID_LINE, fill_mode="MajorWireframe"
                 ),
                 static=True,
             )
@@ -828,9 +853,13 @@ def ellipsoid_axes(cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return ELLIPSOID_SIGMA * np.sqrt(np.maximum(eigenvalues, 0.0)), vectors
 
 
-def _send_uncertainty(send: _Sender, rows: list[_Buffered]) -> None:
+def _send_uncertainty(
+    send: _Sender, rows: list[_Buffered], nees_totals: dict[str, list[float]]
+) -> None:
     """Per checked method, each estimate's covariance ellipsoid; per method, the mean NEES of
-    the tick's matched estimates (NaN, a gap, where it has none)."""
+    the tick's matched estimates (NaN, a gap, where it has none) and the mean over the run so
+    far with its 95% chi-square band (``vnav.uncertainty.nees_band``), which the ``consistent``
+    check judges at the last tick; ``nees_totals`` carries the sums from flush to flush."""
     for name in PREFERENCE:
         per_tick = [
             [
@@ -851,11 +880,23 @@ def _send_uncertainty(send: _Sender, rows: list[_Buffered]) -> None:
             ).partition([len(t) for t in per_tick]),
         )
     for name in METHOD_NAMES:
-        values = []
+        totals = nees_totals[name]
+        values, running, bands = [], [], []
         for r in rows:
-            scored = [d.nees[name][0] for d in r.record.detections if name in d.nees]
-            values.append(float(np.mean(scored)) if scored else np.nan)
+            scored = [d.nees[name] for d in r.record.detections if name in d.nees]
+            values.append(float(np.mean([v for v, _ in scored])) if scored else np.nan)
+            totals[0] += sum(v for v, _ in scored)
+            totals[1] += len(scored)
+            totals[2] += sum(dof for _, dof in scored)
+            if totals[1] and math.isfinite(totals[0]):
+                running.append(totals[0] / totals[1])
+                bands.append(nees_band(totals[2] / totals[1], int(totals[1]), 0.95))
+            else:
+                running.append(np.nan)
+                bands.append((np.nan, np.nan))
         send(entity.nees(name), rows, rr.Scalars.columns(scalars=values))
+        send(entity.nees_mean(name), rows, rr.Scalars.columns(scalars=running))
+        send(entity.nees_band(name), rows, rr.Scalars.columns(scalars=np.array(bands)))
 
 
 def _send_errors(send: _Sender, rows: list[_Buffered]) -> None:

@@ -32,8 +32,12 @@ __all__ = [
     "read",
 ]
 
-VIEW_NAMES: tuple[str, ...] = ("errors", "coordinates", "attitude")
+VIEW_NAMES: tuple[str, ...] = ("errors", "coordinates", "attitude", "nees")
 """Values of the optional ``view`` key: which tab the recording shows first."""
+
+CLOSE_UP_NAMES: tuple[str, ...] = ("drone", "cone")
+"""Values of the optional ``close_up`` key: what the recording's second 3D view looks at,
+the drone and its frames, or the first cone with its estimates and their ellipsoids."""
 
 MAX_M = 1000.0
 """Largest distance from the origin of any position in a scenario, metres."""
@@ -161,7 +165,20 @@ TOP: tuple[Key, ...] = (
         "duration_s", "number", "optional; default: the flight's last time", None, 0.0, MAX_S, True
     ),
     Key("camera_rate_hz", "number", "camera ticks per second", 10.0, 0.0, 1000.0, True),
-    Key("view", "choice", "first tab below the error plot", "errors", choices=VIEW_NAMES),
+    Key(
+        "view",
+        "choice",
+        "first tab below the images: errors, coordinates, attitude or nees",
+        "errors",
+        choices=VIEW_NAMES,
+    ),
+    Key(
+        "close_up",
+        "choice",
+        "what the second 3D view looks at: the drone, or the first cone",
+        "drone",
+        choices=CLOSE_UP_NAMES,
+    ),
     Key("camera", "any", "table: the onboard camera", None),
     Key("cones", "any", "array of tables: the cones", REQUIRED),
     Key("flight", "any", "table: how the drone flies", REQUIRED),

@@ -218,7 +218,9 @@ class ScenarioSpec:
     checks: tuple[Check, ...] = ()
     lesson: str = ""
     view: str = "errors"
-    """The recording's first tab below the error plot: errors, coordinates or attitude."""
+    """The recording's first tab below the error plot: errors, coordinates, attitude or nees."""
+    close_up: str = "drone"
+    """What the recording's second 3D view looks at: the drone, or the first cone."""
 
     @property
     def end_s(self) -> float:
@@ -439,6 +441,7 @@ def from_dict(data: dict[str, Any], where: str = "<scenario>") -> ScenarioSpec:
         checks=_checks(top["checks"], where) if top["checks"] is not None else (),
         lesson=top["lesson"],
         view=top["view"],
+        close_up=top["close_up"],
     )
 
 

@@ -25,6 +25,7 @@ import rerun.blueprint as rrb
 from scenarios.schema import VIEW_NAMES
 from scenarios.spec import ScenarioSpec
 from vnav import so3
+from vnav.cone import TRAFFIC_CONE
 from vnav.methods import METHODS, PREFERENCE, method
 
 if TYPE_CHECKING:
@@ -77,6 +78,14 @@ def _nees(method: str) -> str:
     return f"metrics/nees/{method}"
 
 
+def _nees_mean(method: str) -> str:
+    return f"metrics/nees_mean/{method}"
+
+
+def _nees_band(method: str) -> str:
+    return f"metrics/nees_band/{method}"
+
+
 def _cone0(frame_name: str) -> str:
     return f"coordinates/cone0_{frame_name}"
 
@@ -119,6 +128,8 @@ entity = SimpleNamespace(
     error_segment=_error_segment,
     ellipsoid=_ellipsoid,
     nees=_nees,
+    nees_mean=_nees_mean,
+    nees_band=_nees_band,
     cone0=_cone0,
     stream=_stream,
 )
@@ -175,6 +186,7 @@ def blueprint(
     view: str = "errors",
     *,
     T_w_b=None,
+    close_up_cone_w=None,
     error_top_m: dict[str, float | None] | None = None,
     latency: bool = False,
 ) -> rrb.Blueprint:
@@ -188,11 +200,14 @@ def blueprint(
     ----------
     eye_w, look_target_w : array_like, shape (3,), optional
         Where the 3D view's eye starts and what it looks at, world frame (z up).
-    view : {"errors", "coordinates", "attitude"}
+    view : {"errors", "coordinates", "attitude", "nees"}
         The tab shown first in the lower left panel (see ``VIEWS``).
     T_w_b : array_like, shape (4, 4), optional
         The drone's pose at the last tick: the close-up view starts behind it, to its left
-        and above (``CLOSE_UP_EYE_B``), and then follows the drone.
+        and above (``CLOSE_UP_EYE_B``).
+    close_up_cone_w : array_like, shape (3,), optional
+        A cone's base centre: the close-up looks at it instead of the drone, from its side
+        (``cone_close_up``), to show the estimates around it and their ellipsoids.
     error_top_m : dict of str to float or None, optional
         Top of each method's error plot, metres (None: the method gave no estimate), and of
         the range plot under the key ``entity.RANGE``.
@@ -223,7 +238,13 @@ def blueprint(
                 row_shares=[4, 6] if latency else [4, 5],
             ),
             rrb.Vertical(
-                rrb.Horizontal(world, _close_up(T_w_b), column_shares=[3, 2]),
+                rrb.Horizontal(
+                    world,
+                    _close_up(T_w_b)
+                    if close_up_cone_w is None
+                    else cone_close_up(close_up_cone_w, T_w_b),
+                    column_shares=[3, 2],
+                ),
                 rrb.Tabs(
                     rrb.TextDocumentView(name="state at the time cursor", origin=entity.STATE),
                     rrb.TextDocumentView(name="scenario", origin=entity.DESCRIPTION),
@@ -274,6 +295,48 @@ def _close_up(T_w_b) -> rrb.Spatial3DView:
             f"- /{entity.TRAJECTORY}",
         ],
         eye_controls=eye,
+    )
+
+
+CONE_CLOSE_UP_EYE_M = np.array([0.5, 3.0, 1.8])
+"""Where the cone close-up's eye starts from the cone, m: back along the drone's line of sight
+to it, to that line's left, above; it looks at the cone's middle."""
+
+
+def cone_close_up(cone_w, T_w_b=None) -> rrb.Spatial3DView:
+    """A cone, its truth and estimates and their ellipsoids, seen from across the line of
+    sight (an estimate's error along and across that line are both in view).
+
+    Parameters
+    ----------
+    cone_w : array_like, shape (3,)
+        The cone's base centre, world frame.
+    T_w_b : array_like, shape (4, 4), optional
+        The drone's pose at the last tick: the line of sight is from it to the cone (else
+        along world x).
+    """
+    cone_w = np.asarray(cone_w, dtype=np.float64)
+    bearing = np.array([1.0, 0.0, 0.0])
+    if T_w_b is not None:
+        b = cone_w - np.asarray(T_w_b, dtype=np.float64)[:3, 3]
+        b[2] = 0.0
+        if np.linalg.norm(b) > 1e-6:
+            bearing = b / np.linalg.norm(b)
+    left = np.array([-bearing[1], bearing[0], 0.0])
+    up = np.array([0.0, 0.0, 1.0])
+    target_w = cone_w + 0.5 * TRAFFIC_CONE.height_m * up
+    along, side, above = CONE_CLOSE_UP_EYE_M
+    eye_w = cone_w - along * bearing + side * left + above * up
+    return rrb.Spatial3DView(
+        name="cone close-up",
+        origin=entity.WORLD,
+        contents=[
+            "+ $origin/**",
+            f"- /{entity.DEPTH}",
+            f"- /{entity.DEPTH_CLOUD}",
+            f"- /{entity.TRAJECTORY}",
+        ],
+        eye_controls=rrb.EyeControls3D(position=eye_w, look_target=target_w, eye_up=[0, 0, 1]),
     )
 
 
@@ -363,15 +426,20 @@ def _from_zero(tops: dict[str, float | None], key: str) -> tuple[float, float] |
 
 
 def _nees_tab() -> rrb.Vertical:
-    """Each checked method's NEES per tick, against its expected value (its degrees of
-    freedom: 3, or 2 for ground_plane, whose estimates lie on z = 0 by construction)."""
+    """Each checked method's NEES per tick (thin), its mean over the run so far (thick) and
+    that mean's 95% chi-square band (grey), which narrows around the degrees of freedom (3,
+    or 2 for ground_plane, whose estimates lie on z = 0 by construction) as estimates add up.
+    The y axis stops at four times the degrees of freedom: single ticks above it are clipped,
+    the mean is what the ``consistent`` check judges."""
     return rrb.Vertical(
         *[
             _series(
-                f"{name} NEES (expected {2 if name == 'ground_plane' else 3}: its dof)",
-                [entity.nees(name)],
+                f"{name} NEES, thick: mean so far, grey: 95% band around {dof}",
+                [entity.nees(name), entity.nees_mean(name), entity.nees_band(name)],
+                y_range=(0.0, 4.0 * dof),
             )
             for name in PREFERENCE
+            for dof in [2 if name == "ground_plane" else 3]
         ],
         name="NEES",
     )
@@ -425,12 +493,11 @@ def _lower_tabs(view: str, error_top_m: dict[str, float | None], latency: bool) 
         row_shares=[3, 3, 3],
         name="attitude",
     )
-    tabs = {"errors": errors, "coordinates": coordinates, "attitude": attitude}
+    tabs = {"errors": errors, "coordinates": coordinates, "attitude": attitude, "nees": _nees_tab()}
     return rrb.Tabs(
         *[tabs[name] for name in VIEW_NAMES],
         *extra,
         rrb.Spatial2DView(name="error against range", origin=entity.ERROR_VS_RANGE),
-        _nees_tab(),
         rrb.Vertical(
             _series("naive error (m)", [entity.error("naive")], _from_zero(error_top_m, "naive")),
             _series(

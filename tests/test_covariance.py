@@ -16,6 +16,7 @@ from helpers import render_one
 from sim.noise import noisy_depth
 from vnav.cone import TRAFFIC_CONE
 from vnav.covariance import (
+    DEPTH_FIT_FLOOR,
     GROUND_PLANE_MODEL_STD,
     _known_height_jacobian,
     ground_plane_cov,
@@ -257,3 +258,32 @@ def test_localize_without_noise_or_pose_covariance_keeps_the_model_terms(view) -
         cov = est.covariance(m)
         assert np.all(np.linalg.eigvalsh(cov) >= -1e-15)
         assert np.trace(cov) > 0.0
+
+
+def test_uncertainty_builtin_covariance_grows_with_range_as_the_chain_predicts(builtin_runs):
+    """In the built-in ``uncertainty`` (5 cm, 1 deg of pose noise per sample), a body-frame
+    rotation error ``dtheta`` moves a point seen at range ``r`` by ``dtheta x (p_w - t_w_b)``:
+    across the line of sight, horizontally, by ``r dtheta`` whatever the axis, so the chain
+    ``p_w = T_w_b T_b_c p_c`` predicts a variance ``s_p^2 + (r s_a)^2`` there, times the
+    interpolation factor of the pose between its two samples (``(1 - a)^2 + a^2``, between
+    1/2 and 1). ``depth_image``'s covariance across the line of sight must lie between that
+    prediction at its lowest factor and at its highest plus the method's floor (ranges from
+    the pose the estimator was given, about which the covariance is taken)."""
+    run = builtin_runs["uncertainty"]
+    noise = run.spec.noise
+    s_p, s_a = noise.position_std_m, np.radians(noise.attitude_std_deg)
+    checked = 0
+    for tick in run.result.ticks:
+        t_w_b = tick.T_w_b_est[:3, 3]  # the pose the estimator was given
+        for d in tick.detections:
+            if "depth_image" not in d.covariances_w:
+                continue
+            p_w = d.estimates_w["depth_image"]
+            v = p_w - t_w_b
+            across = np.array([-v[1], v[0], 0.0]) / np.hypot(v[0], v[1])
+            variance = across @ d.covariances_w["depth_image"] @ across
+            chain = s_p**2 + (np.linalg.norm(v) * s_a) ** 2
+            floor = (DEPTH_FIT_FLOOR[0] + DEPTH_FIT_FLOOR[1] * np.linalg.norm(v)) ** 2
+            assert 0.5 * chain * 0.999 <= variance <= chain * 1.001 + floor + 1e-6
+            checked += 1
+    assert checked > 50

@@ -662,3 +662,53 @@ def test_state_panel_time_block_matches_the_stamps(builtin_runs):
         assert float(match.group(11)) == pytest.approx(
             np.degrees(t.true_motion_rad), abs=0.05 + 1e-9
         )
+
+
+def test_ellipsoids_rebuild_each_estimates_covariance(builtin_runs):
+    """The uncertainty built-in's recording: at every tick, each checked method's ellipsoids
+    sit on its estimates, and ``R diag((h / 3)^2) R^T`` from the logged quaternion (turned into
+    a matrix by SciPy) and half-sizes ``h`` gives back the run's covariance (float32 in the
+    file: 1e-4 relative)."""
+    from scipy.spatial.transform import Rotation
+
+    run = builtin_runs["uncertainty"]
+    checked = 0
+    for method in ("depth_image", "ground_plane", "known_height"):
+        rows = {
+            r["tick"]: r
+            for r in read_rows(run.rrd, f"world/cones/uncertainty/{method}")
+            if "tick" in r
+        }
+        for tick in run.result.ticks:
+            dets = [d for d in tick.detections if method in d.covariances_w]
+            if not dets:
+                continue
+            row = rows[tick.tick]
+            centers = np.array(row["Ellipsoids3D:centers"], dtype=np.float64)
+            halves = np.array(row["Ellipsoids3D:half_sizes"], dtype=np.float64)
+            quats = np.array(row["Ellipsoids3D:quaternions"], dtype=np.float64)
+            for d, c, h, q in zip(dets, centers, halves, quats, strict=True):
+                np.testing.assert_allclose(c, d.estimates_w[method], atol=FLOAT32_ATOL_M)
+                R = Rotation.from_quat(q).as_matrix()
+                rebuilt = R @ np.diag((h / 3.0) ** 2) @ R.T
+                cov = d.covariances_w[method]
+                np.testing.assert_allclose(rebuilt, cov, atol=1e-4 * np.abs(cov).max())
+                checked += 1
+    assert checked > 50
+
+
+def test_nees_mean_and_band_at_the_last_tick_are_the_reports(builtin_runs):
+    """The NEES tab's running mean and band, read back at the last tick, are the JSON report's
+    mean NEES and band for each method (one figure, two files)."""
+    run = builtin_runs["uncertainty"]
+    last = run.result.ticks[-1].tick
+    for method in ("depth_image", "ground_plane", "known_height"):
+        summary = run.report["methods"][method]["nees"]
+        (mean_row,) = [
+            r for r in read_rows(run.rrd, f"metrics/nees_mean/{method}") if r.get("tick") == last
+        ]
+        (band_row,) = [
+            r for r in read_rows(run.rrd, f"metrics/nees_band/{method}") if r.get("tick") == last
+        ]
+        assert mean_row["Scalars:scalars"][0] == pytest.approx(summary["mean"], rel=1e-9)
+        assert band_row["Scalars:scalars"] == pytest.approx(summary["band"], rel=1e-6)
