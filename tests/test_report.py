@@ -86,3 +86,37 @@ def test_check_outcomes_decide_whether_the_report_passed(runs):
     assert report.build(result, [skipped, *judged[1:]])["passed"] is True
     assert report.build(result, [no_data, *judged[1:]])["passed"] is False
     assert report.build(result, [no_data])["checks"][0]["outcome"] == "no data"
+
+
+@pytest.mark.parametrize("name", builtin.names())
+def test_report_nees_is_recomputed_from_the_estimates_covariances_and_the_truth(runs, name):
+    """Each method's NEES summary against a recomputation: ``e^T C^+ e`` with numpy's
+    pseudo-inverse over matched estimates, ``e`` the error against the scene's cone and the
+    degrees of freedom the covariance's rank; the band against SciPy's chi-square quantiles
+    (Wilson-Hilferty, 1%); ``consistent`` the mean inside it."""
+    from scipy.stats import chi2
+
+    spec, result, _, rep = runs[name]
+    cones_w = np.array(spec.scene.cones_w)
+    for method in METHOD_NAMES:
+        values, dofs = [], []
+        for f in result.ticks:
+            for d in f.detections:
+                if d.cone_index is None or method not in d.covariances_w:
+                    continue
+                cov = d.covariances_w[method]
+                e = d.estimates_w[method] - cones_w[d.cone_index]
+                values.append(float(e @ np.linalg.pinv(cov, rcond=1e-9, hermitian=True) @ e))
+                dofs.append(np.linalg.matrix_rank(cov, tol=1e-9 * np.abs(cov).max()))
+        summary = rep["methods"][method]["nees"]
+        assert summary["count"] == len(values)
+        if not values:
+            assert summary["mean"] is None and summary["consistent"] is None
+            continue
+        assert summary["mean"] == pytest.approx(np.mean(values), rel=1e-6)
+        assert summary["dof"] == pytest.approx(np.mean(dofs))
+        k = summary["dof"] * len(values)
+        expected_band = chi2.ppf([0.025, 0.975], k) / len(values)
+        assert summary["band"] == pytest.approx(expected_band, rel=0.01)
+        low, high = summary["band"]
+        assert summary["consistent"] == (low <= summary["mean"] <= high)
