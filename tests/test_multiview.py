@@ -1,0 +1,219 @@
+"""``vnav.multiview``: triangulation and PnP against exact synthetic projections, OpenCV's own
+two-view triangulation, and the simulator's truth on rendered frames."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from sim.config import CameraConfig, SceneConfig
+from sim.render import Renderer
+from sim.world import World
+from vnav import se3, so3
+from vnav.camera import PinholeCamera
+from vnav.cone import TRAFFIC_CONE
+from vnav.detect import ConeDetection, detect_cones
+from vnav.multiview import (
+    camera_pose_from_cones,
+    camera_pose_from_points,
+    parallax_deg,
+    triangulate,
+)
+
+CAMERA = PinholeCamera.from_fovy(60.0, 640, 480)
+APEX_OFFSET = np.array([0.0, 0.0, TRAFFIC_CONE.height_m])
+
+
+def _look_at(centre_w: np.ndarray, target_w: np.ndarray) -> np.ndarray:
+    """An optical-frame camera pose at ``centre_w`` looking at ``target_w`` (z forward, y down)."""
+    z = target_w - centre_w
+    z /= np.linalg.norm(z)
+    x = np.cross(z, [0.0, 0.0, 1.0])
+    x /= np.linalg.norm(x)
+    return se3.make(np.column_stack([x, np.cross(z, x), z]), centre_w)
+
+
+def _project(T_w_c: np.ndarray, p_w: np.ndarray) -> np.ndarray:
+    T_c_w = se3.invert(T_w_c)
+    return CAMERA.project(np.atleast_2d(p_w) @ T_c_w[:3, :3].T + T_c_w[:3, 3])
+
+
+def _views(rng: np.random.Generator, p_w: np.ndarray, n: int, baseline_m: float) -> np.ndarray:
+    """``n`` cameras 5-15 m from ``p_w``, spread over ``baseline_m`` sideways, looking near it."""
+    out = []
+    for _ in range(n):
+        centre = p_w + np.array([-rng.uniform(5.0, 15.0), rng.uniform(-1, 1) * baseline_m, 2.0])
+        out.append(_look_at(centre, p_w + rng.normal(0.0, 0.3, 3)))
+    return np.array(out)
+
+
+@pytest.mark.parametrize("method", ["midpoint", "dlt"])
+@pytest.mark.parametrize("seed", range(5))
+def test_triangulate_exact_projections(method: str, seed: int) -> None:
+    """Noise-free pixels of a random point in 2 to 8 random views: the point back, 1e-9 m."""
+    rng = np.random.default_rng(seed)
+    p_w = rng.uniform(-5.0, 5.0, 3)
+    T_w_c = _views(rng, p_w, int(rng.integers(2, 9)), baseline_m=3.0)
+    uv = np.array([_project(T, p_w)[0] for T in T_w_c])
+    np.testing.assert_allclose(triangulate(CAMERA, T_w_c, uv, method), p_w, atol=1e-9)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_dlt_matches_opencv_for_two_views(seed: int) -> None:
+    """Two views with 0.5 px of pixel noise: ``method="dlt"`` against ``cv2.triangulatePoints``
+    given the same normalised projections ``[R_c_w | t_c_w]`` (the same linear system)."""
+    rng = np.random.default_rng(100 + seed)
+    p_w = rng.uniform(-5.0, 5.0, 3)
+    T_w_c = _views(rng, p_w, 2, baseline_m=3.0)
+    uv = np.array([_project(T, p_w)[0] for T in T_w_c]) + rng.normal(0.0, 0.5, (2, 2))
+    ours = triangulate(CAMERA, T_w_c, uv, "dlt")
+    P = [se3.invert(T)[:3, :] for T in T_w_c]
+    x = (uv - [CAMERA.cx, CAMERA.cy]) / [CAMERA.fx, CAMERA.fy]
+    X = cv2.triangulatePoints(P[0], P[1], x[0].reshape(2, 1), x[1].reshape(2, 1))
+    np.testing.assert_allclose(ours, X[:3, 0] / X[3, 0], atol=1e-9 * np.linalg.norm(ours) + 1e-9)
+
+
+def test_triangulate_refuses_degenerate_views() -> None:
+    """Rays within the parallax limit, a point behind the cameras, too few views, bad shapes."""
+    p_w = np.array([10.0, 0.0, 0.5])
+    T_w_c = np.array([_look_at(np.array([0.0, y, 2.0]), p_w) for y in (0.0, 0.05)])
+    uv = np.array([_project(T, p_w)[0] for T in T_w_c])
+    assert parallax_deg(CAMERA.rays(uv)) < 1.0  # same pixels, rays in camera frames: near 0
+    with pytest.raises(ValueError, match=r"degenerate views: the rays meet at 0\.\d+ deg"):
+        triangulate(CAMERA, T_w_c, uv)
+    # Rays that diverge: the least-squares point lies behind the cameras.
+    T_w_c = np.array(
+        [_look_at(np.array([0.0, y, 2.0]), np.array([10.0, 3 * y, 0.5])) for y in (-2.0, 2.0)]
+    )
+    centre_uv = np.array([[CAMERA.cx, CAMERA.cy]] * 2)
+    with pytest.raises(ValueError, match="behind camera"):
+        triangulate(CAMERA, T_w_c, centre_uv)
+    with pytest.raises(ValueError, match="at least 2 views"):
+        triangulate(CAMERA, T_w_c[:1], centre_uv[:1])
+    with pytest.raises(ValueError, match="uv must have shape"):
+        triangulate(CAMERA, T_w_c, centre_uv[:1])
+    with pytest.raises(ValueError, match="method"):
+        triangulate(CAMERA, T_w_c, centre_uv, "optimal")
+
+
+@pytest.mark.parametrize("seed", range(5))
+@pytest.mark.parametrize("planar", [False, True])
+def test_pnp_exact_projections(seed: int, planar: bool) -> None:
+    """Noise-free pixels of 4-12 random points (on a plane, or not) in front of a random camera:
+    the pose back to 1e-9, residuals at rounding level; SQPnP, and IPPE for the plane."""
+    rng = np.random.default_rng(200 + seed)
+    target = rng.uniform(-2, 2, 3)
+    offset = np.array([-rng.uniform(6, 12), rng.uniform(-3, 3), rng.uniform(1, 4)])
+    T_w_c = _look_at(target + offset, target)
+    n = int(rng.integers(4, 13))
+    p_w = target + rng.uniform(-2.0, 2.0, (n, 3))
+    if planar:
+        p_w[:, 2] = target[2]
+    uv = _project(T_w_c, p_w)
+    for method in ("sqpnp", "ippe") if planar else ("sqpnp",):
+        result = camera_pose_from_points(CAMERA, p_w, uv, method)
+        np.testing.assert_allclose(result.T_w_c, T_w_c, atol=1e-9)
+        assert result.rms_px < 1e-6
+
+
+def test_pnp_with_pixel_noise_leaves_residuals_at_the_noise_level() -> None:
+    """0.5 px of pixel noise on each coordinate of 30 points: the RMS of the 2-D residuals of
+    the refined pose is ``0.5 sqrt(2)`` less the 6 parameters fitted (``sqrt((2N - 6) / 2N)``),
+    within 3 sampling standard errors."""
+    rng = np.random.default_rng(3)
+    T_w_c = _look_at(np.array([-10.0, 1.0, 3.0]), np.zeros(3))
+    p_w = rng.uniform(-3.0, 3.0, (30, 3))
+    uv = _project(T_w_c, p_w) + rng.normal(0.0, 0.5, (30, 2))
+    result = camera_pose_from_points(CAMERA, p_w, uv)
+    expected = 0.5 * np.sqrt(2.0 * (60 - 6) / 60)
+    # The RMS of 54 effective squared normals: relative standard error 1 / sqrt(2 * 54).
+    assert result.rms_px == pytest.approx(expected, rel=3.0 / np.sqrt(108))
+
+
+def test_pnp_refuses_degenerate_points() -> None:
+    T_w_c = _look_at(np.array([-10.0, 0.0, 3.0]), np.zeros(3))
+    line = np.column_stack([np.linspace(-2, 2, 6), np.zeros(6), np.zeros(6)])
+    with pytest.raises(ValueError, match="one line"):
+        camera_pose_from_points(CAMERA, line, _project(T_w_c, line))
+    three = np.array([[0.0, 0, 0], [0, 1, 0], [0, 0, 1]])
+    with pytest.raises(ValueError, match="at least 4 points"):
+        camera_pose_from_points(CAMERA, three, _project(T_w_c, three))
+    cube = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=float)
+    with pytest.raises(ValueError, match="coplanar"):
+        camera_pose_from_points(CAMERA, cube, _project(T_w_c, cube), "ippe")
+    with pytest.raises(ValueError, match="method"):
+        camera_pose_from_points(CAMERA, cube, _project(T_w_c, cube), "dls")
+
+
+CONES_W = np.array(
+    [
+        [8.0, 0.0, 0.0],
+        [9.0, 2.5, 0.0],
+        [11.0, -2.0, 0.0],
+        [13.0, 1.0, 0.0],
+        [7.0, -1.5, 0.0],
+        [12.0, 3.5, 0.0],
+    ]
+)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_camera_pose_from_cones_on_rendered_frames(seed: int) -> None:
+    """Six cones rendered from a random drone pose: every detection matched to the cone the
+    simulator says it is (the nearest true apex projection), the pose's RMS residual under a
+    pixel, and the true apexes reprojected by the recovered pose within 2 px of the truth's
+    own projections (the pose explains the scene as well as the pixels allow)."""
+    rng = np.random.default_rng(300 + seed)
+    world = World.from_config(
+        SceneConfig(cones_w=tuple(map(tuple, CONES_W)), camera=CameraConfig(pitch_down_deg=20.0))
+    )
+    world.set_pose(
+        se3.make(
+            so3.from_rpy(*rng.uniform(-0.1, 0.1, 2), rng.uniform(-0.2, 0.2)),
+            [rng.uniform(-2, 1), rng.uniform(-1, 1), rng.uniform(2, 4)],
+        )
+    )
+    with Renderer(world) as renderer:
+        detections = detect_cones(renderer.render(depth=False).rgb)
+    result, matches = camera_pose_from_cones(world.camera, CONES_W, detections)
+    apex_w = CONES_W + APEX_OFFSET
+    true_uv = _project(world.T_w_c, apex_w)
+    for d, c in matches.items():
+        nearest = int(np.argmin(np.linalg.norm(true_uv - detections[d].apex_uv, axis=1)))
+        assert c == nearest
+    assert len(matches) >= 4
+    assert result.rms_px < 1.0
+    in_view = np.isfinite(true_uv).all(axis=1)
+    reprojected = _project(result.T_w_c, apex_w)
+    assert np.max(np.linalg.norm(reprojected[in_view] - true_uv[in_view], axis=1)) < 2.0
+
+
+def _fake_detection(apex_uv: np.ndarray) -> ConeDetection:
+    """A detection with only its apex set (what ``camera_pose_from_cones`` reads)."""
+    apex = np.asarray(apex_uv, dtype=np.float64)
+    return ConeDetection(
+        bbox=(int(apex[0]) - 5, int(apex[1]), 10, 20),
+        area_px=100,
+        mask=np.ones((20, 10), dtype=bool),
+        apex_uv=apex,
+        base_uv=apex + np.array([0.0, 20.0]),
+        centroid_uv=apex + np.array([0.0, 13.0]),
+        touches_border=False,
+        apex_from_edges=True,
+    )
+
+
+def test_camera_pose_from_cones_refuses_a_symmetric_map() -> None:
+    """Four cones on a square seen from straight above its centre: a quarter turn of the camera
+    gives the same image, so the match is ambiguous and refused."""
+    square = np.array([[1.0, 1.0, 0.0], [-1.0, 1.0, 0.0], [-1.0, -1.0, 0.0], [1.0, -1.0, 0.0]])
+    T_w_c = se3.make(np.diag([1.0, -1.0, -1.0]), [0.0, 0.0, 8.0])  # looking straight down
+    uv = _project(T_w_c, square + APEX_OFFSET)
+    with pytest.raises(ValueError, match="ambiguous"):
+        camera_pose_from_cones(CAMERA, square, [_fake_detection(p) for p in uv])
+
+
+def test_camera_pose_from_cones_needs_four_cones() -> None:
+    with pytest.raises(ValueError, match="at least 4 cones"):
+        camera_pose_from_cones(CAMERA, CONES_W, [_fake_detection([320.0, 240.0])] * 3)

@@ -1,0 +1,346 @@
+"""Several views: a point triangulated from N cameras, a camera's pose from known points (PnP).
+
+Triangulation (Hartley & Zisserman, *Multiple View Geometry*, 2nd ed., ch. 12):
+
+- **midpoint** (default): the point nearest to every viewing ray in the least-squares sense,
+  ``p = (sum_i P_i)^-1 sum_i P_i c_i`` with ``P_i = I - d_i d_i^T`` the projection across ray
+  ``i`` (centre ``c_i``, unit direction ``d_i``). With noisy camera poses it is the better N-view
+  estimate (Nasiri et al., "A critical review of N-view triangulation", 2021).
+- **dlt**: the homogeneous linear system ``x_i P_i^3 - P_i^1 = 0`` (H&Z eq. 12.2) solved by SVD,
+  in normalised image coordinates ``K^-1 [u, v, 1]`` for conditioning.
+
+Both refuse degenerate views: a point is only fixed by rays that cross at an angle, and the
+largest angle between any two rays (the parallax) must reach ``min_parallax_deg``.
+
+The pose of a camera from world points and their pixels is OpenCV's ``solvePnP`` with SQPnP
+(Terzakis & Lourakis 2020; globally optimal, any number of points >= 3, planar or not) or
+IPPE (Collins & Bartoli 2014; planar points), then ``solvePnPRefineLM``. OpenCV's own notes
+mark DLS and UPnP as broken and ``SOLVEPNP_ITERATIVE`` can report success with absurd
+reprojection errors: neither is offered. The residual reprojection error comes with the pose,
+so that a caller can tell a good fit from a bad one.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from vnav import se3
+from vnav.camera import PinholeCamera
+from vnav.cone import TRAFFIC_CONE, ConeModel
+from vnav.detect import ConeDetection
+
+__all__ = [
+    "MIN_PARALLAX_DEG",
+    "PnPResult",
+    "camera_pose_from_cones",
+    "camera_pose_from_points",
+    "parallax_deg",
+    "triangulate",
+]
+
+MIN_PARALLAX_DEG = 1.0
+"""The smallest angle between two viewing rays that ``triangulate`` accepts by default: at 1 deg
+a 0.5 px error on a 415 px focal length (the default camera) moves the point by about 7% of
+its range along the rays."""
+
+
+def _check_views(camera: PinholeCamera, T_w_c: object, uv: object) -> tuple[np.ndarray, np.ndarray]:
+    T = se3.check_transform(T_w_c, "T_w_c")
+    if T.ndim != 3:
+        raise ValueError(f"T_w_c must be a stack of poses, shape (N, 4, 4), got {T.shape}")
+    px = np.asarray(uv, dtype=np.float64)
+    if px.shape != (T.shape[0], 2):
+        raise ValueError(
+            f"uv must have shape (N, 2) with N = {T.shape[0]} (one pixel per pose), got {px.shape}"
+        )
+    if not np.isfinite(px).all():
+        raise ValueError("uv must be finite; it holds NaN or inf")
+    if T.shape[0] < 2:
+        raise ValueError(f"triangulation needs at least 2 views, got {T.shape[0]}")
+    return T, px
+
+
+def _rays_w(camera: PinholeCamera, T: np.ndarray, px: np.ndarray) -> np.ndarray:
+    """Unit world rays through the pixels, (N, 3)."""
+    rays_c = camera.rays(px)
+    return np.einsum("nij,nj->ni", T[:, :3, :3], rays_c)
+
+
+def parallax_deg(rays_w: np.ndarray) -> float:
+    """The largest angle between any two of the unit rays ``rays_w`` (N, 3), degrees."""
+    cos = np.clip(rays_w @ rays_w.T, -1.0, 1.0)
+    return math.degrees(float(np.arccos(cos.min())))
+
+
+def triangulate(
+    camera: PinholeCamera,
+    T_w_c: object,
+    uv: object,
+    method: str = "midpoint",
+    *,
+    min_parallax_deg: float = MIN_PARALLAX_DEG,
+) -> np.ndarray:
+    """The world point seen at pixel ``uv[i]`` by the camera at pose ``T_w_c[i]``.
+
+    Parameters
+    ----------
+    camera : PinholeCamera
+    T_w_c : array_like, shape (N, 4, 4)
+        The camera (optical frame) poses, N >= 2.
+    uv : array_like, shape (N, 2)
+        The point's pixel in each view.
+    method : {"midpoint", "dlt"}
+    min_parallax_deg : float
+        Refuse views whose rays are all closer than this.
+
+    Returns
+    -------
+    p_w : ndarray, shape (3,)
+
+    Raises
+    ------
+    ValueError
+        On malformed input, an unknown method, views with too little parallax (the message
+        gives the angle), or a point that comes out behind a camera.
+    """
+    if method not in ("midpoint", "dlt"):
+        raise ValueError(f"method must be 'midpoint' or 'dlt', got {method!r}")
+    T, px = _check_views(camera, T_w_c, uv)
+    rays = _rays_w(camera, T, px)
+    angle = parallax_deg(rays)
+    if not angle >= min_parallax_deg:
+        raise ValueError(
+            f"degenerate views: the rays meet at {angle:.3g} deg at most, below "
+            f"{min_parallax_deg:g} deg; the baseline is too short for the range (move across "
+            "the line of sight)"
+        )
+    centres = T[:, :3, 3]
+    p_w = _midpoint(centres, rays) if method == "midpoint" else _dlt(camera, T, px)
+    depths = np.einsum("ni,ni->n", p_w - centres, T[:, :3, 2])
+    if not np.all(depths > 0.0):
+        i = int(np.argmin(depths))
+        raise ValueError(
+            f"the triangulated point lies behind camera {i} (depth {depths[i]:.3g} m): the rays "
+            "do not meet in front of the cameras"
+        )
+    return p_w
+
+
+def _midpoint(centres: np.ndarray, rays: np.ndarray) -> np.ndarray:
+    """``(sum P_i)^-1 sum P_i c_i``, ``P_i = I - d_i d_i^T``."""
+    P = np.eye(3) - np.einsum("ni,nj->nij", rays, rays)
+    return np.linalg.solve(P.sum(axis=0), np.einsum("nij,nj->i", P, centres))
+
+
+def _dlt(camera: PinholeCamera, T: np.ndarray, px: np.ndarray) -> np.ndarray:
+    """H&Z eq. 12.2 in normalised coordinates: rows ``x P^3 - P^1``, ``y P^3 - P^2``."""
+    T_c_w = se3.invert(T)
+    P = T_c_w[:, :3, :]  # (N, 3, 4): [R_c_w | t_c_w]
+    x = (px[:, 0] - camera.cx) / camera.fx
+    y = (px[:, 1] - camera.cy) / camera.fy
+    A = np.concatenate([x[:, None] * P[:, 2] - P[:, 0], y[:, None] * P[:, 2] - P[:, 1]])
+    _, _, Vt = np.linalg.svd(A)
+    X = Vt[-1]
+    if abs(X[3]) < 1e-12 * np.abs(X).max():
+        raise ValueError("the DLT solution is a point at infinity: the rays are parallel")
+    return X[:3] / X[3]
+
+
+@dataclass(frozen=True)
+class PnPResult:
+    """A camera pose from points, with how well it explains them.
+
+    Attributes
+    ----------
+    T_w_c : ndarray, shape (4, 4)
+    rms_px : float
+        Root-mean-square reprojection error over the points, pixels.
+    residuals_px : ndarray, shape (N,)
+        Each point's reprojection error, pixels.
+    """
+
+    T_w_c: np.ndarray
+    rms_px: float
+    residuals_px: np.ndarray
+
+
+def camera_pose_from_points(
+    camera: PinholeCamera, p_w: object, uv: object, method: str = "sqpnp"
+) -> PnPResult:
+    """The camera pose that projects the world points ``p_w`` onto the pixels ``uv``.
+
+    SQPnP (or IPPE for coplanar points) for the global solution, then Levenberg-Marquardt on
+    the reprojection error (``cv2.solvePnPRefineLM``).
+
+    Parameters
+    ----------
+    camera : PinholeCamera
+    p_w : array_like, shape (N, 3)
+        World points, N >= 4 (three points admit up to four poses).
+    uv : array_like, shape (N, 2)
+        Their pixels.
+    method : {"sqpnp", "ippe"}
+
+    Returns
+    -------
+    PnPResult
+
+    Raises
+    ------
+    ValueError
+        On malformed input, fewer than 4 points, points on one line (the rotation about it is
+        free), ``"ippe"`` with points off a plane, a solver failure, or a pose that puts a
+        point behind the camera.
+    """
+    flags = {"sqpnp": cv2.SOLVEPNP_SQPNP, "ippe": cv2.SOLVEPNP_IPPE}
+    if method not in flags:
+        raise ValueError(f"method must be one of {sorted(flags)}, got {method!r}")
+    P = np.asarray(p_w, dtype=np.float64)
+    px = np.asarray(uv, dtype=np.float64)
+    if P.ndim != 2 or P.shape[1] != 3:
+        raise ValueError(f"p_w must have shape (N, 3), got {P.shape}")
+    if px.shape != (P.shape[0], 2):
+        raise ValueError(f"uv must have shape ({P.shape[0]}, 2), got {px.shape}")
+    if not (np.isfinite(P).all() and np.isfinite(px).all()):
+        raise ValueError("p_w and uv must be finite")
+    if P.shape[0] < 4:
+        raise ValueError(
+            f"a camera pose needs at least 4 points, got {P.shape[0]} "
+            "(three admit up to four poses)"
+        )
+    singular = np.linalg.svd(P - P.mean(axis=0), compute_uv=False)
+    scale = max(float(singular[0]), 1e-12)
+    if singular[1] < 1e-6 * scale:
+        raise ValueError("the points lie on one line: the rotation about it is undetermined")
+    if method == "ippe" and singular[2] > 1e-6 * scale:
+        raise ValueError("method 'ippe' needs coplanar points; use 'sqpnp'")
+    result = _pnp(camera, P, px, flags[method], refine=True)
+    if result is None:
+        raise ValueError(f"solvePnP ({method}) found no pose with every point in front")
+    return result
+
+
+def _pnp(
+    camera: PinholeCamera, P: np.ndarray, px: np.ndarray, flag: int, *, refine: bool
+) -> PnPResult | None:
+    """``cv2.solvePnP`` (then ``solvePnPRefineLM`` if ``refine``) on validated input; None if
+    it fails or puts a point behind the camera."""
+    ok, rvec, tvec = cv2.solvePnP(P, px, camera.K, None, flags=flag)
+    if not ok:
+        return None
+    if refine:
+        rvec, tvec = cv2.solvePnPRefineLM(P, px, camera.K, None, rvec, tvec, _LM_CRITERIA)
+    R_c_w, _ = cv2.Rodrigues(rvec)
+    T_c_w = se3.make(R_c_w, tvec.reshape(3))
+    p_c = P @ R_c_w.T + T_c_w[:3, 3]
+    if not np.all(p_c[:, 2] > 0.0):
+        return None
+    residuals = np.linalg.norm(camera.project(p_c) - px, axis=1)
+    return PnPResult(se3.invert(T_c_w), float(np.sqrt(np.mean(residuals**2))), residuals)
+
+
+_LM_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 50, 1e-14)
+"""Levenberg-Marquardt's stop: OpenCV's default (20 steps, float32 epsilon) leaves ~1e-6 px."""
+
+MATCH_GATE_PX = 8.0
+"""``camera_pose_from_cones``: a cone's apex matches a detection within this many pixels of
+its projection under the candidate pose."""
+
+
+def camera_pose_from_cones(
+    camera: PinholeCamera,
+    cones_w: object,
+    detections: Sequence[ConeDetection],
+    cone: ConeModel = TRAFFIC_CONE,
+) -> tuple[PnPResult, dict[int, int]]:
+    """The camera pose from detected cones of a known map, with the matches it found.
+
+    Each cone gives one sharp world point, its apex ``cone_w + (0, 0, H)``, seen at the
+    detection's ``apex_uv`` (the detector's pose-free apex). Which detection is which cone is
+    not known: every ordered choice of 4 cones for 4 detections is solved (SQPnP) and scored by
+    how many apexes it then projects within ``MATCH_GATE_PX`` of a detection; the best is
+    refined on all its matches. A cone layout that two poses explain equally well (a symmetric
+    map seen from where the symmetry holds) is refused rather than guessed.
+
+    Parameters
+    ----------
+    camera : PinholeCamera
+    cones_w : array_like, shape (M, 3)
+        Base centres of the map's cones, M >= 4.
+    detections : sequence of ConeDetection
+        At least 4, clear of the image border.
+    cone : ConeModel
+
+    Returns
+    -------
+    PnPResult
+        The pose refined on every matched cone.
+    matches : dict of int to int
+        Detection index -> cone index.
+
+    Raises
+    ------
+    ValueError
+        Fewer than 4 usable detections or cones, no pose that explains at least 4 of them, or
+        an ambiguous match.
+    """
+    C = np.asarray(cones_w, dtype=np.float64)
+    if C.ndim != 2 or C.shape[1] != 3:
+        raise ValueError(f"cones_w must have shape (M, 3), got {C.shape}")
+    apex_w = C + np.array([0.0, 0.0, cone.height_m])
+    usable = [i for i, d in enumerate(detections) if not d.touches_border]
+    if len(usable) < 4 or len(C) < 4:
+        raise ValueError(
+            f"a pose from cones needs at least 4 cones seen whole, got {len(usable)} detections "
+            f"clear of the border and {len(C)} cones in the map"
+        )
+    uv = np.array([detections[i].apex_uv for i in usable])
+    # Seed with the 4 largest detections (nearest, best measured).
+    seeds = sorted(range(len(usable)), key=lambda k: -detections[usable[k]].area_px)[:4]
+    scored: list[tuple[int, float, dict[int, int], PnPResult]] = []
+    for chosen in itertools.permutations(range(len(C)), 4):
+        trial = _pnp(camera, apex_w[list(chosen)], uv[seeds], cv2.SOLVEPNP_SQPNP, refine=False)
+        if trial is None or trial.rms_px > MATCH_GATE_PX:
+            continue
+        found = _match(camera, trial.T_w_c, apex_w, uv)
+        if len(found) >= 4:
+            residual = float(np.mean([r for r, _ in found.values()]))
+            scored.append((len(found), residual, {k: c for k, (_, c) in found.items()}, trial))
+    if not scored:
+        raise ValueError("no pose projects 4 or more of the map's cones onto the detections")
+    scored.sort(key=lambda s: (-s[0], s[1]))
+    best = scored[0]
+    for other in scored[1:]:
+        if other[0] == best[0] and other[2] != best[2] and other[1] < 2.0 * best[1] + 0.5:
+            raise ValueError(
+                "ambiguous: two different matches of detections to cones fit equally well "
+                "(the map looks the same from two poses)"
+            )
+    matches = {usable[k]: c for k, c in best[2].items()}
+    ks = list(best[2])
+    result = camera_pose_from_points(camera, apex_w[[best[2][k] for k in ks]], uv[ks])
+    return result, matches
+
+
+def _match(
+    camera: PinholeCamera, T_w_c: np.ndarray, apex_w: np.ndarray, uv: np.ndarray
+) -> dict[int, tuple[float, int]]:
+    """Detection index -> (pixel distance, cone index): mutual nearest within the gate."""
+    T_c_w = se3.invert(T_w_c)
+    p_c = apex_w @ T_c_w[:3, :3].T + T_c_w[:3, 3]
+    front = p_c[:, 2] > 0.0
+    proj = np.full((len(apex_w), 2), np.inf)
+    proj[front] = camera.project(p_c[front])
+    dist = np.linalg.norm(uv[:, None, :] - proj[None, :, :], axis=2)  # (detections, cones)
+    out = {}
+    for k in range(len(uv)):
+        c = int(np.argmin(dist[k]))
+        if dist[k, c] <= MATCH_GATE_PX and int(np.argmin(dist[:, c])) == k:
+            out[k] = (float(dist[k, c]), c)
+    return out
