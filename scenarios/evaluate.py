@@ -230,7 +230,10 @@ def _compare(
     p_c_true = se3.apply(T_c_w, p_true_w)
     range_m = float(np.linalg.norm(p_c_true))
     errors_m = {m: float(metrics.position_error(p_true_w, p)[0]) for m, p in estimates_w.items()}
-    nees_by_method = {m: nees(p - p_true_w, covariances_w[m]) for m, p in estimates_w.items()}
+    # A covariance of rank 0 claims an exact estimate: it has no NEES (0 degrees of freedom),
+    # and counting it would make the band's count differ from its degrees of freedom.
+    scored = {m: nees(p - p_true_w, covariances_w[m]) for m, p in estimates_w.items()}
+    nees_by_method = {m: v for m, v in scored.items() if v[1] > 0}
     in_contract = cone_index in in_view and CONTRACT_DOMAIN.contains_range(range_m)
     return DetectionRecord(
         detection,

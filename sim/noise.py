@@ -2,7 +2,8 @@
 
 The scenario's ``[noise]`` table (``scenarios.spec.Noise``) sets the figures; every draw comes
 from a generator seeded by the run's seed. The truth is never touched: these functions return
-noisy copies. The estimator is told the same figures (``vnav.sensor_noise.SensorNoise``) and
+noisy copies, or, with their noise off, the input itself (not a copy: treat it as
+read-only). The estimator is told the same figures (``vnav.sensor_noise.SensorNoise``) and
 propagates them into each estimate's covariance.
 """
 
