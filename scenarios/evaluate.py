@@ -151,6 +151,7 @@ def evaluate_tick(
         T_w_b=truth.T_w_b,
         T_w_b_est=T_w_b_est,
         T_b_c=truth.T_b_c,
+        T_b_c_est=T_b_c_est,
         quat_xyzw=truth.quat_xyzw,
         rpy_rad=rpy_rad,
         gimbal_locked=locked,

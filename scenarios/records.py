@@ -160,7 +160,10 @@ class TickRecord:
     T_w_b_est : ndarray, shape (4, 4)
         The body pose the estimator was given (the truth plus the scenario's pose noise).
     T_b_c : ndarray, shape (4, 4)
-        The camera mount at this tick (optical frame in the body).
+        The true camera mount at this tick (optical frame in the body).
+    T_b_c_est : ndarray, shape (4, 4)
+        The mount the estimator was told: the declared one (``[camera]``), with the run's
+        extrinsic noise (``[noise]``); the truth is ``[camera.mount_error]`` away from it.
     quat_xyzw : ndarray, shape (4,)
         True attitude ``R_w_b`` as a quaternion, scalar last.
     rpy_rad : ndarray, shape (3,)
@@ -182,6 +185,7 @@ class TickRecord:
     T_w_b: np.ndarray
     T_w_b_est: np.ndarray
     T_b_c: np.ndarray
+    T_b_c_est: np.ndarray
     quat_xyzw: np.ndarray
     rpy_rad: np.ndarray
     gimbal_locked: bool

@@ -162,7 +162,7 @@ def _run_ticks(
                 d.T_w_b_at_exposure,
                 spec.scene.zfar_m,
                 image_timing,
-                T_b_c_est=flow.mount_error @ image.truth.T_b_c,
+                T_b_c_est=flow.mount_error @ image.truth.T_b_c @ flow.true_to_declared,
                 noise=flow.sensor_noise,
                 cov_T_w_b=flow.pose_covariance(d),
                 cov_T_b_c=flow.cov_T_b_c,
@@ -235,6 +235,9 @@ class _Flow:
             n.extrinsic_std_m, n.extrinsic_std_deg, np.random.default_rng(mount_seq)
         )
         self.cov_T_b_c = mount_covariance(n.extrinsic_std_m, math.radians(n.extrinsic_std_deg))
+        # The scenario's fixed mount error: T_b_c_true = T_b_c_declared @ E, so the estimator's
+        # declared mount is the true one times E^-1 (then the per-run extrinsic noise).
+        self.true_to_declared = se3.invert(spec.scene.camera.mount_error.T)
         self.sensor_noise = SensorNoise(n.pixel_std_px, n.depth_std_m, n.depth_std_per_m2)
         self.streams = Streams(
             pose_latency_s=t.pose_latency_s,

@@ -194,13 +194,43 @@ _CAMERA_DOCS = {
     "width": "image width, px",
     "height": "image height, px",
 }
-CAMERA: tuple[Key, ...] = tuple(
-    Key(f.name, "any", _CAMERA_DOCS[f.name], getattr(CameraConfig(), f.name))
-    if f.name != "position_b"
-    else Key(f.name, "vector3", _CAMERA_DOCS[f.name], CameraConfig().position_b, -10.0, 10.0)
-    for f in fields(CameraConfig)
+_MOUNT_ERROR_KEY = Key(
+    "mount_error",
+    "any",
+    "table: the true mount = the declared one above, then this error (camera frame)",
+    None,
+)
+CAMERA: tuple[Key, ...] = (
+    *(
+        Key(f.name, "any", _CAMERA_DOCS[f.name], getattr(CameraConfig(), f.name))
+        if f.name != "position_b"
+        else Key(f.name, "vector3", _CAMERA_DOCS[f.name], CameraConfig().position_b, -10.0, 10.0)
+        for f in fields(CameraConfig)
+        if f.name != "mount_error"
+    ),
+    _MOUNT_ERROR_KEY,
 )
 """Validated by ``sim.config.CameraConfig``, whose defaults these are (the mount within 10 m)."""
+
+MOUNT_ERROR: tuple[Key, ...] = (
+    Key(
+        "position_m",
+        "vector3",
+        "translation in the camera frame (x right, y down, z fwd), m",
+        (0.0, 0.0, 0.0),
+        -1.0,
+        1.0,
+    ),
+    Key(
+        "rpy_deg",
+        "vector3",
+        "rotation about the camera's axes, " + "[roll, pitch, yaw], deg",
+        (0.0, 0.0, 0.0),
+        -45.0,
+        45.0,
+    ),
+)
+"""``[camera.mount_error]``: ``sim.config.MountError``."""
 
 CONE: tuple[Key, ...] = (
     Key("position_w", "vector3", "base centre in the world, z = 0, m", REQUIRED, -MAX_M, MAX_M),
@@ -338,7 +368,8 @@ def example_toml() -> str:
         "name": "my-scene",
         "description": "one line",
         "camera_rate_hz": 10.0,
-        "camera": {k.name: k.default for k in CAMERA},
+        "camera": {k.name: k.default for k in CAMERA if k.name != "mount_error"}
+        | {"mount_error": {k.name: list(k.default) for k in MOUNT_ERROR}},
         "cones": [{"position_w": [6.0, 1.0, 0.0]}],
         "flight": {
             "mode": "kinematic",

@@ -394,6 +394,12 @@ def from_dict(data: dict[str, Any], where: str = "<scenario>") -> ScenarioSpec:
             where, "name", f"must be at most {schema.MAX_NAME_CHARS} characters, got {len(name)}"
         )
     camera_table = _read(top["camera"] or {}, schema.CAMERA, where, "camera")
+    if camera_table["mount_error"] is None:
+        del camera_table["mount_error"]
+    else:
+        camera_table["mount_error"] = _read(
+            camera_table["mount_error"], schema.MOUNT_ERROR, where, "camera.mount_error"
+        )
     try:
         camera = CameraConfig.from_dict(camera_table)
     except ValueError as exc:

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from vnav import frames, se3
+from vnav import frames, se3, so3
 
 
 @dataclass(frozen=True)
@@ -95,6 +95,46 @@ def _check_names(cls: type, kwargs: dict[str, Any]) -> None:
         )
 
 
+MAX_MOUNT_ERROR_M = 1.0
+MAX_MOUNT_ERROR_DEG = 45.0
+
+
+@dataclass(frozen=True)
+class MountError:
+    """How the camera's true mount differs from the declared one: the true mount is the
+    declared mount, then this transform in the (declared) camera frame,
+    ``T_b_c_true = T_b_c_declared @ E``.
+
+    Attributes
+    ----------
+    position_m : tuple of 3 float
+        ``E``'s translation in the camera (optical) frame, metres, each within 1 m.
+    rpy_deg : tuple of 3 float
+        ``E``'s rotation ``Rz(yaw) Ry(pitch) Rx(roll)`` about the camera's axes, degrees, each
+        within 45.
+    """
+
+    position_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    rpy_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        for name, limit in (("position_m", MAX_MOUNT_ERROR_M), ("rpy_deg", MAX_MOUNT_ERROR_DEG)):
+            values = _vector(getattr(self, name), 3, f"mount_error.{name}")
+            if not all(abs(v) <= limit for v in values):
+                raise ValueError(f"mount_error.{name} must be within +-{limit:g}, got {values}")
+            object.__setattr__(self, name, values)
+
+    @property
+    def T(self) -> np.ndarray:
+        """``E``, (4, 4)."""
+        roll, pitch, yaw = (math.radians(a) for a in self.rpy_deg)
+        return se3.make(so3.from_rpy(roll, pitch, yaw), np.asarray(self.position_m))
+
+    @property
+    def is_zero(self) -> bool:
+        return not any(self.position_m) and not any(self.rpy_deg)
+
+
 @dataclass(frozen=True)
 class CameraConfig:
     """The onboard camera: where it sits on the body and what it images.
@@ -110,6 +150,9 @@ class CameraConfig:
         Vertical field of view, degrees, in (0, 180).
     width, height : int
         Image size in pixels.
+    mount_error : MountError
+        The true mount's error from the declared one above (what the estimator is told):
+        the simulator renders through ``T_b_c``, the true mount.
     """
 
     position_b: tuple[float, float, float] = (0.15, 0.0, 0.05)
@@ -117,6 +160,7 @@ class CameraConfig:
     fovy_deg: float = 60.0
     width: int = 640
     height: int = 480
+    mount_error: MountError = field(default_factory=MountError)
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
@@ -131,16 +175,30 @@ class CameraConfig:
         set_(self, "fovy_deg", fovy)
         set_(self, "width", _size(self.width, "CameraConfig.width"))
         set_(self, "height", _size(self.height, "CameraConfig.height"))
+        if isinstance(self.mount_error, dict):
+            _check_names(MountError, self.mount_error)
+            set_(self, "mount_error", MountError(**self.mount_error))
+        elif not isinstance(self.mount_error, MountError):
+            raise ValueError(f"CameraConfig.mount_error must be a table, got {self.mount_error!r}")
 
     @property
-    def T_b_c(self) -> np.ndarray:
-        """(4, 4) the camera's optical frame in the body frame (``vnav.frames.mount_rotation``)."""
+    def T_b_c_declared(self) -> np.ndarray:
+        """(4, 4) the declared mount: the optical frame in the body frame from ``position_b``
+        and ``pitch_down_deg`` (``vnav.frames.mount_rotation``)."""
         R_b_c = frames.mount_rotation(math.radians(self.pitch_down_deg))
         return se3.make(R_b_c, np.asarray(self.position_b, dtype=np.float64))
 
+    @property
+    def T_b_c(self) -> np.ndarray:
+        """(4, 4) the true mount, ``T_b_c_declared @ mount_error.T``: what MuJoCo renders."""
+        if self.mount_error.is_zero:
+            return self.T_b_c_declared
+        return self.T_b_c_declared @ self.mount_error.T
+
     @classmethod
     def from_dict(cls, values: dict[str, Any]) -> CameraConfig:
-        """Build from a mapping, rejecting unknown keys with a ValueError."""
+        """Build from a mapping (``mount_error`` a mapping too), rejecting unknown keys with a
+        ValueError."""
         _check_names(cls, values)
         return cls(**values)
 

@@ -146,7 +146,7 @@ def build_spec(cfg: SceneConfig, cone: ConeModel = TRAFFIC_CONE) -> mujoco.MjSpe
     R_b_glc = cam_cfg.T_b_c[:3, :3] @ frames.R_GLC_RDF
     drone.add_camera(
         name=names.ONBOARD_CAMERA,
-        pos=list(cam_cfg.position_b),
+        pos=list(cam_cfg.T_b_c[:3, 3]),
         quat=list(_mat_to_quat_wxyz(R_b_glc)),
         fovy=cam_cfg.fovy_deg,
     )
@@ -279,6 +279,8 @@ class World:
     def set_camera_position_b(self, position_b) -> None:
         """Slide the onboard camera on the body to ``position_b`` (FLU, metres), keeping its
         orientation: the lecture's chapter 8 composer moves the camera offset at run time.
+        ``position_b`` is the declared mount's; with a mount error the true camera moves with
+        it (``sim.config.MountError``).
 
         Writes MuJoCo's ``cam_pos`` (a body-relative position, no recompile needed) and the
         mount returned by ``T_b_c``, then recomputes the kinematics.
@@ -291,8 +293,12 @@ class World:
         p_b = np.asarray(position_b, dtype=np.float64)
         if p_b.shape != (3,) or not np.all(np.isfinite(p_b)):
             raise ValueError(f"position_b must be 3 finite numbers, got {position_b!r}")
-        self.model.cam_pos[self.camera_id] = p_b
-        self._T_b_c[:3, 3] = p_b
+        cam_cfg = self.config.camera
+        declared = cam_cfg.T_b_c_declared
+        declared[:3, 3] = p_b
+        true = declared if cam_cfg.mount_error.is_zero else declared @ cam_cfg.mount_error.T
+        self.model.cam_pos[self.camera_id] = true[:3, 3]
+        self._T_b_c = true
         mujoco.mj_forward(self.model, self.data)
 
     @property

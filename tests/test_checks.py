@@ -77,6 +77,7 @@ def _tick(k, cones_in_view, detections, gimbal_locked=False, reference_error_m=N
         T_w_b=T,
         T_w_b_est=T,
         T_b_c=T,
+        T_b_c_est=T,
         quat_xyzw=np.array([0.0, 0.0, 0.0, 1.0]),
         rpy_rad=np.zeros(3),
         gimbal_locked=gimbal_locked,

@@ -115,6 +115,7 @@ def _run(detections: list[DetectionRecord]) -> RunResult:
             T_w_b=T,
             T_w_b_est=T,
             T_b_c=T,
+            T_b_c_est=T,
             quat_xyzw=np.array([0.0, 0.0, 0.0, 1.0]),
             rpy_rad=np.zeros(3),
             gimbal_locked=False,

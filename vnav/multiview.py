@@ -38,6 +38,7 @@ from vnav.detect import ConeDetection
 __all__ = [
     "MIN_PARALLAX_DEG",
     "PnPResult",
+    "camera_pose_from_apexes",
     "camera_pose_from_cones",
     "camera_pose_from_points",
     "parallax_deg",
@@ -303,15 +304,38 @@ def camera_pose_from_cones(
     uv = np.array([detections[i].apex_uv for i in usable])
     # Seed with the 4 largest detections (nearest, best measured).
     seeds = sorted(range(len(usable)), key=lambda k: -detections[usable[k]].area_px)[:4]
-    scored: list[tuple[int, float, dict[int, int], PnPResult]] = []
-    for chosen in itertools.permutations(range(len(C)), 4):
-        trial = _pnp(camera, apex_w[list(chosen)], uv[seeds], cv2.SOLVEPNP_SQPNP, refine=False)
+    result, found = camera_pose_from_apexes(camera, apex_w, uv, seeds)
+    return result, {usable[k]: c for k, c in found.items()}
+
+
+def camera_pose_from_apexes(
+    camera: PinholeCamera, apex_w: object, uv: object, seeds: Sequence[int] | None = None
+) -> tuple[PnPResult, dict[int, int]]:
+    """``camera_pose_from_cones`` on bare points: a map's points ``apex_w`` (M, 3) seen at some
+    of the pixels ``uv`` (K, 2), which is which unknown, K >= 4, M >= 4.
+
+    ``seeds``: the 4 pixels to try every ordered choice of 4 map points on (default: the first
+    4). Returns the refined pose and the matches (pixel index -> map index).
+
+    Raises
+    ------
+    ValueError
+        As ``camera_pose_from_cones``.
+    """
+    P = np.asarray(apex_w, dtype=np.float64).reshape(-1, 3)
+    px = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+    if len(px) < 4 or len(P) < 4:
+        raise ValueError(f"a pose needs at least 4 points and 4 pixels, got {len(P)} and {len(px)}")
+    seeds = list(range(4)) if seeds is None else list(seeds)
+    scored: list[tuple[int, float, dict[int, int]]] = []
+    for chosen in itertools.permutations(range(len(P)), 4):
+        trial = _pnp(camera, P[list(chosen)], px[seeds], cv2.SOLVEPNP_SQPNP, refine=False)
         if trial is None or trial.rms_px > MATCH_GATE_PX:
             continue
-        found = _match(camera, trial.T_w_c, apex_w, uv)
+        found = _match(camera, trial.T_w_c, P, px)
         if len(found) >= 4:
             residual = float(np.mean([r for r, _ in found.values()]))
-            scored.append((len(found), residual, {k: c for k, (_, c) in found.items()}, trial))
+            scored.append((len(found), residual, {k: c for k, (_, c) in found.items()}))
     if not scored:
         raise ValueError("no pose projects 4 or more of the map's cones onto the detections")
     scored.sort(key=lambda s: (-s[0], s[1]))
@@ -322,10 +346,9 @@ def camera_pose_from_cones(
                 "ambiguous: two different matches of detections to cones fit equally well "
                 "(the map looks the same from two poses)"
             )
-    matches = {usable[k]: c for k, c in best[2].items()}
     ks = list(best[2])
-    result = camera_pose_from_points(camera, apex_w[[best[2][k] for k in ks]], uv[ks])
-    return result, matches
+    result = camera_pose_from_points(camera, P[[best[2][k] for k in ks]], px[ks])
+    return result, best[2]
 
 
 def _match(

@@ -1,0 +1,357 @@
+"""The camera mount ``T_b_c`` and the camera's clock offset, recovered from a flight.
+
+Inputs are what a real drone logs: the stamped pose stream ``T_w_b(t)`` on the pose clock, each
+image's exposure stamp on the camera clock, the cone apexes the detector found in it, and a
+map of the cones. The model of an apex pixel (lecture 1's chain, with time):
+
+    uv = project(T_c_b @ T_b_w(t_cam + time_offset_s) @ p_apex_w)
+
+with ``t_pose = t_cam + time_offset_s`` (Kalibr's ``t_imu = t_cam + shift``), the pose looked up
+between its samples (``vnav.frames.FrameBuffer``: linear in translation, slerp in rotation).
+The unknowns ``x = [xi, time_offset_s]``, ``T_b_c = T_b_c_guess @ exp(xi^)`` (the error in the
+camera frame, as ``sim.config.MountError`` defines it), minimise the reprojection error over
+the whole flight by Levenberg-Marquardt (Nocedal & Wright, *Numerical Optimization*, 10.3)
+with a Jacobian by central differences. Seven parameters need no sparse solver; numpy does it,
+and SciPy's ``least_squares`` is the tests' oracle, not a dependency.
+
+Before solving, each detection is matched to a cone: a first mount from PnP on the images
+with the most cones (``vnav.multiview``), then, at each round, the apex projected with the
+current estimate, mutual nearest within a gate that narrows as the estimate improves.
+
+After solving, the parameters' standard errors come from ``(J^T J)^-1`` scaled by the residual
+variance (at least the detector's keypoint quantisation): a flight that cannot determine the
+answer (too few cones, no rotation to reveal the clock offset) is refused with what is
+missing, not answered with a guess.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from vnav import se3, so3
+from vnav.camera import PinholeCamera
+from vnav.frames import FrameBuffer
+from vnav.multiview import camera_pose_from_apexes
+from vnav.uncertainty import se3_exp, se3_log
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["CalibrationError", "CalibrationResult", "calibrate_camera"]
+
+MIN_OBSERVATIONS = 30
+"""Apexes matched over the flight, at least."""
+
+MIN_FRAMES = 5
+"""Images with at least one matched apex, at least."""
+
+PIXEL_STD_FLOOR = 0.3
+"""The residual scale assumed at least, px: the detector's apex quantisation (about 0.4 px,
+``vnav.sensor_noise.KEYPOINT_STD_PX``) even when a noise-free fit leaves less."""
+
+MAX_STD_ROTATION_DEG = 0.1
+MAX_STD_TRANSLATION_M = 0.01
+MAX_STD_OFFSET_S = 0.002
+"""The largest standard errors accepted: beyond them the flight does not determine the mount
+or the offset, and the answer is refused."""
+
+GATES_PX = (25.0, 8.0, 4.0)
+"""Matching gates of the successive rounds, px: the first tolerates the offset's and the PnP
+mount's error, the last only the detector's."""
+
+
+class CalibrationError(ValueError):
+    """The flight does not determine the mount or the clock offset; the message says why."""
+
+
+@dataclass(frozen=True)
+class CalibrationResult:
+    """The recovered mount and clock offset, and how well they are determined.
+
+    Attributes
+    ----------
+    T_b_c : ndarray, shape (4, 4)
+        The camera (optical frame) in the body.
+    time_offset_s : float
+        ``t_pose = t_cam + time_offset_s``.
+    reprojection_rms_px : float
+        RMS of the final reprojection errors.
+    frames_used : int
+        Images with at least one matched apex.
+    observations_used : int
+        Matched apexes.
+    std_rotation_deg, std_translation_m, std_offset_s : float
+        Standard errors: the mount's rotation (the largest over the three axes), its
+        translation (likewise) and the offset.
+    """
+
+    T_b_c: np.ndarray
+    time_offset_s: float
+    reprojection_rms_px: float
+    frames_used: int
+    observations_used: int
+    std_rotation_deg: float
+    std_translation_m: float
+    std_offset_s: float
+
+
+def calibrate_camera(
+    camera: PinholeCamera,
+    pose_stamps_s: np.ndarray,
+    T_w_b: np.ndarray,
+    image_stamps_cam_s: np.ndarray,
+    apex_uv: list[np.ndarray],
+    apex_w: np.ndarray,
+    T_b_c_guess: np.ndarray,
+    *,
+    max_offset_s: float = 0.1,
+) -> CalibrationResult:
+    """Recover ``T_b_c`` and the camera's clock offset from a flight.
+
+    Parameters
+    ----------
+    camera : PinholeCamera
+    pose_stamps_s : ndarray, shape (M,)
+        Pose-clock stamps of the pose stream, increasing.
+    T_w_b : ndarray, shape (M, 4, 4)
+        The body poses of the stream.
+    image_stamps_cam_s : ndarray, shape (N,)
+        Each image's exposure stamp on the camera clock.
+    apex_uv : list of N arrays of shape (K_i, 2)
+        The apexes detected in each image (any order, unmatched).
+    apex_w : ndarray, shape (C, 3)
+        The map: each cone's apex in the world.
+    T_b_c_guess : ndarray, shape (4, 4)
+        The declared mount (the starting point; the matching's first round does not need it
+        close: PnP gives the first estimate).
+    max_offset_s : float
+        Images whose stamp +- this falls outside the pose stream are left out, so that every
+        offset tried stays inside it.
+
+    Returns
+    -------
+    CalibrationResult
+
+    Raises
+    ------
+    ValueError
+        On malformed input.
+    CalibrationError
+        Too few matched apexes or images, or a mount or offset the flight does not determine
+        (its standard error above ``MAX_STD_*``): the message names what is missing.
+    """
+    stamps = np.asarray(pose_stamps_s, dtype=np.float64)
+    T_w_b = se3.check_transform(T_w_b, "T_w_b")
+    if stamps.ndim != 1 or T_w_b.shape != (stamps.size, 4, 4) or stamps.size < 2:
+        raise ValueError("pose_stamps_s (M,) and T_w_b (M, 4, 4) must match, M >= 2")
+    t_cam = np.asarray(image_stamps_cam_s, dtype=np.float64)
+    if t_cam.ndim != 1 or len(apex_uv) != t_cam.size:
+        raise ValueError("image_stamps_cam_s (N,) and apex_uv (N arrays) must match")
+    P = np.asarray(apex_w, dtype=np.float64).reshape(-1, 3)
+    T_b_c_guess = se3.check_pose(T_b_c_guess, "T_b_c_guess")
+    buffer = FrameBuffer(cache_s=max(float(stamps[-1] - stamps[0]) + 1.0, 1.0))
+    buffer.set_transform("world", "body", stamps, T_w_b)
+    inside = (t_cam - max_offset_s >= stamps[0]) & (t_cam + max_offset_s <= stamps[-1])
+    images = [
+        (float(t_cam[i]), np.asarray(apex_uv[i], dtype=np.float64).reshape(-1, 2))
+        for i in np.flatnonzero(inside)
+    ]
+    images = [(t, uv) for t, uv in images if len(uv)]
+    problem = _Problem(camera, buffer, images, P, T_b_c_guess)
+    x = np.zeros(7)
+    x[:6] = problem.first_mount()
+    for gate in GATES_PX:
+        problem.match(x, gate)
+        if problem.n_observations < MIN_OBSERVATIONS or problem.n_frames < MIN_FRAMES:
+            raise CalibrationError(
+                f"too few cones seen: {problem.n_observations} apexes matched in "
+                f"{problem.n_frames} images (need {MIN_OBSERVATIONS} in {MIN_FRAMES})"
+            )
+        x = _levenberg_marquardt(problem.residuals, x)
+    return problem.result(x)
+
+
+class _Problem:
+    """The matched observations and the residual function of ``x = [xi, offset]``."""
+
+    def __init__(self, camera, buffer, images, apex_w, T_b_c_guess) -> None:
+        self.camera, self.buffer, self.images = camera, buffer, images
+        self.apex_w, self.T_b_c_guess = apex_w, T_b_c_guess
+        self.t = np.array([t for t, _ in images])
+        self.obs_image = np.zeros(0, dtype=np.int64)
+        self.obs_cone = np.zeros(0, dtype=np.int64)
+        self.obs_uv = np.zeros((0, 2))
+
+    @property
+    def n_observations(self) -> int:
+        return int(self.obs_image.size)
+
+    @property
+    def n_frames(self) -> int:
+        return int(np.unique(self.obs_image).size)
+
+    def T_b_c(self, x: np.ndarray) -> np.ndarray:
+        return self.T_b_c_guess @ se3_exp(x[:6])
+
+    def first_mount(self) -> np.ndarray:
+        """``xi`` of the mount from PnP on the images with the most apexes (up to 5): each gives
+        ``T_b_c = T_w_b(t)^-1 T_w_c``; the one nearest the others (a medoid) is kept."""
+        ranked = sorted(range(len(self.images)), key=lambda i: -len(self.images[i][1]))
+        mounts = []
+        for i in ranked[:5]:
+            T_w_c = self._pnp(i)
+            if T_w_c is not None:
+                mounts.append(se3.invert(self.buffer.lookup("world", "body", self.t[i])) @ T_w_c)
+        if not mounts:
+            logger.info("calibration: no image gave a PnP pose; starting from the declared mount")
+            return np.zeros(6)
+        spread = [sum(_distance(a, b) for b in mounts) for a in mounts]
+        best = mounts[int(np.argmin(spread))]
+        return se3_log(se3.invert(self.T_b_c_guess) @ best)
+
+    def _pnp(self, i: int) -> np.ndarray | None:
+        """The camera pose of image ``i`` from its apexes, matched to the map without a prior
+        (``vnav.multiview.camera_pose_from_apexes``), or None."""
+        _, uv = self.images[i]
+        if len(uv) < 4:
+            return None
+        try:
+            fit, _ = camera_pose_from_apexes(self.camera, self.apex_w, uv)
+        except ValueError:
+            return None
+        return fit.T_w_c if fit.rms_px < 3.0 else None
+
+    def match(self, x: np.ndarray, gate_px: float) -> None:
+        """Match every image's apexes to the map's under ``x``."""
+        T_w_c = self._poses(x)
+        image, cone, uv = [], [], []
+        for i, (_, pixels) in enumerate(self.images):
+            for k, c in _mutual_nearest(self.camera, T_w_c[i], self.apex_w, pixels, gate_px):
+                image.append(i)
+                cone.append(c)
+                uv.append(pixels[k])
+        self.obs_image = np.array(image, dtype=np.int64)
+        self.obs_cone = np.array(cone, dtype=np.int64)
+        self.obs_uv = np.array(uv, dtype=np.float64).reshape(-1, 2)
+
+    def _poses(self, x: np.ndarray) -> np.ndarray:
+        """``T_w_c`` of every image under ``x``, (N, 4, 4)."""
+        T_w_b = self.buffer.lookup("world", "body", self.t + x[6])
+        return T_w_b @ self.T_b_c(x)
+
+    def residuals(self, x: np.ndarray) -> np.ndarray:
+        """Reprojection errors of the matched apexes, (2 K,) px."""
+        T_c_w = se3.invert(self._poses(x))[self.obs_image]
+        p_c = (
+            np.einsum("nij,nj->ni", T_c_w[:, :3, :3], self.apex_w[self.obs_cone]) + T_c_w[:, :3, 3]
+        )
+        z = np.maximum(p_c[:, 2], 1e-6)
+        u = self.camera.fx * p_c[:, 0] / z + self.camera.cx
+        v = self.camera.fy * p_c[:, 1] / z + self.camera.cy
+        return (np.column_stack([u, v]) - self.obs_uv).ravel()
+
+    def result(self, x: np.ndarray) -> CalibrationResult:
+        r = self.residuals(x)
+        J = _jacobian(self.residuals, x)
+        rms = float(np.sqrt(np.mean(r**2) * 2.0))  # per apex: sqrt(du^2 + dv^2)
+        sigma = max(float(np.sqrt(r @ r / max(r.size - 7, 1))), PIXEL_STD_FLOOR)
+        try:
+            cov = sigma**2 * np.linalg.inv(J.T @ J)
+            std = np.sqrt(np.maximum(np.diag(cov), 0.0))
+        except np.linalg.LinAlgError:
+            std = np.full(7, np.inf)
+        std_rot_deg = math.degrees(float(std[3:6].max()))
+        std_t_m, std_offset = float(std[:3].max()), float(std[6])
+        missing = []
+        if not std_offset <= MAX_STD_OFFSET_S:
+            missing.append(
+                f"the clock offset (standard error {std_offset * 1e3:.3g} ms, need <= "
+                f"{MAX_STD_OFFSET_S * 1e3:g} ms): the flight needs rotation or faster motion"
+            )
+        if not std_rot_deg <= MAX_STD_ROTATION_DEG or not std_t_m <= MAX_STD_TRANSLATION_M:
+            missing.append(
+                f"the mount (standard errors {std_rot_deg:.3g} deg, {std_t_m * 1e3:.3g} mm, need "
+                f"<= {MAX_STD_ROTATION_DEG:g} deg, {MAX_STD_TRANSLATION_M * 1e3:g} mm): more "
+                "cones, seen from more directions"
+            )
+        if missing:
+            raise CalibrationError("the flight does not determine " + "; nor ".join(missing))
+        return CalibrationResult(
+            T_b_c=self.T_b_c(x),
+            time_offset_s=float(x[6]),
+            reprojection_rms_px=rms,
+            frames_used=self.n_frames,
+            observations_used=self.n_observations,
+            std_rotation_deg=std_rot_deg,
+            std_translation_m=std_t_m,
+            std_offset_s=std_offset,
+        )
+
+
+_STEPS = np.array([1e-6] * 6 + [1e-4])
+"""Central-difference steps: metres and radians of the mount, seconds of the offset (the pose
+is linear between samples 5 ms apart: a 0.1 ms step stays within one or two pieces)."""
+
+
+def _jacobian(f, x: np.ndarray) -> np.ndarray:
+    columns = []
+    for i, h in enumerate(_STEPS):
+        e = np.zeros_like(x)
+        e[i] = h
+        columns.append((f(x + e) - f(x - e)) / (2.0 * h))
+    return np.column_stack(columns)
+
+
+def _levenberg_marquardt(f, x: np.ndarray, iterations: int = 50) -> np.ndarray:
+    """Minimise ``|f(x)|^2``: Levenberg-Marquardt with Marquardt's diagonal scaling
+    (Nocedal & Wright 10.3), stopping when the step or the gain is negligible."""
+    r = f(x)
+    cost = float(r @ r)
+    lam = 1e-3
+    for _ in range(iterations):
+        J = _jacobian(f, x)
+        A, g = J.T @ J, J.T @ r
+        D = np.diag(np.maximum(np.diag(A), 1e-12))
+        while True:
+            step = -np.linalg.solve(A + lam * D, g)
+            x_new = x + step
+            r_new = f(x_new)
+            cost_new = float(r_new @ r_new)
+            if cost_new < cost:
+                lam = max(lam / 10.0, 1e-12)
+                break
+            lam *= 10.0
+            if lam > 1e12:
+                return x
+        gain = cost - cost_new
+        x, r, cost = x_new, r_new, cost_new
+        if gain < 1e-12 * max(cost, 1e-12) or np.all(np.abs(step) < 1e-12):
+            break
+    return x
+
+
+def _mutual_nearest(
+    camera: PinholeCamera, T_w_c: np.ndarray, apex_w: np.ndarray, uv: np.ndarray, gate_px: float
+) -> list[tuple[int, int]]:
+    """``(detection, cone)`` pairs: each the other's nearest, within ``gate_px``."""
+    T_c_w = se3.invert(T_w_c)
+    p_c = apex_w @ T_c_w[:3, :3].T + T_c_w[:3, 3]
+    proj = np.full((len(apex_w), 2), np.inf)
+    front = p_c[:, 2] > 0.1
+    proj[front] = camera.project(p_c[front])
+    d = np.linalg.norm(uv[:, None, :] - proj[None, :, :], axis=2)
+    pairs = []
+    for k in range(len(uv)):
+        c = int(np.argmin(d[k]))
+        if d[k, c] <= gate_px and int(np.argmin(d[:, c])) == k:
+            pairs.append((k, c))
+    return pairs
+
+
+def _distance(a: np.ndarray, b: np.ndarray) -> float:
+    """A mount-to-mount distance: rotation angle (rad) plus translation (m) over 0.1 m."""
+    rot = float(np.linalg.norm(so3.log(a[:3, :3].T @ b[:3, :3])))
+    return rot + float(np.linalg.norm(a[:3, 3] - b[:3, 3])) / 0.1
