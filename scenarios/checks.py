@@ -72,6 +72,8 @@ class Unit(enum.Enum):
     """One figure over another (shown as ``12x``)."""
     BOUND = "fraction of bound"
     """An error over the method's accuracy bound at its range (1: at the bound)."""
+    DEGREES = "deg"
+    SECONDS = "s"
 
 
 _LIMIT_UNIT_DOC = {
@@ -80,6 +82,8 @@ _LIMIT_UNIT_DOC = {
     Unit.COUNT: "a count",
     Unit.RATIO: "a ratio (10: ten times)",
     Unit.BOUND: "times the method's accuracy bound (1: the bound)",
+    Unit.DEGREES: "degrees",
+    Unit.SECONDS: "seconds",
 }
 
 
@@ -295,6 +299,10 @@ def _in_unit(x: float, unit: Unit) -> str:
         return _percent(x)
     if unit is Unit.RATIO:
         return f"{_number(x)}x"
+    if unit is Unit.DEGREES:
+        return f"{_number(x)} deg"
+    if unit is Unit.SECONDS:
+        return f"{_number(1e3 * x)} ms"
     return _number(x)  # counts (integers print as integers)
 
 
@@ -447,6 +455,35 @@ def _consistent(run: RunResult, check: Check) -> float | NoData:
     if not values.size:
         return _no_estimates(run, check.method, contract_only=False)
     return nees_p_value(float(np.mean(values)), float(np.mean(dofs)), values.size)
+
+
+def _calibration_error(run: RunResult, key: str) -> float | NoData:
+    c = run.calibration
+    if c is None:
+        return NoData("the run was not calibrated (a calibration check asks for it)")
+    if c.refused is not None:
+        return NoData(f"calibration refused: {c.refused}")
+    return c.errors[key]
+
+
+@check_kind("calibration_rotation", operator.le, Unit.DEGREES, uses_method=False)
+def _calibration_rotation(run: RunResult, check: Check) -> float | NoData:
+    """rotation between the recovered camera mount and the true one <= limit (degrees)
+
+    The mount recovered from the whole flight (``vnav.calibration``), not the declared one."""
+    return _calibration_error(run, "rotation_deg")
+
+
+@check_kind("calibration_translation", operator.le, Unit.METRES, uses_method=False)
+def _calibration_translation(run: RunResult, check: Check) -> float | NoData:
+    """distance between the recovered camera mount's origin and the true one <= limit_m"""
+    return _calibration_error(run, "translation_m")
+
+
+@check_kind("calibration_time_offset", operator.le, Unit.SECONDS, uses_method=False)
+def _calibration_time_offset(run: RunResult, check: Check) -> float | NoData:
+    """error of the recovered camera clock offset <= limit (seconds)"""
+    return _calibration_error(run, "time_offset_s")
 
 
 @check_kind("detection_rate", operator.ge, Unit.FRACTION, uses_method=False)

@@ -6,6 +6,8 @@
 - ``vnav-demo run NAME|FILE.toml [...] [--all] [--out DIR] [--seed N] [--duration S] [--quiet]``:
   runs scenarios headless, writes ``DIR/<name>.rrd`` and ``DIR/<name>.json``, prints a summary.
 - ``vnav-demo lecture``: the lecture's worked examples next to vnav's results.
+- ``vnav-demo calibrate FILE.rrd [--out FILE.yaml]``: the camera mount and clock offset
+  recovered from a recording (``scenarios.calibrate``).
 
 Output fits 80 columns (``scenarios.console.WIDTH``). Exit status: 0 when every check passed
 (or was skipped), 1 when a check failed or had no data, 2 for bad usage or bad input
@@ -93,6 +95,12 @@ def _show(args: argparse.Namespace) -> int:
     return 0
 
 
+def _calibrate(args: argparse.Namespace) -> int:
+    from scenarios import calibrate
+
+    return calibrate.command(args.recording, args.out)
+
+
 def _run(args: argparse.Namespace) -> int:
     from scenarios import run_command
 
@@ -130,6 +138,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_show)
 
     _add_run_parser(sub)
+
+    p = sub.add_parser(
+        "calibrate",
+        help="recover the camera mount and clock offset from a recording",
+        description="Recover the camera mount T_b_c and the camera clock's offset "
+        "(t_pose = t_cam + offset) from a recording written by `vnav-demo run`: least squares "
+        "on the cone apexes' reprojection error over the whole flight. Prints the answer, its "
+        "standard errors and, as the recording holds the truth, its errors. Exit status 2 if "
+        "the file is not such a recording or the flight does not determine the answer (too "
+        "few cones seen, no rotation to reveal the offset): the message says which.",
+    )
+    p.add_argument("recording", metavar="FILE.rrd", help="a recording from vnav-demo run")
+    p.add_argument("--out", default=None, metavar="FILE.yaml", help="also write the answer as YAML")
+    p.set_defaults(func=_calibrate)
     return parser
 
 
@@ -171,6 +193,13 @@ def _add_run_parser(sub) -> None:
         help=f"refuse runs of more than N camera ticks (default: {MAX_TICKS_DEFAULT})",
     )
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
+    p.add_argument(
+        "--export",
+        choices=["tum"],
+        default=None,
+        help="also write DIR/<name>.truth.tum and DIR/<name>.pnp.tum (camera trajectories "
+        "for evo: true, and from PnP on the cones)",
+    )
     p.set_defaults(func=_run)
 
 

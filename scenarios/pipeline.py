@@ -90,6 +90,7 @@ def run(
     recording_id = f"{spec.name}-seed{seed}-{uuid.uuid4().hex[:12]}"
     if out_dir is None:
         result = run_scenario(spec, seed=seed, progress=progress)
+        _calibrate_if_checked(spec, result)
         judged = _judge(spec, result)
         return Outcome(result, judged, report.build(result, judged))
     rrd_path, json_path = output_paths(spec, Path(out_dir))
@@ -97,6 +98,7 @@ def run(
     try:
         recording = Recording(pair.rrd_tmp, recording_id)
         result = run_scenario(spec, seed=seed, observer=recording, progress=progress)
+        _calibrate_if_checked(spec, result)
         judged = _judge(spec, result)
         rep = report.build(result, judged, recording={"file": rrd_path.name, "id": recording_id})
         pair.write_json(report.dumps(rep))
@@ -105,6 +107,14 @@ def run(
         pair.discard()
         raise
     return Outcome(result, judged, rep, rrd_path, json_path)
+
+
+def _calibrate_if_checked(spec: ScenarioSpec, result: RunResult) -> None:
+    """Recover the camera mount and clock offset from the run when a check judges them."""
+    if any(c.kind.startswith("calibration_") for c in spec.checks):
+        from scenarios.calibrate import calibrate_run
+
+        result.calibration = calibrate_run(result)
 
 
 def _judge(spec: ScenarioSpec, result: RunResult) -> list[checks.CheckResult]:

@@ -42,6 +42,12 @@ docs/CONVENTIONS.md; "in F" is the named transform frame an entity is drawn in):
     plots/error_vs_range           image (matplotlib), logged at the end (static)
     plots/depth_scale              the depth colour scale, logged at the end (static)
     description                    TextDocument (markdown)
+    estimator/pose_stream          sim_time only: Transform3D T_w_b of every pose sample the
+                                   estimator was sent (noise included), at its stamp
+    estimator/mount                Transform3D T_b_c the estimator was told, every tick
+    estimator/stamp_cam_s          Scalars: the image's exposure stamp on the camera clock
+    truth                          AnyValues (static): camera_clock_offset_s
+                                   (``vnav-demo calibrate`` reads these and the detections)
 
 Timelines: ``tick`` (camera tick index) and ``sim_time`` (simulated seconds, on the pose
 clock). Everything about an image, the image itself first, is logged at its tick and at its
@@ -341,8 +347,22 @@ class Recording:
             rr.EncodedImage(contents=error_against_range_png(result), media_type="image/png"),
             static=True,
         )
-        if self._latency and result.poses is not None:
-            _send_pose_samples(rec, result.poses)
+        if result.poses is not None:
+            if self._latency:
+                _send_pose_samples(rec, result.poses)
+            rec.send_columns(
+                entity.POSE_STREAM,
+                indexes=[rr.TimeColumn("sim_time", duration=result.poses.stamps_s)],
+                columns=rr.Transform3D.columns(
+                    translation=result.poses.T_w_b[:, :3, 3],
+                    quaternion=quat.from_matrix(result.poses.T_w_b[:, :3, :3]),
+                ),
+            )
+        rec.log(
+            entity.TRUTH_VALUES,
+            rr.AnyValues(camera_clock_offset_s=self._spec.timing.camera_clock_offset_s),
+            static=True,
+        )
         depth_max_m = _depth_scale_m(result, self._depth_p95_m)
         rec.log(
             entity.DEPTH,
@@ -402,6 +422,7 @@ class Recording:
         quats = continuous_sign(np.array([r.record.quat_xyzw for r in rows]), self._last_quat)
         self._last_quat = quats[-1]
         _send_poses(send, rows, self._mount_moves)
+        _send_estimator_inputs(send, rows)
         _send_images(send, rows, images)
         _send_detections(send, rows)
         _send_estimates(send, rows, self._cones_w)
@@ -759,6 +780,23 @@ def _send_poses(send: _Sender, rows: list[_Buffered], mount_moves: bool) -> None
             parent_frame=[parent] * len(rows),
         )
         send(path, rows, columns)
+
+
+def _send_estimator_inputs(send: _Sender, rows: list[_Buffered]) -> None:
+    """The mount the estimator was told and each image's stamp on the camera clock: with the
+    pose stream and the detections, what ``vnav-demo calibrate`` needs."""
+    mounts = np.array([r.record.T_b_c_est for r in rows])
+    send(
+        entity.MOUNT_DECLARED,
+        rows,
+        rr.Transform3D.columns(
+            translation=mounts[:, :3, 3], quaternion=quat.from_matrix(mounts[:, :3, :3])
+        ),
+    )
+    stamps = [
+        r.record.t_s if r.record.timing is None else r.record.timing.stamp_cam_s for r in rows
+    ]
+    send(entity.STAMP_CAM, rows, rr.Scalars.columns(scalars=stamps))
 
 
 def _send_images(send: _Sender, rows: list[_Buffered], images: list) -> None:

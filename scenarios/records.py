@@ -234,6 +234,32 @@ class TickRecord:
         )
 
 
+@dataclass(frozen=True)
+class CalibrationRecord:
+    """The camera mount and clock offset recovered from the run (``vnav.calibration``), or why
+    they could not be, and their errors against the truth.
+
+    Attributes
+    ----------
+    T_b_c : ndarray, shape (4, 4), or None
+    time_offset_s : float or None
+    reprojection_rms_px : float or None
+    frames_used : int
+    errors : dict of str to float
+        ``rotation_deg``, ``translation_m``, ``time_offset_s``: absolute errors against the
+        true mount and clock offset (empty when refused).
+    refused : str or None
+        ``vnav.calibration.CalibrationError``'s message when the flight did not determine them.
+    """
+
+    T_b_c: np.ndarray | None
+    time_offset_s: float | None
+    reprojection_rms_px: float | None
+    frames_used: int
+    errors: dict[str, float]
+    refused: str | None = None
+
+
 @dataclass
 class RunResult:
     """Everything a finished run produced, before it is judged and written.
@@ -248,6 +274,9 @@ class RunResult:
         ``setup``); the only figures that depend on the machine.
     poses : PoseStream or None
         The pose stream the estimator was sent (set when the run ends).
+    calibration : CalibrationRecord or None
+        The mount and clock offset recovered from the run, for a scenario that checks them
+        (``scenarios.pipeline``).
     """
 
     spec: ScenarioSpec
@@ -255,6 +284,7 @@ class RunResult:
     ticks: list[TickRecord] = field(default_factory=list)
     timing_s: dict[str, float] = field(default_factory=dict)
     poses: PoseStream | None = None
+    calibration: CalibrationRecord | None = None
 
     @property
     def cones_w(self) -> np.ndarray:

@@ -28,7 +28,7 @@ from vnav import metrics
 from vnav.methods import METHOD_NAMES
 from vnav.uncertainty import nees_band
 
-REPORT_VERSION = 5
+REPORT_VERSION = 6
 """2: ``camera_ticks`` (was ``frames``): the word frame means a coordinate frame only;
 ``recording`` names the ``.rrd`` file and its Rerun recording id.
 3: each check has an ``outcome`` (passed, failed, no data, skipped), a ``unit``, the figure
@@ -39,7 +39,26 @@ the pose looked up at the exposure stamp and with the newest pose received when 
 arrived, the latter's first-order prediction, image latencies and the newest pose's lead.
 5: per method ``nees``: the normalised estimation error squared of its estimates against their
 covariances (count, mean, mean degrees of freedom, the 95% chi-square band of the mean and
-whether the mean lies in it); ``noise``, the scenario's sensor noise."""
+whether the mean lies in it); ``noise``, the scenario's sensor noise.
+6: ``calibration`` (null unless a check asks for it): the camera mount ``T_b_c`` and clock
+offset recovered from the flight, their reprojection RMS, images used, errors against the
+truth, or why the flight was refused; ``camera_mount_error``, the scenario's true mount's
+error from the declared one."""
+
+
+def _calibration(run: RunResult) -> dict[str, Any] | None:
+    c = run.calibration
+    if c is None:
+        return None
+    if c.refused is not None:
+        return {"refused": c.refused}
+    return {
+        "T_b_c": [[round(float(v), 9) for v in row] for row in c.T_b_c],
+        "time_offset_s": _finite_or_none(c.time_offset_s),
+        "reprojection_rms_px": _finite_or_none(c.reprojection_rms_px),
+        "frames_used": c.frames_used,
+        "errors": {k: _finite_or_none(v) for k, v in c.errors.items()},
+    }
 
 
 def _finite_or_none(value: float) -> float | int | None:
@@ -92,7 +111,9 @@ def build(
         "methods": methods,
         "timing": dataclasses.asdict(spec.timing),
         "noise": dataclasses.asdict(spec.noise),
+        "camera_mount_error": dataclasses.asdict(spec.scene.camera.mount_error),
         "pose_lookup": pose_lookup(run),
+        "calibration": _calibration(run),
         "checks": [
             {**c.as_dict(), "value": None if c.value is None else _finite_or_none(c.value)}
             for c in checks

@@ -329,7 +329,25 @@ def run_one(spec: ScenarioSpec, args: argparse.Namespace, out_dir: Path) -> tupl
     if not args.quiet:
         wall_s = time.perf_counter() - start
         say(summary(outcome.report, wall_s, outcome.rrd_path, outcome.json_path))
+    if getattr(args, "export", None) == "tum":
+        try:
+            written = _export_tum(spec, outcome, out_dir)
+        except OSError as exc:
+            _error(f"{spec.name}: cannot write its TUM trajectories: {exc}")
+            return EXIT_INCOMPLETE, outcome.rrd_path
+        if not args.quiet:
+            say("  wrote " + " and ".join(str(p) for p in written) + " (TUM, for evo)")
     return (EXIT_PASSED if outcome.passed else EXIT_CHECK_FAILED), outcome.rrd_path
+
+
+def _export_tum(spec: ScenarioSpec, outcome: pipeline.Outcome, out_dir: Path) -> list[Path]:
+    """``NAME.truth.tum`` and ``NAME.pnp.tum`` (``scenarios.tum``)."""
+    from scenarios import tum
+    from vnav.camera import PinholeCamera
+
+    cam = spec.scene.camera
+    camera = PinholeCamera.from_fovy(cam.fovy_deg, cam.width, cam.height)
+    return tum.write_tum_files(outcome.result, camera, out_dir)
 
 
 def _validate(args: argparse.Namespace) -> tuple[list[ScenarioSpec], Path]:

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from scenarios import builtin, checks
-from scenarios.records import DetectionRecord, RunResult, TickRecord
+from scenarios.records import CalibrationRecord, DetectionRecord, RunResult, TickRecord
 from scenarios.spec import from_dict
 from vnav.detect import ConeDetection
 from vnav.estimators import NoEstimate, known_height_max_elevation_rad
@@ -92,8 +92,15 @@ def run() -> RunResult:
     """Two ticks, two cones: cone 0 seen twice, cone 1 once (out of the contract's domain),
     one unmatched detection."""
     return RunResult(
-        spec=None,  # the checks read the ticks only
+        spec=None,  # the checks read the ticks (and the calibration) only
         seed=0,
+        calibration=CalibrationRecord(
+            np.eye(4),
+            0.03,
+            0.3,
+            10,
+            {"rotation_deg": 0.02, "translation_m": 0.004, "time_offset_s": 0.0005},
+        ),
         ticks=[
             _tick(
                 0,
@@ -163,6 +170,10 @@ FIGURES = {
     # root of 6 / 6 is 1, its mean 1 - 2/54, its sd sqrt(2/54), so z = sqrt(2/54) and the
     # two-sided probability 2 (1 - Phi(z)) (SciPy's exact figure, 0.847, in test_uncertainty).
     "consistent": 2.0 * (1.0 - NormalDist().cdf(math.sqrt(2.0 / 54.0))),
+    # the run's calibration record, as given
+    "calibration_rotation": 0.02,
+    "calibration_translation": 0.004,
+    "calibration_time_offset": 0.0005,
 }
 
 
@@ -341,3 +352,34 @@ def test_default_checks_are_every_bound_and_the_detection_rate() -> None:
     (rate,) = [c for c in defaults if c.kind == "detection_rate"]
     assert rate.limit == 0.95
     assert all(c.default for c in defaults)
+
+
+def test_calibration_checks_without_a_calibration_have_no_data() -> None:
+    """A run not calibrated, and one whose flight was refused: no data, with the reason."""
+    plain = RunResult(spec=None, seed=0, ticks=[_tick(0, [], [])])
+    result = checks.judge(checks.Check("calibration_rotation", 0.05), plain)
+    assert result.outcome is checks.Outcome.NO_DATA and "not calibrated" in result.reason
+    refused = RunResult(
+        spec=None,
+        seed=0,
+        ticks=[_tick(0, [], [])],
+        calibration=CalibrationRecord(None, None, None, 0, {}, refused="too few cones seen"),
+    )
+    result = checks.judge(checks.Check("calibration_time_offset", 0.001), refused)
+    assert result.outcome is checks.Outcome.NO_DATA and "too few cones seen" in result.reason
+    shown = checks.judge(
+        checks.Check("calibration_time_offset", 0.001),
+        RunResult(
+            spec=None,
+            seed=0,
+            ticks=[],
+            calibration=CalibrationRecord(
+                np.eye(4),
+                0.0,
+                0.3,
+                1,
+                {"rotation_deg": 0.0, "translation_m": 0.0, "time_offset_s": 0.0005},
+            ),
+        ),
+    ).shown
+    assert shown == "0.5 ms (must be <= 1 ms)"

@@ -100,6 +100,14 @@ def test_truth_points_and_estimates_agree_with_report(recorded):
         if not errors:  # e.g. known height, refused when the cone is seen from straight above
             assert stats["max"] is None
             continue
+        # The nearest cone is the matched one only while every error is under half the
+        # spacing of the cones (the calibration built-in's wrong mount moves estimates further).
+        spacing = min(
+            (np.linalg.norm(a - b) for i, a in enumerate(cones_w) for b in cones_w[i + 1 :]),
+            default=np.inf,
+        )
+        if stats["max"] >= 0.5 * spacing:
+            continue
         assert max(errors) == pytest.approx(stats["max"], abs=FLOAT32_ATOL_M)
         assert np.median(errors) == pytest.approx(stats["median"], abs=FLOAT32_ATOL_M)
 
@@ -503,7 +511,10 @@ def test_each_image_logged_at_its_exposure_time(recorded):
         exposure_s = f.timing.stamp_cam_s + offset_s
         assert row["sim_time"] == pytest.approx(exposure_s * 1e9, abs=1e3)
         assert f.t_s == pytest.approx(exposure_s, abs=1e-9)
-        if not spec.timing.synchronous:  # it arrived later than where it is drawn
+        # It arrives no earlier than its exposure, later when the link has a latency (a clock
+        # offset alone changes the stamp, not the arrival).
+        assert f.timing.arrival_s >= exposure_s
+        if spec.timing.image_latency_s > 0.0:
             assert f.timing.arrival_s > exposure_s
 
 

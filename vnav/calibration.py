@@ -58,6 +58,10 @@ MAX_STD_OFFSET_S = 0.002
 """The largest standard errors accepted: beyond them the flight does not determine the mount
 or the offset, and the answer is refused."""
 
+OUTLIER_SIGMAS = 4.0
+"""Apexes whose reprojection error exceeds this many robust standard deviations are dropped
+after the matching rounds (Gaussian 2-D errors: 1 in 3000 beyond 4 sigma)."""
+
 GATES_PX = (25.0, 8.0, 4.0)
 """Matching gates of the successive rounds, px: the first tolerates the offset's and the PnP
 mount's error, the last only the detector's."""
@@ -171,6 +175,17 @@ def calibrate_camera(
                 f"{problem.n_frames} images (need {MIN_OBSERVATIONS} in {MIN_FRAMES})"
             )
         x = _levenberg_marquardt(problem.residuals, x)
+    # Outliers (a cone's blob merged with another's, a mismatch the gate let through) would
+    # pull a least-squares fit: drop apexes off by more than OUTLIER_SIGMAS robust standard
+    # deviations (the median absolute deviation's, 1.4826 MAD) and solve again.
+    for _ in range(2):
+        norms = np.linalg.norm(problem.residuals(x).reshape(-1, 2), axis=1)
+        sigma = max(1.4826 * float(np.median(norms)) / math.sqrt(2.0 * math.log(2.0)), 0.1)
+        keep = norms <= OUTLIER_SIGMAS * sigma
+        if keep.all():
+            break
+        problem.keep(keep)
+        x = _levenberg_marquardt(problem.residuals, x)
     return problem.result(x)
 
 
@@ -236,6 +251,12 @@ class _Problem:
         self.obs_image = np.array(image, dtype=np.int64)
         self.obs_cone = np.array(cone, dtype=np.int64)
         self.obs_uv = np.array(uv, dtype=np.float64).reshape(-1, 2)
+
+    def keep(self, mask: np.ndarray) -> None:
+        """Keep only the observations where ``mask`` is True."""
+        self.obs_image = self.obs_image[mask]
+        self.obs_cone = self.obs_cone[mask]
+        self.obs_uv = self.obs_uv[mask]
 
     def _poses(self, x: np.ndarray) -> np.ndarray:
         """``T_w_c`` of every image under ``x``, (N, 4, 4)."""

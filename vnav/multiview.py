@@ -249,6 +249,10 @@ def _pnp(
 _LM_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 50, 1e-14)
 """Levenberg-Marquardt's stop: OpenCV's default (20 steps, float32 epsilon) leaves ~1e-6 px."""
 
+GUESS_GATE_PX = 30.0
+"""``camera_pose_from_cones`` with a guessed pose: the gate of its matching, px (a few degrees
+of attitude or mount error)."""
+
 MATCH_GATE_PX = 8.0
 """``camera_pose_from_cones``: a cone's apex matches a detection within this many pixels of
 its projection under the candidate pose."""
@@ -259,6 +263,8 @@ def camera_pose_from_cones(
     cones_w: object,
     detections: Sequence[ConeDetection],
     cone: ConeModel = TRAFFIC_CONE,
+    *,
+    T_w_c_guess: np.ndarray | None = None,
 ) -> tuple[PnPResult, dict[int, int]]:
     """The camera pose from detected cones of a known map, with the matches it found.
 
@@ -277,6 +283,10 @@ def camera_pose_from_cones(
     detections : sequence of ConeDetection
         At least 4, clear of the image border.
     cone : ConeModel
+    T_w_c_guess : ndarray, shape (4, 4), optional
+        A rough pose (the pose stream's, say): the apexes are matched by projecting the map
+        with it (mutual nearest within ``GUESS_GATE_PX``), a single solve; the search over
+        every choice runs only when fewer than 4 match.
 
     Returns
     -------
@@ -302,6 +312,14 @@ def camera_pose_from_cones(
             f"clear of the border and {len(C)} cones in the map"
         )
     uv = np.array([detections[i].apex_uv for i in usable])
+    if T_w_c_guess is not None:
+        guessed = _match(
+            camera, se3.check_pose(T_w_c_guess, "T_w_c_guess"), apex_w, uv, GUESS_GATE_PX
+        )
+        if len(guessed) >= 4:
+            ks = list(guessed)
+            result = camera_pose_from_points(camera, apex_w[[guessed[k][1] for k in ks]], uv[ks])
+            return result, {usable[k]: guessed[k][1] for k in ks}
     # Seed with the 4 largest detections (nearest, best measured).
     seeds = sorted(range(len(usable)), key=lambda k: -detections[usable[k]].area_px)[:4]
     result, found = camera_pose_from_apexes(camera, apex_w, uv, seeds)
@@ -352,7 +370,11 @@ def camera_pose_from_apexes(
 
 
 def _match(
-    camera: PinholeCamera, T_w_c: np.ndarray, apex_w: np.ndarray, uv: np.ndarray
+    camera: PinholeCamera,
+    T_w_c: np.ndarray,
+    apex_w: np.ndarray,
+    uv: np.ndarray,
+    gate_px: float = MATCH_GATE_PX,
 ) -> dict[int, tuple[float, int]]:
     """Detection index -> (pixel distance, cone index): mutual nearest within the gate."""
     T_c_w = se3.invert(T_w_c)
@@ -364,6 +386,6 @@ def _match(
     out = {}
     for k in range(len(uv)):
         c = int(np.argmin(dist[k]))
-        if dist[k, c] <= MATCH_GATE_PX and int(np.argmin(dist[:, c])) == k:
+        if dist[k, c] <= gate_px and int(np.argmin(dist[:, c])) == k:
             out[k] = (float(dist[k, c]), c)
     return out

@@ -148,6 +148,17 @@ class SilhouetteView:
             self._exit[key] = exit_on_boundary(self._boundary, d, apex_uv)
         return self._exit[key]
 
+    def apex_keypoint(self, cone: ConeModel) -> np.ndarray | None:
+        """The apex ``bottom`` draws its axis from: ``apex_pixel`` with the triangle fraction
+        at least 0.5, (2,), or None (no image vertical, or no fit). Unlike the detector's
+        pose-free ``apex_uv`` (about 0.25 px above the true apex, two edges fitted to a
+        rounded tip), it is unbiased (``vnav.sensor_noise.KEYPOINT_STD_PX``)."""
+        vertical = self.vertical_at_blob()
+        if vertical is None:
+            return None
+        d, elevation = vertical
+        return self.apex(d, max(triangle_fraction(elevation, cone), 0.5))
+
     def bottom(self, cone: ConeModel) -> np.ndarray:
         """Where the image of the cone's axis leaves the blob at the bottom, (2,) float64.
 
@@ -162,8 +173,8 @@ class SilhouetteView:
         vertical = self.vertical_at_blob()
         if vertical is None:
             return np.asarray(self.detection.base_uv, dtype=np.float64)
-        d, elevation = vertical
-        apex_uv = self.apex(d, max(triangle_fraction(elevation, cone), 0.5))
+        d, _ = vertical
+        apex_uv = self.apex_keypoint(cone)
         if apex_uv is None:
             apex_uv = np.asarray(self.detection.apex_uv, dtype=np.float64)
         return self.axis_exit(d, apex_uv)

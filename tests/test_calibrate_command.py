@@ -1,0 +1,107 @@
+"""``vnav-demo calibrate`` on recordings written by ``vnav-demo run``, and the built-in
+``calibration`` scenario's in-run calibration, against the simulator's truth."""
+
+from __future__ import annotations
+
+import math
+import re
+
+import numpy as np
+import pytest
+
+from scenarios import calibrate
+from scenarios.cli import main
+from vnav import so3
+
+
+def _yaml_numbers(text: str) -> dict:
+    """The four keys of the YAML ``calibrate`` writes, read back without a YAML library."""
+    rows = re.findall(r"\[([-0-9., ]+)\]", text)
+    T = np.array([[float(v) for v in row.split(",")] for row in rows])
+    values = dict(re.findall(r"^(\w+): ([-0-9.e]+)$", text, flags=re.M))
+    return {
+        "T_b_c": T,
+        "time_offset_s": float(values["time_offset_s"]),
+        "reprojection_rms_px": float(values["reprojection_rms_px"]),
+        "frames_used": int(values["frames_used"]),
+    }
+
+
+def test_calibrate_a_recording_recovers_the_true_mount_and_offset(builtin_runs, tmp_path, capsys):
+    """The built-in ``calibration`` run's recording (mount 2.4 deg and 3 cm off, clock 30 ms
+    off): the YAML's mount and offset against the scenario's truth, within what the detector's
+    apexes allow (they sit about 0.25 px above the true apex: 0.1 deg, 1 cm, 1 ms)."""
+    run = builtin_runs["calibration"]
+    out = tmp_path / "calib.yaml"
+    assert main(["calibrate", str(run.rrd), "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "against the truth" in printed and f"wrote {out}" in printed
+    assert all(len(line) <= 80 for line in printed.splitlines())
+    got = _yaml_numbers(out.read_text())
+    cam = run.spec.scene.camera
+    true_mount = cam.T_b_c_declared @ cam.mount_error.T
+    # 9 decimals in the file: project back onto SO(3) before taking the angle.
+    R_err = so3.nearest_rotation(got["T_b_c"][:3, :3]).T @ true_mount[:3, :3]
+    assert math.degrees(np.linalg.norm(so3.log(R_err))) < 0.1
+    assert np.linalg.norm(got["T_b_c"][:3, 3] - true_mount[:3, 3]) < 0.01
+    assert got["time_offset_s"] == pytest.approx(run.spec.timing.camera_clock_offset_s, abs=1e-3)
+    assert got["frames_used"] > 0.8 * len(run.result.ticks)
+    assert 0.0 < got["reprojection_rms_px"] < 1.0
+    assert [p.name for p in tmp_path.iterdir()] == ["calib.yaml"]  # no partial file left
+
+
+def test_recording_inputs_are_the_runs(builtin_runs):
+    """What ``inputs_from_recording`` reads back equals what the run held: the pose stream
+    (float32 in the file), the camera stamps, the camera's intrinsics, the map, the declared
+    mount and the truth."""
+    run = builtin_runs["calibration"]
+    cam = run.spec.scene.camera
+    from vnav.camera import PinholeCamera
+
+    camera = PinholeCamera.from_fovy(cam.fovy_deg, cam.width, cam.height)
+    mine = calibrate.inputs_from_run(run.result, camera)
+    read = calibrate.inputs_from_recording(run.rrd)
+    np.testing.assert_allclose(read.pose_stamps_s, mine.pose_stamps_s, atol=1e-9)
+    np.testing.assert_allclose(read.T_w_b, mine.T_w_b, atol=1e-5)
+    np.testing.assert_allclose(read.image_stamps_cam_s, mine.image_stamps_cam_s, atol=1e-12)
+    assert read.camera.fx == pytest.approx(camera.fx, rel=1e-6)
+    assert (read.camera.cx, read.camera.cy) == pytest.approx((camera.cx, camera.cy), abs=1e-4)
+    np.testing.assert_allclose(read.apex_w, mine.apex_w, atol=1e-6)
+    np.testing.assert_allclose(read.T_b_c_declared, mine.T_b_c_declared, atol=1e-6)
+    np.testing.assert_allclose(read.truth.T_b_c, mine.truth.T_b_c, atol=1e-6)
+    assert read.truth.time_offset_s == mine.truth.time_offset_s
+    # The recording holds every detection's apex, the run's inputs those clear of the border.
+    assert sum(len(a) for a in read.apex_uv) >= sum(len(a) for a in mine.apex_uv)
+
+
+def test_in_run_calibration_meets_the_scenario_targets(builtin_runs):
+    """The built-in's own checks (0.05 deg, 5 mm, 1 ms) passed, and the report's errors are
+    the recovered mount's against the truth."""
+    run = builtin_runs["calibration"]
+    assert all(c.passed for c in run.judged), [c.shown for c in run.judged]
+    c = run.result.calibration
+    cam = run.spec.scene.camera
+    true_mount = cam.T_b_c_declared @ cam.mount_error.T
+    angle = math.degrees(np.linalg.norm(so3.log(c.T_b_c[:3, :3].T @ true_mount[:3, :3])))
+    assert c.errors["rotation_deg"] == pytest.approx(angle, abs=1e-9)
+    assert run.report["calibration"]["errors"]["rotation_deg"] == pytest.approx(angle, abs=1e-8)
+
+
+def test_calibrate_refuses_what_it_cannot_use(builtin_runs, tmp_path, capsys):
+    """One line and exit 2, nothing written: no file, not a recording, a flight with one cone
+    (the ``approach``), an output directory that does not exist."""
+    out = tmp_path / "calib.yaml"
+    cases = [
+        ([str(tmp_path / "none.rrd"), "--out", str(out)], "no such file"),
+        (
+            [str(builtin_runs["approach"].json_path), "--out", str(out)],
+            "not a readable Rerun recording",
+        ),
+        ([str(builtin_runs["approach"].rrd), "--out", str(out)], "too few|does not determine"),
+        ([str(builtin_runs["calibration"].rrd), "--out", str(tmp_path / "no" / "c.yaml")], "no"),
+    ]
+    for argv, message in cases:
+        assert main(["calibrate", *argv]) == 2
+        err = capsys.readouterr().err
+        assert len(err.strip().splitlines()) == 1 and re.search(message, err), err
+    assert not out.exists()
