@@ -23,7 +23,7 @@ import math
 import numpy as np
 
 from scenarios.records import ImageTiming, TickRecord
-from vnav import quat
+from vnav import quat, se3, so3
 from vnav.estimators import naive
 
 __all__ = ["SYNCHRONOUS_NOTE", "state_text"]
@@ -130,6 +130,15 @@ def state_text(record: TickRecord, quat_xyzw: np.ndarray, cone0_w: np.ndarray) -
         f"        axis-angle  axis {_vector(axis, 3, 6)}  angle "
         f"{_number(math.degrees(angle), 1, 6)} deg  (R = I + sin(a) K + (1 - cos(a)) K^2)",
     ]
+    mount_off = se3.invert(record.T_b_c_est) @ T_b_c
+    if not np.allclose(mount_off, np.eye(4), atol=1e-9):
+        off_deg = math.degrees(float(np.linalg.norm(so3.log(mount_off[:3, :3]))))
+        off_mm = 1e3 * float(np.linalg.norm(mount_off[:3, 3]))
+        lines += [
+            "",
+            f"mount   the estimator is told a T_b_c {off_deg:.2f} deg and {off_mm:.1f} mm off "
+            "this one (the truth)",
+        ]
     header = f"**tick {record.tick}, t = {record.t_s:.2f} s** (simulator truth)"
     if record.timing is not None and _synchronous(record.timing):
         # One line in the header: the panel keeps its height in the common case.

@@ -79,7 +79,7 @@ import rerun as rr
 
 from scenarios.panel import state_text
 from scenarios.plots import depth_scale_png, error_against_range_png
-from scenarios.records import PoseStream, RunResult, TickRecord
+from scenarios.records import CalibrationRecord, PoseStream, RunResult, TickRecord
 from scenarios.spec import ScenarioSpec
 from scenarios.viewer import (
     AXIS_COLORS,
@@ -297,10 +297,11 @@ class Recording:
         self._encoder = ThreadPoolExecutor(max_workers=1, thread_name_prefix="vnav-encode")
         self._spec, self._camera, self._far_m = spec, camera, spec.scene.zfar_m
         self._mount_moves = spec.flight.moves_camera
-        # A synchronous run's newest pose is its exposure pose: drawing its estimate again
-        # and plotting a pose stream with no gap would only clutter the views.
-        self._latency = not spec.timing.synchronous
+        # Where nothing arrives late the newest pose is the exposure pose: drawing its estimate
+        # again and plotting a pose stream with no gap would only clutter the views.
+        self._latency = spec.timing.delivers_late
         self._cones_w = np.array(spec.scene.cones_w, dtype=np.float64).reshape(-1, 3)
+        self._seed = seed
         _log_static(self.rec, spec, seed, camera, scenery)
         if self._latency:
             _log_latency_static(self.rec)
@@ -363,6 +364,11 @@ class Recording:
             rr.AnyValues(camera_clock_offset_s=self._spec.timing.camera_clock_offset_s),
             static=True,
         )
+        if result.calibration is not None:  # the description gains what the run recovered
+            text = describe(self._spec, self._seed) + "\n\n" + calibration_text(result.calibration)
+            rec.log(
+                entity.DESCRIPTION, rr.TextDocument(text, media_type="text/markdown"), static=True
+            )
         depth_max_m = _depth_scale_m(result, self._depth_p95_m)
         rec.log(
             entity.DEPTH,
@@ -504,6 +510,21 @@ def _mesh(mesh: TriangleMesh) -> rr.Mesh3D:
         triangle_indices=mesh.triangles,
         vertex_normals=mesh.normals.astype(np.float32),
         vertex_colors=mesh.colors_rgba,
+    )
+
+
+def calibration_text(c: CalibrationRecord) -> str:
+    """Markdown: the mount and clock offset recovered from the run, and their errors."""
+    if c.refused is not None:
+        return f"## Calibration\n\nRefused: {c.refused}"
+    rows = "\n".join("    " + " ".join(f"{v:9.5f}" for v in row) for row in c.T_b_c)
+    e = c.errors
+    return (
+        "## Calibration\n\nRecovered from the flight (``vnav.calibration``): camera mount "
+        f"T_b_c\n\n{rows}\n\nclock offset t_pose = t_cam + {1e3 * c.time_offset_s:.3f} ms, "
+        f"reprojection RMS {c.reprojection_rms_px:.3f} px over {c.frames_used} images. Against "
+        f"the truth: rotation {e['rotation_deg']:.4f} deg, translation "
+        f"{1e3 * e['translation_m']:.2f} mm, offset {1e3 * e['time_offset_s']:.3f} ms."
     )
 
 

@@ -193,6 +193,13 @@ class Timing:
     jitter_s: float = 0.0
 
     @property
+    def delivers_late(self) -> bool:
+        """A pose or an image can arrive after its stamp (a latency or jitter): the newest
+        pose at an image's arrival can then differ from its exposure pose. (A clock offset
+        alone changes the stamps, not the arrivals.)"""
+        return self.pose_latency_s > 0.0 or self.image_latency_s > 0.0 or self.jitter_s > 0.0
+
+    @property
     def synchronous(self) -> bool:
         """No latency, offset or jitter: each image is processed the moment it is taken."""
         return (
