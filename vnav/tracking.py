@@ -1,0 +1,189 @@
+"""Cone apexes followed from image to image and triangulated: depth from motion alone.
+
+A cone's apex is the one point of it fixed in the world that the detector sees in every view.
+Each image gives, per detection, a world ray from the camera centre through the apex pixel
+(the pose stream's ``T_w_c`` at the image's exposure). ``ApexTracker`` keeps, per cone, the
+rays of a sliding window of images and triangulates them (``vnav.multiview.triangulate``,
+midpoint) once they cross at ``min_parallax_deg`` or more; the cone's base centre is the apex
+less the cone's height. No depth image, no ground plane and no apparent size are used.
+
+Which ray belongs to which cone is decided without the truth, by bearing: a new ray joins the
+track whose triangulated apex it points at most nearly (or, for a track without one yet, whose
+latest ray it is most nearly parallel to: between two images a cone's bearing changes little),
+within ``gate_deg``; a ray that joins none starts a track.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from vnav import se3
+from vnav.camera import PinholeCamera
+from vnav.cone import TRAFFIC_CONE, ConeModel
+from vnav.multiview import parallax_deg, triangulate
+
+__all__ = ["ApexTracker", "TrackedApex"]
+
+
+@dataclass(frozen=True)
+class TrackedApex:
+    """What the tracker says of one detection of the latest image.
+
+    Attributes
+    ----------
+    track : int
+        The track's id (stable from image to image).
+    p_w : ndarray, shape (3,), or None
+        The cone's base centre in the world, or None when the track's rays do not yet cross
+        at ``min_parallax_deg``.
+    apex_w : ndarray, shape (3,), or None
+        The triangulated apex.
+    parallax_deg : float
+        The largest angle between the track's rays in the window.
+    views : int
+        Rays in the window.
+    """
+
+    track: int
+    p_w: np.ndarray | None
+    apex_w: np.ndarray | None
+    parallax_deg: float
+    views: int
+
+
+@dataclass
+class _Track:
+    id: int
+    rays: deque = field(default_factory=deque)  # (t_s, centre (3,), unit direction (3,), T, uv)
+    apex_w: np.ndarray | None = None
+
+
+class ApexTracker:
+    """Apex rays per cone over a sliding window, triangulated.
+
+    Parameters
+    ----------
+    camera : PinholeCamera
+    cone : ConeModel
+    window_s : float
+        Rays older than this (seconds before the latest image) are dropped.
+    gate_deg : float
+        A ray joins a track when it points within this angle of the track's apex (or latest
+        ray).
+    min_parallax_deg : float
+        Triangulate only rays that cross at this angle or more.
+    max_views : int
+        At most this many rays per track (the newest).
+    """
+
+    def __init__(
+        self,
+        camera: PinholeCamera,
+        cone: ConeModel = TRAFFIC_CONE,
+        *,
+        window_s: float = 3.0,
+        gate_deg: float = 2.0,
+        min_parallax_deg: float = 3.0,
+        max_views: int = 40,
+    ) -> None:
+        if not (window_s > 0 and gate_deg > 0 and min_parallax_deg > 0 and max_views >= 2):
+            raise ValueError(
+                "window_s, gate_deg and min_parallax_deg must be > 0 and max_views >= 2, got "
+                f"{window_s}, {gate_deg}, {min_parallax_deg}, {max_views}"
+            )
+        self.camera, self.cone = camera, cone
+        self.window_s, self.gate_rad = float(window_s), math.radians(gate_deg)
+        self.min_parallax_deg, self.max_views = float(min_parallax_deg), int(max_views)
+        self._tracks: list[_Track] = []
+        self._next_id = 0
+
+    def update(self, t_s: float, T_w_c: np.ndarray, apex_uv: np.ndarray) -> list[TrackedApex]:
+        """Add one image's apex pixels (K, 2), seen from ``T_w_c`` at ``t_s``; return one
+        ``TrackedApex`` per pixel, in order.
+
+        Raises
+        ------
+        ValueError
+            On a malformed pose or pixels, or a time earlier than the previous image's.
+        """
+        T = se3.check_pose(T_w_c, "T_w_c")
+        uv = np.asarray(apex_uv, dtype=np.float64).reshape(-1, 2)
+        if not np.isfinite(uv).all():
+            raise ValueError("apex_uv must be finite")
+        latest = max((tr.rays[-1][0] for tr in self._tracks if tr.rays), default=-math.inf)
+        if t_s < latest:
+            raise ValueError(f"t_s must not go back in time: {t_s} after {latest}")
+        self._forget(t_s)
+        centre = T[:3, 3]
+        directions = self.camera.rays(uv) @ T[:3, :3].T if len(uv) else np.zeros((0, 3))
+        assigned = self._associate(centre, directions)
+        out = []
+        for k, d in enumerate(directions):
+            track = assigned.get(k)
+            if track is None:
+                track = _Track(self._next_id)
+                self._next_id += 1
+                self._tracks.append(track)
+            track.rays.append((float(t_s), centre.copy(), d, T, uv[k]))
+            while len(track.rays) > self.max_views:
+                track.rays.popleft()
+            out.append(self._estimate(track))
+        return out
+
+    def _forget(self, t_s: float) -> None:
+        for tr in self._tracks:
+            while tr.rays and tr.rays[0][0] < t_s - self.window_s:
+                tr.rays.popleft()
+        self._tracks = [tr for tr in self._tracks if tr.rays]
+
+    def _associate(self, centre: np.ndarray, directions: np.ndarray) -> dict[int, _Track]:
+        """Greedy: the closest (ray, track) pairs first, each used once, within the gate."""
+        pairs = []
+        for k, d in enumerate(directions):
+            for tr in self._tracks:
+                dist = _angle_to_track(centre, d, tr)
+                if dist <= self.gate_rad:
+                    pairs.append((dist, k, tr.id))
+        pairs.sort()
+        by_id = {tr.id: tr for tr in self._tracks}
+        used_k: set[int] = set()
+        used_track: set[int] = set()
+        out: dict[int, _Track] = {}
+        for _, k, tid in pairs:
+            if k in used_k or tid in used_track:
+                continue
+            out[k] = by_id[tid]
+            used_k.add(k)
+            used_track.add(tid)
+        return out
+
+    def _estimate(self, track: _Track) -> TrackedApex:
+        directions = np.array([r[2] for r in track.rays])
+        angle = parallax_deg(directions) if len(directions) >= 2 else 0.0
+        if angle < self.min_parallax_deg:
+            return TrackedApex(track.id, None, track.apex_w, angle, len(track.rays))
+        T = np.array([r[3] for r in track.rays])
+        uv = np.array([r[4] for r in track.rays])
+        try:
+            apex = triangulate(self.camera, T, uv, min_parallax_deg=self.min_parallax_deg)
+        except ValueError:
+            return TrackedApex(track.id, None, None, angle, len(track.rays))
+        track.apex_w = apex
+        base = apex - np.array([0.0, 0.0, self.cone.height_m])
+        return TrackedApex(track.id, base, apex, angle, len(track.rays))
+
+
+def _angle_to_track(centre: np.ndarray, d: np.ndarray, track: _Track) -> float:
+    """The angle (rad) between the ray ``centre + s d`` and the track: the direction from
+    ``centre`` to the track's apex if it has one (in front), else its latest ray's."""
+    if track.apex_w is not None:
+        v = track.apex_w - centre
+        n = float(np.linalg.norm(v))
+        if n > 1e-9 and float(v @ d) > 0.0:
+            return math.acos(min(1.0, float(v @ d) / n))
+    d2 = track.rays[-1][2]
+    return math.acos(min(1.0, max(-1.0, float(d @ d2))))
