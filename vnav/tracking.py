@@ -26,7 +26,7 @@ from vnav.camera import PinholeCamera
 from vnav.cone import TRAFFIC_CONE, ConeModel
 from vnav.multiview import parallax_deg, triangulate
 
-__all__ = ["ApexTracker", "TrackedApex"]
+__all__ = ["ApexTracker", "TrackedApex", "midpoint_covariance"]
 
 
 @dataclass(frozen=True)
@@ -46,6 +46,8 @@ class TrackedApex:
         The largest angle between the track's rays in the window.
     views : int
         Rays in the window.
+    cov_w : ndarray, shape (3, 3), or None
+        The estimate's covariance, m^2 (``midpoint_covariance``), with ``p_w``.
     """
 
     track: int
@@ -53,6 +55,7 @@ class TrackedApex:
     apex_w: np.ndarray | None
     parallax_deg: float
     views: int
+    cov_w: np.ndarray | None = None
 
 
 @dataclass
@@ -101,9 +104,19 @@ class ApexTracker:
         self._tracks: list[_Track] = []
         self._next_id = 0
 
-    def update(self, t_s: float, T_w_c: np.ndarray, apex_uv: np.ndarray) -> list[TrackedApex]:
+    def update(
+        self,
+        t_s: float,
+        T_w_c: np.ndarray,
+        apex_uv: np.ndarray,
+        *,
+        cov_T_w_c: np.ndarray | None = None,
+        cov_uv: np.ndarray | None = None,
+    ) -> list[TrackedApex]:
         """Add one image's apex pixels (K, 2), seen from ``T_w_c`` at ``t_s``; return one
-        ``TrackedApex`` per pixel, in order.
+        ``TrackedApex`` per pixel, in order. ``cov_T_w_c`` (6, 6, left perturbation) and
+        ``cov_uv`` (2, 2, px^2, every apex) are this view's noise, for the estimates'
+        covariances (default: none).
 
         Raises
         ------
@@ -128,7 +141,7 @@ class ApexTracker:
                 track = _Track(self._next_id)
                 self._next_id += 1
                 self._tracks.append(track)
-            track.rays.append((float(t_s), centre.copy(), d, T, uv[k]))
+            track.rays.append((float(t_s), centre.copy(), d, T, uv[k], cov_T_w_c, cov_uv))
             while len(track.rays) > self.max_views:
                 track.rays.popleft()
             out.append(self._estimate(track))
@@ -174,7 +187,15 @@ class ApexTracker:
             return TrackedApex(track.id, None, None, angle, len(track.rays))
         track.apex_w = apex
         base = apex - np.array([0.0, 0.0, self.cone.height_m])
-        return TrackedApex(track.id, base, apex, angle, len(track.rays))
+        cov = midpoint_covariance(
+            self.camera,
+            T,
+            uv,
+            apex,
+            [r[5] for r in track.rays],
+            [r[6] for r in track.rays],
+        )
+        return TrackedApex(track.id, base, apex, angle, len(track.rays), cov)
 
 
 def _angle_to_track(centre: np.ndarray, d: np.ndarray, track: _Track) -> float:
@@ -187,3 +208,60 @@ def _angle_to_track(centre: np.ndarray, d: np.ndarray, track: _Track) -> float:
             return math.acos(min(1.0, float(v @ d) / n))
     d2 = track.rays[-1][2]
     return math.acos(min(1.0, max(-1.0, float(d @ d2))))
+
+
+def midpoint_covariance(
+    camera: PinholeCamera,
+    T_w_c: np.ndarray,
+    uv: np.ndarray,
+    p_w: np.ndarray,
+    cov_T_w_c: list,
+    cov_uv: list,
+) -> np.ndarray:
+    """First-order covariance of the midpoint ``p = A^-1 sum_i P_i c_i`` (``A = sum_i P_i``,
+    ``P_i = I - d_i d_i^T``), the views independent, (3, 3) m^2.
+
+    From ``sum_i P_i (c_i - p) = 0``: ``A dp = sum_i [P_i dc_i - M_i dd_i]`` with
+    ``M_i = (d_i . w_i) I + d_i w_i^T``, ``w_i = c_i - p``. A left perturbation
+    ``[rho, phi]`` of ``T_w_c`` moves ``c -> c + rho + phi x c`` and turns ``d -> d + phi x d``;
+    a pixel moves the unit ray by ``(I - d d^T) [r_0 / fx, r_1 / fy] / |K^-1 [u, v, 1]|``.
+
+    Parameters
+    ----------
+    camera : PinholeCamera
+    T_w_c : ndarray, shape (N, 4, 4)
+    uv : ndarray, shape (N, 2)
+    p_w : ndarray, shape (3,)
+        The midpoint.
+    cov_T_w_c : list of N arrays (6, 6) or None
+    cov_uv : list of N arrays (2, 2) or None
+        None: that view's pose or pixel is exact.
+    """
+    rays_c = camera.rays(uv)
+    d = np.einsum("nij,nj->ni", T_w_c[:, :3, :3], rays_c)
+    c = T_w_c[:, :3, 3]
+    P = np.eye(3) - np.einsum("ni,nj->nij", d, d)
+    A_inv = np.linalg.inv(P.sum(axis=0))
+    cov = np.zeros((3, 3))
+    for i in range(len(d)):
+        w = c[i] - p_w
+        M = float(d[i] @ w) * np.eye(3) + np.outer(d[i], w)
+        if cov_T_w_c[i] is not None:
+            J = np.empty((3, 6))
+            J[:, :3] = P[i]
+            J[:, 3:] = -P[i] @ _skew(c[i]) + M @ _skew(d[i])
+            J = A_inv @ J
+            cov += J @ cov_T_w_c[i] @ J.T
+        if cov_uv[i] is not None:
+            x = (uv[i, 0] - camera.cx) / camera.fx
+            y = (uv[i, 1] - camera.cy) / camera.fy
+            R = T_w_c[i, :3, :3]
+            D = P[i] @ np.column_stack([R[:, 0] / camera.fx, R[:, 1] / camera.fy])
+            D /= math.sqrt(x * x + y * y + 1.0)
+            J = -A_inv @ M @ D
+            cov += J @ cov_uv[i] @ J.T
+    return 0.5 * (cov + cov.T)
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
