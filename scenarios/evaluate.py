@@ -25,13 +25,15 @@ import numpy as np
 from scenarios.records import DetectionRecord, ImageTiming, TickRecord
 from vnav import metrics, se3, so3
 from vnav.camera import PinholeCamera
-from vnav.cone import cones_fully_in_view
+from vnav.cone import TRAFFIC_CONE, cones_fully_in_view
 from vnav.detect import ConeDetection
-from vnav.estimators import estimate_from_depth
+from vnav.estimators import NoEstimate, estimate_from_depth
 from vnav.localize import ConeEstimates, localize
 from vnav.methods import CONTRACT_DOMAIN
-from vnav.sensor_noise import NOISELESS, SensorNoise
-from vnav.uncertainty import nees
+from vnav.sensor_noise import NOISELESS, SensorNoise, keypoint_std_px
+from vnav.silhouette import SilhouetteView
+from vnav.tracking import ApexTracker
+from vnav.uncertainty import compose, nees
 
 __all__ = ["MATCH_GATE_M", "TickTruth", "evaluate_tick"]
 
@@ -82,6 +84,7 @@ def evaluate_tick(
     noise: SensorNoise = NOISELESS,
     cov_T_w_b: np.ndarray | None = None,
     cov_T_b_c: np.ndarray | None = None,
+    tracker: ApexTracker | None = None,
 ) -> TickRecord:
     """Localise every detection with the estimator's pose and compare with the truth.
 
@@ -109,6 +112,9 @@ def evaluate_tick(
     cov_T_w_b, cov_T_b_c : ndarray, shape (6, 6), optional
         The covariances the estimator is told for ``T_w_b_est`` and ``T_b_c_est``
         (``vnav.localize``).
+    tracker : ApexTracker, optional
+        The run's apex tracks (``vnav.tracking``): with it, each detection's apex joins its
+        track and the ``triangulated`` estimate comes from the track's rays.
 
     Returns
     -------
@@ -134,6 +140,14 @@ def evaluate_tick(
         cov_T_b_c=cov_T_b_c,
     )
     estimates = [estimate(d) for d in detections]
+    if tracker is not None:
+        T_w_c_est = T_w_b_est @ T_b_c_est
+        cov_T_w_c = _ZERO_6 if cov_T_w_b is None else cov_T_w_b
+        if cov_T_b_c is not None:
+            cov_T_w_c = compose(T_w_b_est, cov_T_w_c, T_b_c_est, cov_T_b_c)[1]
+        estimates = _triangulated(
+            tracker, truth.t_s, detections, estimates, camera, T_w_c_est, cov_T_w_c, noise
+        )
     cone_of = _match(estimates, truth.cones_w)
     T_c_w = se3.invert(T_w_c)
     records = [
@@ -197,6 +211,52 @@ def _with_latest(
         latest_error_m=float(metrics.position_error(truth.cones_w[record.cone_index], p_w)[0]),
         predicted_latest_error_m=timing.true_motion_m + record.range_m * timing.true_motion_rad,
     )
+
+
+_ZERO_6 = np.zeros((6, 6))
+
+
+def _triangulated(
+    tracker: ApexTracker,
+    t_s: float,
+    detections: list[ConeDetection],
+    estimates: list[ConeEstimates],
+    camera: PinholeCamera,
+    T_w_c: np.ndarray,
+    cov_T_w_c: np.ndarray,
+    noise: SensorNoise,
+) -> list[ConeEstimates]:
+    """Each detection's ``triangulated`` estimate from its apex track (``vnav.tracking``),
+    merged into its ``ConeEstimates``: the apex fitted along the image vertical the pose gives
+    (``SilhouetteView.apex_keypoint``), its noise the keypoint table's along-figure in every
+    direction (``vnav.sensor_noise``)."""
+    apexes: dict[int, np.ndarray] = {}
+    for i, d in enumerate(detections):
+        if not d.touches_border:
+            apex = SilhouetteView(d, camera, T_w_c).apex_keypoint(TRAFFIC_CONE)
+            if apex is not None:
+                apexes[i] = apex
+    std_px = keypoint_std_px("apex", noise.pixel_std)[0]
+    tracked = tracker.update(
+        t_s,
+        T_w_c,
+        np.array(list(apexes.values())).reshape(-1, 2),
+        cov_T_w_c=cov_T_w_c,
+        cov_uv=std_px**2 * np.eye(2),
+    )
+    out = list(estimates)
+    for i, t in zip(apexes, tracked, strict=True):
+        e = estimates[i]
+        points = dict(e.p_w_by_method)
+        reasons = {m: r for m, r in e.no_estimate.items() if m != "triangulated"}
+        covs = dict(e.cov_w_by_method)
+        if t.p_w is None:
+            reasons["triangulated"] = NoEstimate.PARALLAX
+        else:
+            points["triangulated"] = t.p_w
+            covs["triangulated"] = t.cov_w
+        out[i] = ConeEstimates(points, reasons, covs)
+    return out
 
 
 def _match(estimates: list[ConeEstimates], cones_w: np.ndarray) -> dict[int, int]:

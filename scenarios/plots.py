@@ -52,9 +52,13 @@ def error_against_range_png(result: RunResult) -> bytes:
     the grey line is the method's bound ``max(floor, fraction * range)`` and the shaded band
     the contract's range domain.
     """
-    fig = _figure(7.2, 5.6)
-    axes = fig.subplots(2, 2).ravel()
-    for ax, m in zip(axes, METHODS, strict=True):
+    columns = 2
+    rows = -(-len(METHODS) // columns)
+    fig = _figure(7.2, 2.8 * rows)
+    axes = fig.subplots(rows, columns).ravel()
+    for ax in axes[len(METHODS) :]:
+        ax.set_visible(False)
+    for ax, m in zip(axes, METHODS, strict=False):
         _style(ax)
         color = np.array(m.color_rgb) / 255.0
         inside_r = result.ranges_for(m.name, contract_only=True)

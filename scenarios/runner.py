@@ -49,6 +49,7 @@ from vnav.camera import PinholeCamera
 from vnav.detect import detect_cones
 from vnav.frames import FrameBuffer
 from vnav.sensor_noise import SensorNoise, body_pose_covariance, mount_covariance
+from vnav.tracking import ApexTracker
 
 __all__ = ["STAGES", "TickObserver", "run_scenario"]
 
@@ -166,6 +167,7 @@ def _run_ticks(
                 noise=flow.sensor_noise,
                 cov_T_w_b=flow.pose_covariance(d),
                 cov_T_b_c=flow.cov_T_b_c,
+                tracker=flow.tracker,
             )
             result.ticks.append(record)
             t1 = time.perf_counter()
@@ -238,6 +240,7 @@ class _Flow:
         # The scenario's fixed mount error: T_b_c_true = T_b_c_declared @ E, so the estimator's
         # declared mount is the true one times E^-1 (then the per-run extrinsic noise).
         self.true_to_declared = se3.invert(spec.scene.camera.mount_error.T)
+        self.tracker = ApexTracker(world.camera)  # the triangulated method's apex tracks
         self.sensor_noise = SensorNoise(n.pixel_std_px, n.depth_std_m, n.depth_std_per_m2)
         self.streams = Streams(
             pose_latency_s=t.pose_latency_s,

@@ -174,9 +174,10 @@ def test_copy_of_a_builtin_without_checks_passes_and_says_what_it_skipped(
     tmp_path, monkeypatch, capsys
 ):
     """A user's copy of frame-problem with its [[checks]] removed is held to the default
-    checks; known_height cannot measure a cone seen from almost straight above, so its bound
-    is skipped, with the reason, in the table and the report, and the run passes. Run beside
-    another scenario, the command ends with a summary."""
+    checks; known_height cannot measure a cone seen from almost straight above, nor can
+    triangulated a cone seen from a drone that only yaws in place (no parallax), so their
+    bounds are skipped, with the reasons, in the table and the report, and the run passes. Run
+    beside another scenario, the command ends with a summary."""
     assert main(["show", "frame-problem"]) == 0
     text = capsys.readouterr().out
     (tmp_path / "mine.toml").write_text(text[: text.index("[[checks]]")])
@@ -188,7 +189,11 @@ def test_copy_of_a_builtin_without_checks_passes_and_says_what_it_skipped(
     skipped = outcomes["known_height median <= 5% of range"]
     assert skipped["outcome"] == "skipped" and "seen steeper than 69 deg" in skipped["reason"]
     assert rep["passed"] and rep["methods"]["known_height"]["no_estimate"] == {"steep": 51}
-    assert all(c["outcome"] == "passed" for c in rep["checks"] if c is not skipped)
+    parallax = outcomes["triangulated median <= max(5 cm, 1% of range)"]
+    assert parallax["outcome"] == "skipped" and "cross widely enough" in parallax["reason"]
+    assert all(
+        c["outcome"] == "passed" for c in rep["checks"] if c is not skipped and c is not parallax
+    )
     assert re.search(r"^  skipped +known_height median <= 5% of range", out, re.M)
     # The summary: counts, where the files are, how to open one (a file that exists).
     assert "2 scenarios: 2 passed" in out

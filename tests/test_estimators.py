@@ -72,7 +72,10 @@ def test_known_height_refuses_steep_views(
         assert "known_height" not in estimates.no_estimate
     else:
         assert estimates.known_height is None
-        assert estimates.no_estimate == {"known_height": NoEstimate.STEEP}
+        assert estimates.no_estimate == {
+            "known_height": NoEstimate.STEEP,
+            "triangulated": NoEstimate.ONE_IMAGE,
+        }
     assert relative_error(world, estimates.depth_image) <= 0.01
     assert relative_error(world, estimates.ground_plane) <= 0.02
 
@@ -147,6 +150,7 @@ def test_no_estimate_reasons_say_which_are_the_geometry() -> None:
         NoEstimate.NADIR,
         NoEstimate.STEEP,
         NoEstimate.SMALL,
+        NoEstimate.PARALLAX,
     }
     assert all(r.text for r in NoEstimate)
 

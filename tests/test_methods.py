@@ -48,10 +48,10 @@ def test_declared_bounds_are_the_contract() -> None:
 
 
 def test_names_and_preference() -> None:
-    assert METHOD_NAMES == ("depth_image", "ground_plane", "known_height", "naive")
+    assert METHOD_NAMES == ("depth_image", "ground_plane", "known_height", "triangulated", "naive")
     assert METHOD_NAMES == tuple(m.name for m in METHODS)
     # The checked methods, best first: the naive estimate is never the best estimate.
-    assert PREFERENCE == ("depth_image", "ground_plane", "known_height")
+    assert PREFERENCE == ("depth_image", "ground_plane", "known_height", "triangulated")
     assert "naive" not in PREFERENCE
     assert all(method(name).bound is not None for name in PREFERENCE)
     assert len({m.color_rgb for m in METHODS}) == len(METHODS)  # one colour each

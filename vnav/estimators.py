@@ -85,6 +85,8 @@ class NoEstimate(enum.Enum):
     NO_APEX = "no_apex"
     INCONSISTENT = "inconsistent"
     NO_OTHER_ESTIMATE = "no_other_estimate"
+    ONE_IMAGE = "one_image"
+    PARALLAX = "parallax"
 
     @property
     def text(self) -> str:
@@ -112,6 +114,8 @@ _NO_ESTIMATE_TEXT = {
     NoEstimate.NO_APEX: "with no apex found in the silhouette",
     NoEstimate.INCONSISTENT: "whose similar triangles do not close",
     NoEstimate.NO_OTHER_ESTIMATE: "with no other estimate to start from",
+    NoEstimate.ONE_IMAGE: "from one image (triangulation needs a track over several)",
+    NoEstimate.PARALLAX: "whose views do not cross widely enough (too little motion for the noise)",
 }
 _GEOMETRIC = frozenset(
     {
@@ -120,6 +124,7 @@ _GEOMETRIC = frozenset(
         NoEstimate.NADIR,
         NoEstimate.STEEP,
         NoEstimate.SMALL,
+        NoEstimate.PARALLAX,
     }
 )
 

@@ -191,6 +191,8 @@ def localize(
         "depth_image": NoEstimate.NO_DEPTH if z_c is None else _from_depth(view, z_c, cone, far_m),
         "ground_plane": _ground_plane(view, cone),
         "known_height": _known_height(view, cone),
+        # Several images' work (vnav.tracking): scenarios.evaluate fills it in.
+        "triangulated": NoEstimate.ONE_IMAGE,
     }
     no_estimate = {m: r for m, r in found.items() if isinstance(r, NoEstimate)}
     p_w_by_method = {m: p for m, p in found.items() if m not in no_estimate}

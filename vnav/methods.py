@@ -147,6 +147,13 @@ METHODS: tuple[Method, ...] = (
         AccuracyBound(0.0, 0.05, "median"),
     ),
     Method(
+        "triangulated",
+        "the apex's rays over the last images, triangulated (motion alone, no depth)",
+        (255, 165, 0),
+        "orange",
+        AccuracyBound(0.05, 0.01, "median"),
+    ),
+    Method(
         "naive",
         "the lecture's mistake: camera coordinates added to the drone's position",
         (255, 40, 40),

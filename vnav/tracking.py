@@ -26,7 +26,11 @@ from vnav.camera import PinholeCamera
 from vnav.cone import TRAFFIC_CONE, ConeModel
 from vnav.multiview import parallax_deg, triangulate
 
-__all__ = ["ApexTracker", "TrackedApex", "midpoint_covariance"]
+__all__ = ["MIN_RANGE_M", "ApexTracker", "TrackedApex", "midpoint_covariance"]
+
+MIN_RANGE_M = 2.0
+"""The nearest a tracked cone is assumed to be (the accuracy contract's nearest range): it
+bounds how far its bearing can turn as the camera moves."""
 
 
 @dataclass(frozen=True)
@@ -81,6 +85,10 @@ class ApexTracker:
         Triangulate only rays that cross at this angle or more.
     max_views : int
         At most this many rays per track (the newest).
+    max_std_fraction : float
+        Refuse an estimate whose covariance's largest standard deviation exceeds this
+        fraction of its range: rays that cross at a few degrees cannot beat noise of a
+        degree (no estimate rather than a wrong one).
     """
 
     def __init__(
@@ -92,6 +100,7 @@ class ApexTracker:
         gate_deg: float = 2.0,
         min_parallax_deg: float = 3.0,
         max_views: int = 40,
+        max_std_fraction: float = 0.05,
     ) -> None:
         if not (window_s > 0 and gate_deg > 0 and min_parallax_deg > 0 and max_views >= 2):
             raise ValueError(
@@ -101,6 +110,7 @@ class ApexTracker:
         self.camera, self.cone = camera, cone
         self.window_s, self.gate_rad = float(window_s), math.radians(gate_deg)
         self.min_parallax_deg, self.max_views = float(min_parallax_deg), int(max_views)
+        self.max_std_fraction = float(max_std_fraction)
         self._tracks: list[_Track] = []
         self._next_id = 0
 
@@ -154,12 +164,19 @@ class ApexTracker:
         self._tracks = [tr for tr in self._tracks if tr.rays]
 
     def _associate(self, centre: np.ndarray, directions: np.ndarray) -> dict[int, _Track]:
-        """Greedy: the closest (ray, track) pairs first, each used once, within the gate."""
+        """Greedy: the closest (ray, track) pairs first, each used once, within the gate.
+
+        Towards a track's apex the gate is ``gate_deg``; towards a track without one, the
+        cone's bearing may also have turned by the camera's travel since that ray over the
+        cone's range, at most ``baseline / MIN_RANGE_M``: the gate widens by that."""
         pairs = []
         for k, d in enumerate(directions):
             for tr in self._tracks:
                 dist = _angle_to_track(centre, d, tr)
-                if dist <= self.gate_rad:
+                gate = self.gate_rad
+                if tr.apex_w is None:
+                    gate += float(np.linalg.norm(centre - tr.rays[-1][1])) / MIN_RANGE_M
+                if dist <= gate:
                     pairs.append((dist, k, tr.id))
         pairs.sort()
         by_id = {tr.id: tr for tr in self._tracks}
@@ -195,6 +212,12 @@ class ApexTracker:
             [r[5] for r in track.rays],
             [r[6] for r in track.rays],
         )
+        range_m = float(np.linalg.norm(apex - track.rays[-1][1]))
+        if (
+            math.sqrt(max(float(np.linalg.eigvalsh(cov)[-1]), 0.0))
+            > self.max_std_fraction * range_m
+        ):
+            return TrackedApex(track.id, None, apex, angle, len(track.rays), None)
         return TrackedApex(track.id, base, apex, angle, len(track.rays), cov)
 
 
