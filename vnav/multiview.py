@@ -275,13 +275,19 @@ def camera_pose_from_cones(
     refined on all its matches. A cone layout that two poses explain equally well (a symmetric
     map seen from where the symmetry holds) is refused rather than guessed.
 
+    With exactly 3 cones seen (three apexes admit up to four poses), each also gives its base
+    plate's near bottom edge on the line of sight, seen at ``base_uv``: ``cone_w - s b`` with
+    ``s = ConeModel.base_axis_distance_m`` and ``b`` the horizontal bearing from the camera,
+    which the pose sets; solved from the cones' centres first, then once more with the edges
+    the first pose gives. The 3 cones must not stand on one line.
+
     Parameters
     ----------
     camera : PinholeCamera
     cones_w : array_like, shape (M, 3)
-        Base centres of the map's cones, M >= 4.
+        Base centres of the map's cones, M >= 3.
     detections : sequence of ConeDetection
-        At least 4, clear of the image border.
+        At least 3, clear of the image border.
     cone : ConeModel
     T_w_c_guess : ndarray, shape (4, 4), optional
         A rough pose (the pose stream's, say): the apexes are matched by projecting the map
@@ -298,17 +304,19 @@ def camera_pose_from_cones(
     Raises
     ------
     ValueError
-        Fewer than 4 usable detections or cones, no pose that explains at least 4 of them, or
-        an ambiguous match.
+        Fewer than 3 usable detections or cones, 3 cones on one line, no pose that explains
+        the detections, or an ambiguous match.
     """
     C = np.asarray(cones_w, dtype=np.float64)
     if C.ndim != 2 or C.shape[1] != 3:
         raise ValueError(f"cones_w must have shape (M, 3), got {C.shape}")
     apex_w = C + np.array([0.0, 0.0, cone.height_m])
     usable = [i for i, d in enumerate(detections) if not d.touches_border]
+    if len(usable) == 3 and len(C) >= 3:
+        return _pose_from_three_cones(camera, C, detections, usable, cone)
     if len(usable) < 4 or len(C) < 4:
         raise ValueError(
-            f"a pose from cones needs at least 4 cones seen whole, got {len(usable)} detections "
+            f"a pose from cones needs at least 3 cones seen whole, got {len(usable)} detections "
             f"clear of the border and {len(C)} cones in the map"
         )
     uv = np.array([detections[i].apex_uv for i in usable])
@@ -324,6 +332,54 @@ def camera_pose_from_cones(
     seeds = sorted(range(len(usable)), key=lambda k: -detections[usable[k]].area_px)[:4]
     result, found = camera_pose_from_apexes(camera, apex_w, uv, seeds)
     return result, {usable[k]: c for k, c in found.items()}
+
+
+def _pose_from_three_cones(
+    camera: PinholeCamera,
+    C: np.ndarray,
+    detections: Sequence[ConeDetection],
+    usable: list[int],
+    cone: ConeModel,
+) -> tuple[PnPResult, dict[int, int]]:
+    """``camera_pose_from_cones`` for exactly 3 detections: apexes and base edges."""
+    apex_uv = np.array([detections[i].apex_uv for i in usable])
+    base_uv = np.array([detections[i].base_uv for i in usable])
+    px = np.concatenate([apex_uv, base_uv])
+    up = np.array([0.0, 0.0, cone.height_m])
+    scored: list[tuple[float, tuple[int, ...], PnPResult]] = []
+    for chosen in itertools.permutations(range(len(C)), 3):
+        centres = C[list(chosen)]
+        if np.linalg.matrix_rank(centres[1:] - centres[0], tol=1e-6) < 2:
+            continue  # three cones on one line leave the rotation about it free
+        result = _pnp(
+            camera, np.concatenate([centres + up, centres]), px, cv2.SOLVEPNP_SQPNP, refine=True
+        )
+        if result is None:
+            continue
+        edges = _edges(centres, result.T_w_c, cone)
+        refined = _pnp(
+            camera, np.concatenate([centres + up, edges]), px, cv2.SOLVEPNP_SQPNP, refine=True
+        )
+        if refined is not None and refined.rms_px <= MATCH_GATE_PX:
+            scored.append((refined.rms_px, chosen, refined))
+    if not scored:
+        raise ValueError("no pose puts 3 of the map's cones (not on one line) on the detections")
+    scored.sort(key=lambda s: s[0])
+    best = scored[0]
+    if len(scored) > 1 and set(scored[1][1]) != set(best[1]) and scored[1][0] < 2.0 * best[0] + 0.5:
+        raise ValueError(
+            "ambiguous: two different matches of detections to cones fit equally well "
+            "(the map looks the same from two poses)"
+        )
+    return best[2], {usable[k]: c for k, c in enumerate(best[1])}
+
+
+def _edges(centres: np.ndarray, T_w_c: np.ndarray, cone: ConeModel) -> np.ndarray:
+    """Each base plate's near bottom edge on the line of sight from the camera at ``T_w_c``."""
+    b = centres - T_w_c[:3, 3]
+    b[:, 2] = 0.0
+    b /= np.maximum(np.linalg.norm(b, axis=1, keepdims=True), 1e-9)
+    return centres - cone.base_axis_distance_m * b
 
 
 def camera_pose_from_apexes(
