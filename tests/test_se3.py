@@ -159,3 +159,20 @@ def test_float32_transform_shear_names_the_float32_tolerance():
     # The plain-float fast path and the full check agree on a float64 pose.
     assert se3.check_transform(T_OK) is T_OK
     np.testing.assert_array_equal(se3.check_pose(T_OK.astype(np.float32)), T_OK.astype(np.float32))
+
+
+def test_apply_into_a_buffer_is_apply() -> None:
+    """``out=``: the same numbers written into the caller's buffer, which is returned; a buffer
+    of the wrong shape, dtype or layout, or one overlapping ``p``, is refused."""
+    rng = np.random.default_rng(4)
+    T = se3.make(so3.exp(rng.normal(size=3)), rng.normal(size=3))
+    for shape in ((3,), (5, 3), (2, 7, 3), (20_000, 3)):
+        p = rng.normal(size=shape)
+        out = np.empty(shape)
+        got = se3.apply(T, p, out=out)
+        assert got is out
+        np.testing.assert_array_equal(out, se3.apply(T, p))
+    p = rng.normal(size=(4, 3))
+    for bad in (np.empty((4, 3), np.float32), np.empty((3, 4)).T, np.empty((5, 3)), p):
+        with pytest.raises(ValueError, match="out must"):
+            se3.apply(T, p, out=bad)

@@ -362,3 +362,25 @@ def test_float32_rotations_go_through_every_rotation_function():
     q = quat.from_matrix(R32)
     assert q.dtype == np.float64
     np.testing.assert_allclose(np.linalg.norm(q, axis=-1), 1.0, atol=1e-15)
+
+
+def test_fused_rotation_errors_match_the_lecture_form() -> None:
+    """``_rotation_errors`` (one pass over the entries) against ``max |R^T R - I|`` by matmul
+    and ``np.linalg.det``, on rotations, near-rotations, reflections and arbitrary matrices,
+    in stacks of any leading shape."""
+    from vnav.so3 import _orthogonality_error, _rotation_errors
+
+    rng = np.random.default_rng(11)
+    R = so3.exp(rng.normal(0.0, 1.0, (2, 5, 3)))
+    samples = [
+        R,
+        R + rng.normal(0.0, 1e-6, R.shape),
+        R * np.array([1.0, 1.0, -1.0]),
+        rng.normal(0.0, 1.0, (7, 3, 3)),
+        R[0, 0],
+    ]
+    for M in samples:
+        err, det = _rotation_errors(M)
+        assert err.shape == det.shape == M.shape[:-2]
+        np.testing.assert_allclose(err, _orthogonality_error(M), rtol=0, atol=1e-14)
+        np.testing.assert_allclose(det, np.linalg.det(M), rtol=1e-12, atol=1e-14)

@@ -148,7 +148,7 @@ def invert(T: ArrayLike) -> FloatArray:
     return out
 
 
-def apply(T: ArrayLike, p: ArrayLike) -> FloatArray:
+def apply(T: ArrayLike, p: ArrayLike, *, out: np.ndarray | None = None) -> FloatArray:
     """Transform points: ``p_a = R_a_b @ p_b + t_a_b`` for ``T = T_a_b`` (lecture chapter 7).
 
     Parameters
@@ -158,16 +158,20 @@ def apply(T: ArrayLike, p: ArrayLike) -> FloatArray:
     p : array_like, shape (3,) or (N, 3) (any (..., 3))
         Points ``p_b``, one per row. NaN rows pass through as NaN (so masked point sets, such
         as points behind a camera, keep their rows); only the shape is checked.
+    out : ndarray, optional
+        A C-contiguous float64 array of ``p``'s shape to write the result into (a buffer kept
+        across frames: no new memory to map per call). It must not overlap ``p``.
 
     Returns
     -------
     ndarray, same shape as ``p``
-        Points ``p_a``.
+        Points ``p_a`` (``out`` itself when given).
 
     Raises
     ------
     ValueError
-        If ``T`` is not a rigid transform or ``p`` does not end with a dimension of 3.
+        If ``T`` is not a rigid transform, ``p`` does not end with a dimension of 3, or ``out``
+        is not a C-contiguous float64 array of ``p``'s shape apart from ``p``.
     """
     T = check_transform(T)
     if T.ndim != 2:
@@ -175,10 +179,29 @@ def apply(T: ArrayLike, p: ArrayLike) -> FloatArray:
     p = _v.vector(p, "p", finite=False)
     R = T[:3, :3]
     t = T[:3, 3]
+    if out is not None:
+        if (
+            not isinstance(out, np.ndarray)
+            or out.dtype != np.float64
+            or out.shape != p.shape
+            or not out.flags.c_contiguous
+            or not out.flags.writeable
+        ):
+            raise ValueError(
+                f"out must be a writeable C-contiguous float64 array of shape {p.shape}; got "
+                f"{getattr(out, 'dtype', type(out).__name__)} {getattr(out, 'shape', '')}"
+            )
+        if np.shares_memory(out, p):
+            raise ValueError("out must not overlap p (the chunks read p after writing out)")
     if p.ndim == 1:
-        return R @ p + t
+        if out is None:
+            return R @ p + t
+        np.matmul(R, p, out=out)
+        out += t
+        return out
     flat = p.reshape(-1, 3)
-    out = np.empty(flat.shape)
+    result = out
+    out = np.empty(flat.shape) if result is None else result.reshape(-1, 3)
     t_rows = np.tile(t, _T_BLOCK)
     # Per chunk (a few MB, still in cache for the second step): out = p R^T in one BLAS call,
     # then + t on long rows of interleaved [x0 y0 z0 x1 y1 z1 ...].
@@ -189,7 +212,7 @@ def apply(T: ArrayLike, p: ArrayLike) -> FloatArray:
         rows = chunk[:n_block].reshape(-1, 3 * _T_BLOCK)  # a view
         np.add(rows, t_rows, out=rows)
         chunk[n_block:] += t
-    return out.reshape(p.shape)
+    return out.reshape(p.shape) if result is None else result
 
 
 def check_pose(T: ArrayLike, name: str = "T") -> FloatArray:
