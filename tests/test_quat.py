@@ -366,3 +366,18 @@ def test_quaternion_tolerance_is_checked_before_anything_else(atol):
     for q in ([0.0, 0.0, 0.0, 1.0], np.zeros((0, 4))):
         with pytest.raises(ValueError, match=r"^atol must be a (finite )?number"):
             quat.check_quaternion(q, atol=atol)
+
+
+def test_from_matrix_matches_its_lecture_form(rng):
+    """The vectorised kernel against Shepperd's four branches matrix by matrix, on random
+    rotations and on rotations by pi (where w = 0 and another component dominates)."""
+    R = so3.exp(rng.normal(size=(200, 3)))
+    axes = rng.normal(size=(20, 3))
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    R = np.concatenate([R, so3.exp(np.pi * axes)])
+    q = quat.from_matrix(R)
+    for Ri, qi in zip(R, q, strict=True):
+        ref = quat._from_matrix_reference(Ri)
+        if abs(ref[3]) < 1e-12:  # at w = 0, q and -q are both canonical
+            ref = ref if ref @ qi >= 0 else -ref
+        np.testing.assert_allclose(qi, ref, atol=1e-15)
