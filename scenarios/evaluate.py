@@ -17,7 +17,6 @@ the simulator that produced them (``scenarios.runner`` reads them out of MuJoCo)
 from __future__ import annotations
 
 import dataclasses
-import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -25,13 +24,12 @@ import numpy as np
 from scenarios.records import DetectionRecord, ImageTiming, TickRecord
 from vnav import metrics, se3, so3
 from vnav.camera import PinholeCamera
-from vnav.cone import TRAFFIC_CONE, cones_fully_in_view
+from vnav.cone import cones_fully_in_view
 from vnav.detect import ConeDetection
 from vnav.estimators import NoEstimate, estimate_from_depth
 from vnav.localize import ConeEstimates, localize
 from vnav.methods import CONTRACT_DOMAIN
 from vnav.sensor_noise import NOISELESS, SensorNoise, keypoint_std_px
-from vnav.silhouette import SilhouetteView
 from vnav.tracking import ApexTracker
 from vnav.uncertainty import compose, nees
 
@@ -128,26 +126,12 @@ def evaluate_tick(
     rpy_rad = so3.to_rpy(R_w_b, warn=False)
     in_view = cones_fully_in_view(truth.cones_w, camera, T_w_c, CONTRACT_DOMAIN.min_height_px)
     T_b_c_est = truth.T_b_c if T_b_c_est is None else T_b_c_est
-    estimate = functools.partial(
-        localize,
-        camera=camera,
-        T_w_b=T_w_b_est,
-        T_b_c=T_b_c_est,
-        depth=depth_m,
-        far_m=far_m,
-        noise=noise,
-        cov_T_w_b=cov_T_w_b,
-        cov_T_b_c=cov_T_b_c,
-    )
-    estimates = [estimate(d) for d in detections]
+    told = {"noise": noise, "cov_T_w_b": cov_T_w_b, "cov_T_b_c": cov_T_b_c}
+    estimates = [
+        localize(d, camera, T_w_b_est, T_b_c_est, depth_m, far_m=far_m, **told) for d in detections
+    ]
     if tracker is not None:
-        T_w_c_est = T_w_b_est @ T_b_c_est
-        cov_T_w_c = _ZERO_6 if cov_T_w_b is None else cov_T_w_b
-        if cov_T_b_c is not None:
-            cov_T_w_c = compose(T_w_b_est, cov_T_w_c, T_b_c_est, cov_T_b_c)[1]
-        estimates = _triangulated(
-            tracker, truth.t_s, detections, estimates, camera, T_w_c_est, cov_T_w_c, noise
-        )
+        estimates = _triangulated(tracker, truth.t_s, estimates, T_w_b_est, T_b_c_est, **told)
     cone_of = _match(estimates, truth.cones_w)
     T_c_w = se3.invert(T_w_c)
     records = [
@@ -219,23 +203,24 @@ _ZERO_6 = np.zeros((6, 6))
 def _triangulated(
     tracker: ApexTracker,
     t_s: float,
-    detections: list[ConeDetection],
     estimates: list[ConeEstimates],
-    camera: PinholeCamera,
-    T_w_c: np.ndarray,
-    cov_T_w_c: np.ndarray,
+    T_w_b: np.ndarray,
+    T_b_c: np.ndarray,
+    *,
     noise: SensorNoise,
+    cov_T_w_b: np.ndarray | None,
+    cov_T_b_c: np.ndarray | None,
 ) -> list[ConeEstimates]:
     """Each detection's ``triangulated`` estimate from its apex track (``vnav.tracking``),
     merged into its ``ConeEstimates``: the apex fitted along the image vertical the pose gives
-    (``SilhouetteView.apex_keypoint``), its noise the keypoint table's along-figure in every
-    direction (``vnav.sensor_noise``)."""
-    apexes: dict[int, np.ndarray] = {}
-    for i, d in enumerate(detections):
-        if not d.touches_border:
-            apex = SilhouetteView(d, camera, T_w_c).apex_keypoint(TRAFFIC_CONE)
-            if apex is not None:
-                apexes[i] = apex
+    (``ConeEstimates.apex_uv``), its noise the keypoint table's along-figure in every
+    direction (``vnav.sensor_noise``), the camera pose's covariance composed as
+    ``vnav.localize`` composes it."""
+    T_w_c = T_w_b @ T_b_c
+    cov_T_w_c = _ZERO_6 if cov_T_w_b is None else cov_T_w_b
+    if cov_T_b_c is not None:
+        cov_T_w_c = compose(T_w_b, cov_T_w_c, T_b_c, cov_T_b_c)[1]
+    apexes = {i: e.apex_uv for i, e in enumerate(estimates) if e.apex_uv is not None}
     std_px = keypoint_std_px("apex", noise.pixel_std)[0]
     tracked = tracker.update(
         t_s,
@@ -255,7 +240,7 @@ def _triangulated(
         else:
             points["triangulated"] = t.p_w
             covs["triangulated"] = t.cov_w
-        out[i] = ConeEstimates(points, reasons, covs)
+        out[i] = ConeEstimates(points, reasons, covs, e.apex_uv)
     return out
 
 

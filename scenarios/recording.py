@@ -348,27 +348,7 @@ class Recording:
             rr.EncodedImage(contents=error_against_range_png(result), media_type="image/png"),
             static=True,
         )
-        if result.poses is not None:
-            if self._latency:
-                _send_pose_samples(rec, result.poses)
-            rec.send_columns(
-                entity.POSE_STREAM,
-                indexes=[rr.TimeColumn("sim_time", duration=result.poses.stamps_s)],
-                columns=rr.Transform3D.columns(
-                    translation=result.poses.T_w_b[:, :3, 3],
-                    quaternion=quat.from_matrix(result.poses.T_w_b[:, :3, :3]),
-                ),
-            )
-        rec.log(
-            entity.TRUTH_VALUES,
-            rr.AnyValues(camera_clock_offset_s=self._spec.timing.camera_clock_offset_s),
-            static=True,
-        )
-        if result.calibration is not None:  # the description gains what the run recovered
-            text = describe(self._spec, self._seed) + "\n\n" + calibration_text(result.calibration)
-            rec.log(
-                entity.DESCRIPTION, rr.TextDocument(text, media_type="text/markdown"), static=True
-            )
+        _log_run_inputs(rec, result, self._spec, self._seed, self._latency)
         depth_max_m = _depth_scale_m(result, self._depth_p95_m)
         rec.log(
             entity.DEPTH,
@@ -792,27 +772,53 @@ def _send_poses(send: _Sender, rows: list[_Buffered], mount_moves: bool) -> None
     if mount_moves:
         poses[entity.CAMERA] = ([r.record.T_b_c for r in rows], FRAME.BODY, FRAME.CAMERA)
     for path, (T, parent, child) in poses.items():
-        T_parent_child = np.array(T)
-        # vnav and Rerun both order quaternions x, y, z, w: no reordering here.
-        columns = rr.Transform3D.columns(
-            translation=T_parent_child[:, :3, 3],
-            quaternion=quat.from_matrix(T_parent_child[:, :3, :3]),
-            child_frame=[child] * len(rows),
-            parent_frame=[parent] * len(rows),
+        columns = _transform_columns(
+            np.array(T), child_frame=[child] * len(rows), parent_frame=[parent] * len(rows)
         )
         send(path, rows, columns)
+
+
+def _transform_columns(T_parent_child: np.ndarray, **more) -> object:
+    """``Transform3D`` columns of a stack of poses (N, 4, 4); vnav and Rerun both order
+    quaternions x, y, z, w: no reordering here."""
+    return rr.Transform3D.columns(
+        translation=T_parent_child[:, :3, 3],
+        quaternion=quat.from_matrix(T_parent_child[:, :3, :3]),
+        **more,
+    )
+
+
+def _log_run_inputs(
+    rec: rr.RecordingStream, result: RunResult, spec: ScenarioSpec, seed: int, latency: bool
+) -> None:
+    """At the end of a run: the pose stream as the estimator received it, the true clock
+    offset (what ``vnav-demo calibrate`` reads beside the detections), and, when the run was
+    calibrated, what it recovered, appended to the scenario's description."""
+    if result.poses is not None:
+        if latency:
+            _send_pose_samples(rec, result.poses)
+        rec.send_columns(
+            entity.POSE_STREAM,
+            indexes=[rr.TimeColumn("sim_time", duration=result.poses.stamps_s)],
+            columns=_transform_columns(result.poses.T_w_b),
+        )
+    rec.log(
+        entity.TRUTH_VALUES,
+        rr.AnyValues(camera_clock_offset_s=spec.timing.camera_clock_offset_s),
+        static=True,
+    )
+    if result.calibration is not None:
+        text = describe(spec, seed) + "\n\n" + calibration_text(result.calibration)
+        rec.log(entity.DESCRIPTION, rr.TextDocument(text, media_type="text/markdown"), static=True)
 
 
 def _send_estimator_inputs(send: _Sender, rows: list[_Buffered]) -> None:
     """The mount the estimator was told and each image's stamp on the camera clock: with the
     pose stream and the detections, what ``vnav-demo calibrate`` needs."""
-    mounts = np.array([r.record.T_b_c_est for r in rows])
     send(
         entity.MOUNT_DECLARED,
         rows,
-        rr.Transform3D.columns(
-            translation=mounts[:, :3, 3], quaternion=quat.from_matrix(mounts[:, :3, :3])
-        ),
+        _transform_columns(np.array([r.record.T_b_c_est for r in rows])),
     )
     stamps = [
         r.record.t_s if r.record.timing is None else r.record.timing.stamp_cam_s for r in rows

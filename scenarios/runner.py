@@ -152,23 +152,9 @@ def _run_ticks(
     def evaluate(delivered: list[Delivered]) -> None:
         nonlocal done
         for d in delivered:
-            image_timing = flow.image_timing(d)
             t0 = time.perf_counter()
             image: _Image = d.payload
-            record = evaluate_tick(
-                image.truth,
-                image.detections,
-                image.depth,
-                world.camera,
-                d.T_w_b_at_exposure,
-                spec.scene.zfar_m,
-                image_timing,
-                T_b_c_est=flow.mount_error @ image.truth.T_b_c @ flow.true_to_declared,
-                noise=flow.sensor_noise,
-                cov_T_w_b=flow.pose_covariance(d),
-                cov_T_b_c=flow.cov_T_b_c,
-                tracker=flow.tracker,
-            )
+            record = flow.evaluate(d)
             result.ticks.append(record)
             t1 = time.perf_counter()
             if observer:
@@ -364,6 +350,26 @@ class _Flow:
                 depth, n.depth_std_m, n.depth_std_per_m2, self.spec.scene.zfar_m, self.depth_rng
             )
         return rgb, depth
+
+    def evaluate(self, d: Delivered) -> TickRecord:
+        """Evaluate a delivered image with what the estimator was told: the pose at its
+        exposure stamp, the declared mount (``[camera.mount_error]`` and the run's extrinsic
+        error away from the truth), the sensors' noise and the apex tracks."""
+        image: _Image = d.payload
+        return evaluate_tick(
+            image.truth,
+            image.detections,
+            image.depth,
+            self.world.camera,
+            d.T_w_b_at_exposure,
+            self.spec.scene.zfar_m,
+            self.image_timing(d),
+            T_b_c_est=self.mount_error @ image.truth.T_b_c @ self.true_to_declared,
+            noise=self.sensor_noise,
+            cov_T_w_b=self.pose_covariance(d),
+            cov_T_b_c=self.cov_T_b_c,
+            tracker=self.tracker,
+        )
 
     def pose_covariance(self, d: Delivered) -> np.ndarray:
         """The covariance the estimator is told for ``d.T_w_b_at_exposure``, (6, 6).

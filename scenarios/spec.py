@@ -377,6 +377,21 @@ def _start_pose(flight) -> tuple[tuple[float, ...], tuple[float, ...]]:
     return position_w, tuple(map(float, quat.from_axis_angle([0.0, 0.0, 1.0], yaw_rad)))
 
 
+def _camera(table: Any, where: str) -> CameraConfig:
+    """``[camera]`` and its optional ``[camera.mount_error]``."""
+    camera_table = _read(table or {}, schema.CAMERA, where, "camera")
+    if camera_table["mount_error"] is None:
+        del camera_table["mount_error"]
+    else:
+        camera_table["mount_error"] = _read(
+            camera_table["mount_error"], schema.MOUNT_ERROR, where, "camera.mount_error"
+        )
+    try:
+        return CameraConfig.from_dict(camera_table)
+    except ValueError as exc:
+        raise _err(where, "camera", str(exc)) from None
+
+
 def from_dict(data: dict[str, Any], where: str = "<scenario>") -> ScenarioSpec:
     """Build a ``ScenarioSpec`` from parsed TOML (user units), as ``scenarios.schema`` declares.
 
@@ -400,17 +415,7 @@ def from_dict(data: dict[str, Any], where: str = "<scenario>") -> ScenarioSpec:
         raise _err(
             where, "name", f"must be at most {schema.MAX_NAME_CHARS} characters, got {len(name)}"
         )
-    camera_table = _read(top["camera"] or {}, schema.CAMERA, where, "camera")
-    if camera_table["mount_error"] is None:
-        del camera_table["mount_error"]
-    else:
-        camera_table["mount_error"] = _read(
-            camera_table["mount_error"], schema.MOUNT_ERROR, where, "camera.mount_error"
-        )
-    try:
-        camera = CameraConfig.from_dict(camera_table)
-    except ValueError as exc:
-        raise _err(where, "camera", str(exc)) from None
+    camera = _camera(top["camera"], where)
     cones_w = _cones(top["cones"], where)
     flight = _flight(top["flight"], where)
     start_position_w, start_quat_xyzw = _start_pose(flight)

@@ -270,6 +270,15 @@ CLOSE_UP_EYE_B = np.array([-2.0, 1.2, 1.2])
 """Where the close-up's eye starts in the drone's yaw frame: behind, to the left, above (m)."""
 
 
+_CLOSE_UP_CONTENTS = [
+    "+ $origin/**",
+    f"- /{entity.DEPTH}",
+    f"- /{entity.DEPTH_CLOUD}",
+    f"- /{entity.TRAJECTORY}",
+]
+"""What a close-up shows: the world without the depth image, its cloud and the flown path."""
+
+
 def _close_up(T_w_b) -> rrb.Spatial3DView:
     """The drone at the last tick, its three frames and the start of each ray, from 2.6 m.
 
@@ -292,12 +301,7 @@ def _close_up(T_w_b) -> rrb.Spatial3DView:
     return rrb.Spatial3DView(
         name="drone close-up",
         origin=entity.WORLD,
-        contents=[
-            "+ $origin/**",
-            f"- /{entity.DEPTH}",
-            f"- /{entity.DEPTH_CLOUD}",
-            f"- /{entity.TRAJECTORY}",
-        ],
+        contents=_CLOSE_UP_CONTENTS,
         eye_controls=eye,
     )
 
@@ -334,12 +338,7 @@ def cone_close_up(cone_w, T_w_b=None) -> rrb.Spatial3DView:
     return rrb.Spatial3DView(
         name="cone close-up",
         origin=entity.WORLD,
-        contents=[
-            "+ $origin/**",
-            f"- /{entity.DEPTH}",
-            f"- /{entity.DEPTH_CLOUD}",
-            f"- /{entity.TRAJECTORY}",
-        ],
+        contents=_CLOSE_UP_CONTENTS,
         eye_controls=rrb.EyeControls3D(position=eye_w, look_target=target_w, eye_up=[0, 0, 1]),
     )
 

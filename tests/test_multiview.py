@@ -158,15 +158,11 @@ CONES_W = np.array(
 )
 
 
-@pytest.mark.parametrize("seed", range(4))
-def test_camera_pose_from_cones_on_rendered_frames(seed: int) -> None:
-    """Six cones rendered from a random drone pose: every detection matched to the cone the
-    simulator says it is (the nearest true apex projection), the pose's RMS residual under a
-    pixel, and the true apexes reprojected by the recovered pose within 2 px of the truth's
-    own projections (the pose explains the scene as well as the pixels allow)."""
-    rng = np.random.default_rng(300 + seed)
+def _render_cones(cones_w: np.ndarray, rng: np.random.Generator):
+    """The cones rendered from a random drone pose (camera pitched 20 deg down): the world and
+    the detections."""
     world = World.from_config(
-        SceneConfig(cones_w=tuple(map(tuple, CONES_W)), camera=CameraConfig(pitch_down_deg=20.0))
+        SceneConfig(cones_w=tuple(map(tuple, cones_w)), camera=CameraConfig(pitch_down_deg=20.0))
     )
     world.set_pose(
         se3.make(
@@ -175,7 +171,16 @@ def test_camera_pose_from_cones_on_rendered_frames(seed: int) -> None:
         )
     )
     with Renderer(world) as renderer:
-        detections = detect_cones(renderer.render(depth=False).rgb)
+        return world, detect_cones(renderer.render(depth=False).rgb)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_camera_pose_from_cones_on_rendered_frames(seed: int) -> None:
+    """Six cones rendered from a random drone pose: every detection matched to the cone the
+    simulator says it is (the nearest true apex projection), the pose's RMS residual under a
+    pixel, and the true apexes reprojected by the recovered pose within 2 px of the truth's
+    own projections (the pose explains the scene as well as the pixels allow)."""
+    world, detections = _render_cones(CONES_W, np.random.default_rng(300 + seed))
     result, matches = camera_pose_from_cones(world.camera, CONES_W, detections)
     apex_w = CONES_W + APEX_OFFSET
     true_uv = _project(world.T_w_c, apex_w)
@@ -230,18 +235,7 @@ def test_camera_pose_from_three_rendered_cones(seed: int) -> None:
     the cone the simulator says it is, and the pose within 1 deg and 20 cm of the truth (the
     base edges' pixels are the detector's, 1-2 px off the plate's true edge)."""
     cones = np.array([[8.0, 0.0, 0.0], [10.0, 2.5, 0.0], [12.0, -2.0, 0.0]])
-    rng = np.random.default_rng(600 + seed)
-    world = World.from_config(
-        SceneConfig(cones_w=tuple(map(tuple, cones)), camera=CameraConfig(pitch_down_deg=20.0))
-    )
-    world.set_pose(
-        se3.make(
-            so3.from_rpy(*rng.uniform(-0.1, 0.1, 2), rng.uniform(-0.2, 0.2)),
-            [rng.uniform(-2, 1), rng.uniform(-1, 1), rng.uniform(2, 4)],
-        )
-    )
-    with Renderer(world) as renderer:
-        detections = detect_cones(renderer.render(depth=False).rgb)
+    world, detections = _render_cones(cones, np.random.default_rng(600 + seed))
     result, matches = camera_pose_from_cones(world.camera, cones, detections)
     true_uv = _project(world.T_w_c, cones + APEX_OFFSET)
     for d, c in matches.items():

@@ -53,6 +53,9 @@ class ConeEstimates(Mapping[str, "np.ndarray | None"]):
     cov_w_by_method : mapping of str to ndarray, shape (3, 3), optional
         The covariance of each estimate in the world frame, m^2 (``vnav.covariance``);
         ``localize`` gives one for every estimate.
+    apex_uv : ndarray, shape (2,), optional
+        The apex pixel the estimators fitted (``SilhouetteView.apex_keypoint``), or None:
+        what a tracker over several images follows (``vnav.tracking``).
 
     Raises
     ------
@@ -64,6 +67,7 @@ class ConeEstimates(Mapping[str, "np.ndarray | None"]):
     p_w_by_method: Mapping[str, np.ndarray | None]
     no_estimate: Mapping[str, NoEstimate] = field(default_factory=dict)
     cov_w_by_method: Mapping[str, np.ndarray] = field(default_factory=dict)
+    apex_uv: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         unknown = sorted((set(self.p_w_by_method) | set(self.no_estimate)) - set(METHOD_NAMES))
@@ -196,14 +200,15 @@ def localize(
     }
     no_estimate = {m: r for m, r in found.items() if isinstance(r, NoEstimate)}
     p_w_by_method = {m: p for m, p in found.items() if m not in no_estimate}
+    apex_uv = view.apex_keypoint(cone)  # memoised: ground_plane's bottom pixel fitted it
     if not p_w_by_method:
         no_estimate["naive"] = NoEstimate.NO_OTHER_ESTIMATE
-        return ConeEstimates({}, no_estimate)
+        return ConeEstimates({}, no_estimate, apex_uv=apex_uv)
     best_method = next(m for m in PREFERENCE if m in p_w_by_method)
     p_c = np.array(view.camera_coordinates(p_w_by_method[best_method]))
     p_w_by_method["naive"] = naive(p_c, T_w_b[:3, 3])
     if not with_covariance:
-        return ConeEstimates(p_w_by_method, no_estimate)
+        return ConeEstimates(p_w_by_method, no_estimate, apex_uv=apex_uv)
     cov_w = _covariances(
         p_w_by_method,
         view,
@@ -216,7 +221,7 @@ def localize(
         noise=noise,
         cone=cone,
     )
-    return ConeEstimates(p_w_by_method, no_estimate, cov_w)
+    return ConeEstimates(p_w_by_method, no_estimate, cov_w, apex_uv)
 
 
 def _covariances(
