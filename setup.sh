@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Sets up vnav-sim on a fresh Debian/Ubuntu machine: the system libraries MuJoCo needs to render
 # off-screen (EGL through Mesa), a virtual environment in .venv, and the project with its test
-# extra. Safe to run again: it skips what is already there.
+# and sweep extras (the tests run sweeps on Ray for real). Safe to run again: it skips what is
+# already there.
 set -euo pipefail
 cd "$(dirname "$0")"
 
@@ -26,4 +27,4 @@ if [ ! -x .venv/bin/python ]; then
   "$python_bin" -m venv .venv
 fi
 .venv/bin/python -m pip install -q --upgrade pip
-.venv/bin/python -m pip install -q -e '.[test]'
+.venv/bin/python -m pip install -q -e '.[test,sweep]'

@@ -43,6 +43,7 @@ __all__ = [
     "Unit",
     "check_kind",
     "default_checks",
+    "detection_counts",
     "judge",
 ]
 
@@ -486,14 +487,21 @@ def _calibration_time_offset(run: RunResult, check: Check) -> float | NoData:
     return _calibration_error(run, "time_offset_s")
 
 
-@check_kind("detection_rate", operator.ge, Unit.FRACTION, uses_method=False)
-def _detection_rate(run: RunResult, check: Check) -> float | NoData:
-    """detections / cones fully in view (summed over camera ticks) >= limit"""
+def detection_counts(run: RunResult) -> tuple[int, int]:
+    """Cones detected (matched) while fully in view, and cones fully in view, summed over the
+    camera ticks: the detection rate's numerator and denominator."""
     seen = detected = 0
     for t in run.ticks:
         matched = {d.cone_index for d in t.detections if d.cone_index is not None}
         seen += len(t.cones_in_view)
         detected += len(set(t.cones_in_view) & matched)
+    return detected, seen
+
+
+@check_kind("detection_rate", operator.ge, Unit.FRACTION, uses_method=False)
+def _detection_rate(run: RunResult, check: Check) -> float | NoData:
+    """detections / cones fully in view (summed over camera ticks) >= limit"""
+    detected, seen = detection_counts(run)
     if seen:
         return detected / seen
     border = sum(d.detection.touches_border for d in _detections(run))

@@ -6,6 +6,8 @@
 - ``vnav-demo run NAME|FILE.toml [...] [--all] [--out DIR] [--seed N] [--duration S] [--quiet]``:
   runs scenarios headless, writes ``DIR/<name>.rrd`` and ``DIR/<name>.json``, prints a summary.
 - ``vnav-demo lecture``: the lecture's worked examples next to vnav's results.
+- ``vnav-demo sweep FILE.toml [--out DIR] [--workers N] [--address ADDR] [--resume]``: a
+  scenario over a grid of values and many seeds, on Ray (``scenarios.sweep``).
 - ``vnav-demo calibrate FILE.rrd [--out FILE.yaml]``: the camera mount and clock offset
   recovered from a recording (``scenarios.calibrate``).
 
@@ -138,6 +140,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_show)
 
     _add_run_parser(sub)
+    _add_sweep_parser(sub)
 
     p = sub.add_parser(
         "calibrate",
@@ -201,6 +204,64 @@ def _add_run_parser(sub) -> None:
         "for evo: true, and from PnP on the cones)",
     )
     p.set_defaults(func=_run)
+
+
+def _add_sweep_parser(sub) -> None:
+    """``vnav-demo sweep`` and its options."""
+    p = sub.add_parser(
+        "sweep",
+        help="run a scenario over a grid of values and many seeds (Ray); tables and plots",
+        description="Run a scenario over every combination of the sweep file's grid values, "
+        "each with every seed, on Ray workers (or in this process with --workers 0). Writes "
+        "DIR/results.parquet (one row per episode), DIR/estimates.parquet (one row per "
+        "estimate), DIR/summary.json (per grid point: statistics across seeds, pass rate, the "
+        "worst seed and the command that replays it) and DIR/plots/*.png. An interrupted sweep "
+        "keeps its finished episodes; --resume runs the rest. Needs the sweep extra: "
+        "pip install 'vnav-sim[sweep]'. Exit status 0 if every episode passed, 1 if one "
+        "failed or diverged, 2 for bad input, 3 if one could not run, 128+N on signal N.",
+    )
+    p.add_argument("file", metavar="FILE.toml", help="the sweep file (see README: Sweeps)")
+    p.add_argument(
+        "--out",
+        default=None,
+        metavar="DIR",
+        help="output directory (default: sweeps/<FILE's name>)",
+    )
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        metavar="N",
+        help="Ray workers (default: one per core, or per CPU of the cluster); "
+        "0 runs every episode in this process, one after another",
+    )
+    p.add_argument(
+        "--address",
+        default=None,
+        metavar="ADDR",
+        help="join an existing Ray cluster (auto, or ray://host:port) instead of "
+        "starting a local one; its nodes need vnav-sim installed",
+    )
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="finish the sweep already in DIR: run only its missing episodes",
+    )
+    p.add_argument(
+        "--record-worst",
+        type=int,
+        default=0,
+        metavar="K",
+        help="write the K worst episodes' recordings and reports into DIR/worst/",
+    )
+    p.add_argument("--quiet", action="store_true", help="print nothing but errors")
+    p.set_defaults(func=_sweep)
+
+
+def _sweep(args: argparse.Namespace) -> int:
+    from scenarios.sweep import command
+
+    return command.run(args)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -19,10 +19,17 @@ import fcntl
 import os
 import re
 import warnings
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
-__all__ = ["OutputError", "OutputPair", "directory_lock", "remove_stale_partials", "verify_rrd"]
+__all__ = [
+    "OutputError",
+    "OutputPair",
+    "directory_lock",
+    "remove_stale_partials",
+    "verify_rrd",
+    "write_atomic",
+]
 
 LOCK_NAME = ".vnav-demo.lock"
 _TEMP = re.compile(r"^\..+\.(\d+)\.(partial|old)$")
@@ -39,6 +46,32 @@ def _fsync(path: Path) -> None:
         os.fsync(fd)
     finally:
         os.close(fd)
+
+
+def write_atomic(path: Path, write: Callable[[Path], None]) -> None:
+    """Write one file whole or not at all: ``write(tmp)`` fills a hidden temporary file beside
+    ``path``, which is flushed to the disk and then renamed over ``path``.
+
+    Raises
+    ------
+    OutputError
+        If any step fails; ``path`` is then as it was and the temporary file is gone.
+    """
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.partial")
+    try:
+        write(tmp)
+        _fsync(tmp)
+        os.replace(tmp, path)
+        _fsync(path.parent)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        if isinstance(exc, OutputError):
+            raise
+        raise OutputError(exc.errno, f"{path.name}: {exc.strerror or exc}") from None
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 def verify_rrd(path: Path) -> None:

@@ -22,6 +22,7 @@ from scenarios.recording import Recording
 from scenarios.records import RunResult
 from scenarios.runner import run_scenario
 from scenarios.spec import ScenarioSpec
+from sim.scene_cache import SceneCache
 
 __all__ = ["Outcome", "output_paths", "run"]
 
@@ -65,6 +66,7 @@ def run(
     seed: int = 1,
     out_dir: Path | None = None,
     progress: Callable[[int, int], None] | None = None,
+    scenes: SceneCache | None = None,
 ) -> Outcome:
     """Run ``spec``, judge it with its checks (or ``checks.default_checks()``), report it.
 
@@ -79,6 +81,8 @@ def run(
         id, unique to this run.
     progress : callable(done, total), optional
         Called after every camera tick.
+    scenes : sim.scene_cache.SceneCache, optional
+        Worlds and renderers to reuse across runs (``scenarios.runner.run_scenario``).
 
     Raises
     ------
@@ -89,7 +93,7 @@ def run(
     """
     recording_id = f"{spec.name}-seed{seed}-{uuid.uuid4().hex[:12]}"
     if out_dir is None:
-        result = run_scenario(spec, seed=seed, progress=progress)
+        result = run_scenario(spec, seed=seed, progress=progress, scenes=scenes)
         _calibrate_if_checked(spec, result)
         judged = _judge(spec, result)
         return Outcome(result, judged, report.build(result, judged))
@@ -97,7 +101,7 @@ def run(
     pair = OutputPair(rrd_path, json_path)
     try:
         recording = Recording(pair.rrd_tmp, recording_id)
-        result = run_scenario(spec, seed=seed, observer=recording, progress=progress)
+        result = run_scenario(spec, seed=seed, observer=recording, progress=progress, scenes=scenes)
         _calibrate_if_checked(spec, result)
         judged = _judge(spec, result)
         rep = report.build(result, judged, recording={"file": rrd_path.name, "id": recording_id})

@@ -12,6 +12,7 @@ Each scenario's ``.rrd`` and ``.json`` are written together or not at all
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import logging
 import math
@@ -23,6 +24,7 @@ import sys
 import tempfile
 import textwrap
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 from scenarios import builtin, outputs, pipeline
@@ -61,6 +63,20 @@ camera tick raises it again (``Progress``)."""
 def _raise_signalled(signum: int, frame: object) -> None:
     _caught.append(signum)
     raise Signalled(signum)
+
+
+@contextlib.contextmanager
+def stop_on_signals() -> Iterator[None]:
+    """SIGTERM and SIGHUP raise ``Signalled`` in the main thread while inside, so that a run
+    ends as on Ctrl-C (``KeyboardInterrupt``): cleaning up, keeping what is finished."""
+    _caught.clear()
+    previous = {s: signal.signal(s, _raise_signalled) for s in (signal.SIGTERM, signal.SIGHUP)}
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+        _caught.clear()
 
 
 def resolve(targets: list[str], run_all: bool) -> list[ScenarioSpec]:
@@ -376,10 +392,8 @@ def run(args: argparse.Namespace) -> int:
     except InputError as exc:
         _error(str(exc))
         return EXIT_BAD_INPUT
-    _caught.clear()
-    previous = {s: signal.signal(s, _raise_signalled) for s in (signal.SIGTERM, signal.SIGHUP)}
     try:
-        with outputs.directory_lock(out_dir):
+        with stop_on_signals(), outputs.directory_lock(out_dir):
             results = [(spec, *run_one(spec, args, out_dir)) for spec in specs]
     except BlockingIOError:
         _error(f"another vnav-demo run is writing into {out_dir}; wait for it to finish")
@@ -390,10 +404,6 @@ def run(args: argparse.Namespace) -> int:
     except Signalled as exc:
         _error(f"stopped by {signal.Signals(exc.signum).name}; no partial file was kept")
         return 128 + exc.signum
-    finally:
-        for signum, handler in previous.items():
-            signal.signal(signum, handler)
-        _caught.clear()
     if not args.quiet:
         say(final_summary(results, out_dir))
     return max((status for _, status, _ in results), default=EXIT_PASSED)

@@ -20,6 +20,7 @@ nothing of Rerun: whatever is done with each tick is the observer's business.
 from __future__ import annotations
 
 import bisect
+import contextlib
 import logging
 import math
 import time
@@ -43,6 +44,7 @@ from sim.flight import (
 from sim.mesh import Scenery, scenery
 from sim.noise import mount_error, noisy_depth, noisy_rgb
 from sim.render import Renderer
+from sim.scene_cache import SceneCache
 from sim.world import World
 from vnav import quat, se3, so3
 from vnav.camera import PinholeCamera
@@ -85,6 +87,7 @@ def run_scenario(
     seed: int = 1,
     observer: TickObserver | None = None,
     progress: Callable[[int, int], None] | None = None,
+    scenes: SceneCache | None = None,
 ) -> RunResult:
     """Run ``spec`` headless and return what it saw, tick by tick.
 
@@ -97,6 +100,9 @@ def run_scenario(
         Given every tick's record and images as they are made (e.g. a recording).
     progress : callable(done, total), optional
         Called after every camera tick.
+    scenes : sim.scene_cache.SceneCache, optional
+        Where to take the world and its renderer from (and leave them): a process running
+        many episodes builds each scene once. Without it the run builds and frees its own.
 
     Raises
     ------
@@ -106,15 +112,34 @@ def run_scenario(
     """
     setup_start = time.perf_counter()
     result = RunResult(spec=spec, seed=seed, timing_s=dict.fromkeys(STAGES, 0.0))
-    world = World.from_config(spec.scene)
+    with contextlib.ExitStack() as owned:
+        if scenes is None:
+            world = World.from_config(spec.scene)
+            renderer = owned.enter_context(Renderer(world))
+        else:
+            world, renderer = scenes.acquire(spec.scene)
+        _observe_and_run(spec, seed, world, renderer, result, observer, progress, setup_start)
+    return result
+
+
+def _observe_and_run(
+    spec: ScenarioSpec,
+    seed: int,
+    world: World,
+    renderer: Renderer,
+    result: RunResult,
+    observer: TickObserver | None,
+    progress: Callable[[int, int], None] | None,
+    setup_start: float,
+) -> None:
+    """The ticks, between the observer's ``start`` and its ``finish`` (or ``abort``)."""
     try:
         if observer:
             observer.start(
                 spec, seed, world.camera, scenery(world.model, world.data, len(spec.scene.cones_w))
             )
-        with Renderer(world) as renderer:
-            setup_s = time.perf_counter() - setup_start
-            _run_ticks(spec, world, renderer, result, observer, progress)
+        setup_s = time.perf_counter() - setup_start
+        _run_ticks(spec, world, renderer, result, observer, progress)
         finish_start = time.perf_counter()
         if observer:
             observer.finish(result)
@@ -124,7 +149,6 @@ def run_scenario(
         if observer:
             observer.abort()
         raise
-    return result
 
 
 def _run_ticks(

@@ -473,6 +473,18 @@ def load_toml(path: str | Path) -> ScenarioSpec:
         or unreadable, is not valid TOML (the message gives the line and column), or holds an
         invalid value (the message gives the key).
     """
+    return from_dict(read_toml(path), where=str(path))
+
+
+def read_toml(path: str | Path, what: str = "scenario file") -> dict[str, Any]:
+    """The parsed TOML of a file (a regular file of at most ``MAX_FILE_BYTES``), unchecked;
+    ``what`` names the kind of file in the messages.
+
+    Raises
+    ------
+    ScenarioError
+        If the file is missing, not a regular file, too large, unreadable or not valid TOML.
+    """
     path = Path(path)
     try:
         # Opened without blocking and checked before reading: a FIFO would wait for a writer,
@@ -483,17 +495,16 @@ def load_toml(path: str | Path) -> ScenarioSpec:
                 raise ScenarioError(f"{path}: not a regular file")
             raw = f.read(MAX_FILE_BYTES + 1)
     except FileNotFoundError:
-        raise ScenarioError(f"{path}: no such scenario file") from None
+        raise ScenarioError(f"{path}: no such {what}") from None
     except OSError as exc:
         raise ScenarioError(f"{path}: cannot read: {exc.strerror}") from None
     if len(raw) > MAX_FILE_BYTES:
-        raise ScenarioError(f"{path}: larger than {MAX_FILE_BYTES} bytes; not a scenario file")
+        raise ScenarioError(f"{path}: larger than {MAX_FILE_BYTES} bytes; not a {what}")
     try:
-        data = tomllib.loads(raw.decode("utf-8"))
+        return tomllib.loads(raw.decode("utf-8"))
     except UnicodeDecodeError as exc:
         raise ScenarioError(f"{path}: cannot read: not UTF-8 text ({exc.reason})") from None
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(f"{path}: invalid TOML: {exc}") from None
     except ValueError as exc:  # e.g. an integer beyond Python's digit limit
         raise ScenarioError(f"{path}: invalid TOML: {exc}") from None
-    return from_dict(data, where=str(path))

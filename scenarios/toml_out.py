@@ -17,6 +17,7 @@ import json
 import math
 import re
 import textwrap
+from contextvars import ContextVar
 from typing import Any
 
 from scenarios import schema
@@ -30,11 +31,17 @@ SIGNIFICANT_DIGITS = 6
 """Floats are written to this many significant digits: 33.690067525979785 -> 33.6901."""
 
 
+_exact_floats: ContextVar[bool] = ContextVar("_exact_floats", default=False)
+"""Set by ``dumps(exact=True)`` for the text it writes: floats in full."""
+
+
 def _float(v: float) -> str:
-    """``v`` rounded to ``SIGNIFICANT_DIGITS``, in Python's shortest form (a valid TOML float:
-    ``33.6901``, ``10.0``, ``1e-07``)."""
+    """``v`` rounded to ``SIGNIFICANT_DIGITS`` (in full under ``dumps(exact=True)``), in
+    Python's shortest form (a valid TOML float: ``33.6901``, ``10.0``, ``1e-07``)."""
     if not math.isfinite(v):
         raise ValueError(f"TOML has no literal for {v!r} in this schema")
+    if _exact_floats.get():
+        return repr(float(v))  # the shortest text that parses back to the same double
     return repr(float(f"{v:.{SIGNIFICANT_DIGITS}g}"))
 
 
@@ -135,12 +142,22 @@ def _section(header: str, table: dict[str, Any], path: str, comments: bool) -> l
     return lines
 
 
-def dumps(data: dict[str, Any], *, comments: bool = False) -> str:
+def dumps(data: dict[str, Any], *, comments: bool = False, exact: bool = False) -> str:
     """TOML text for a scenario dict (top-level keys, then tables, then arrays of tables).
 
     With ``comments``, each key the schema documents (``scenarios.schema.comment``) is
     followed by its meaning and unit (on the line above where it does not fit ``WIDTH``).
+    With ``exact``, floats are written in full: the text parses back to ``data`` exactly (a
+    sweep's grid points, replayed by ``vnav-demo run``), at the cost of longer lines.
     """
+    token = _exact_floats.set(exact)
+    try:
+        return _dumps(data, comments)
+    finally:
+        _exact_floats.reset(token)
+
+
+def _dumps(data: dict[str, Any], comments: bool) -> str:
     tables = {k: v for k, v in data.items() if isinstance(v, dict)}
     arrays = {k: v for k, v in data.items() if _is_table_array(v)}
     top = {k: v for k, v in data.items() if k not in tables and k not in arrays}

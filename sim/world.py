@@ -261,6 +261,7 @@ class World:
         """(N, 2) geom ids of each cone: [base plate, body]."""
         cam_cfg = self.config.camera
         self._T_b_c = cam_cfg.T_b_c
+        self._cam_pos0 = m.cam_pos[self.camera_id].copy()
         self._camera = PinholeCamera.from_fovy(
             float(m.cam_fovy[self.camera_id]), cam_cfg.width, cam_cfg.height
         )
@@ -394,7 +395,10 @@ class World:
         self.data.ctrl[self.actuator_ids] = thrusts_N
 
     def reset(self) -> None:
-        """Back to the configured start pose, at rest, time 0."""
+        """Back to the configured start pose, at rest, time 0, with the configured camera mount
+        (undoing ``set_camera_position_b``): the state of a world just built from its config."""
+        self.model.cam_pos[self.camera_id] = self._cam_pos0
+        self._T_b_c = self.config.camera.T_b_c
         mujoco.mj_resetData(self.model, self.data)
         mujoco.mj_forward(self.model, self.data)
 

@@ -96,11 +96,12 @@ def test_a_new_machine_needs_two_commands_that_set_up_first() -> None:
 
 def test_setup_script_makes_the_venv_the_commands_use() -> None:
     """Not run here (it needs root, apt-get and the network, and would rebuild the venv these
-    tests run in): it exists, is executable, and makes ``.venv`` with the test extra."""
+    tests run in): it exists, is executable, and makes ``.venv`` with the test and sweep extras
+    (the tests run sweeps on Ray)."""
     script = ROOT / "setup.sh"
     assert script.is_file() and os.access(script, os.X_OK)
     text = script.read_text()
-    assert "-m venv .venv" in text and "pip install -q -e '.[test]'" in text
+    assert "-m venv .venv" in text and "pip install -q -e '.[test,sweep]'" in text
     # The tests the second command runs: pytest's configured test paths.
     pyproject = tomllib.loads((ROOT / "pyproject.toml").read_text())
     assert all((ROOT / p).is_dir() for p in pyproject["tool"]["pytest"]["ini_options"]["testpaths"])

@@ -1,0 +1,297 @@
+"""``vnav-demo sweep FILE.toml``: plan, run every episode, write the tables, summary and plots.
+
+Everything that can be checked before running is checked first (the extra is installed, the
+sweep file and every grid point parse, the options, the output directory and what it holds),
+so bad input exits with status 2 and runs nothing. Exit statuses: 0 every episode passed its
+checks, 1 some failed or diverged, 2 bad input, 3 some episode could not run (an internal
+error or a lost worker: ``--resume`` runs it again), 128 + N on signal N (what finished is
+kept: ``--resume`` goes on from there).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+import signal
+import statistics
+import sys
+import time
+from pathlib import Path
+
+from scenarios import outputs, pipeline
+from scenarios.console import WIDTH, say
+from scenarios.console import error as _error
+from scenarios.run_command import (
+    EXIT_BAD_INPUT,
+    EXIT_CHECK_FAILED,
+    EXIT_INCOMPLETE,
+    EXIT_PASSED,
+    InputError,
+    Signalled,
+    prepare_out_dir,
+    stop_on_signals,
+)
+from scenarios.sweep import engine as engines
+from scenarios.sweep import plots, summary
+from scenarios.sweep.episode import Episode, method_column
+from scenarios.sweep.plan import SweepError, SweepPlan, load
+from scenarios.sweep.store import SweepStore, pyarrow_missing
+
+__all__ = ["run"]
+
+SHOWN_POINTS = 20
+"""Grid points listed in the printed summary (all are in summary.json)."""
+
+
+@dataclasses.dataclass
+class _Run:
+    """What the loop over episodes leaves: failures, the signal that stopped it, the time."""
+
+    failures: list[engines.Failure] = dataclasses.field(default_factory=list)
+    stopped_by: int | None = None
+    wall_s: float = 0.0
+    ran: int = 0
+
+
+def _validate(args: argparse.Namespace) -> tuple[SweepPlan, Path]:
+    missing = pyarrow_missing() or (engines.ray_missing() if args.workers != 0 else None)
+    if missing:
+        hint = " (or --workers 0 to run without Ray)" if "Ray" in missing else ""
+        raise InputError(f"vnav-demo sweep needs its extra: {missing}{hint}")
+    if args.workers is not None and args.workers < 0:
+        raise InputError(f"--workers must be 0 (this process) or more, got {args.workers}")
+    if args.workers == 0 and args.address:
+        raise InputError("--workers 0 runs in this process; it cannot go with --address")
+    if args.record_worst < 0:
+        raise InputError(f"--record-worst must be 0 or more, got {args.record_worst}")
+    try:
+        plan = load(args.file)
+    except SweepError as exc:
+        raise InputError(str(exc)) from None
+    out = args.out if args.out is not None else str(Path("sweeps") / Path(args.file).stem)
+    return plan, prepare_out_dir(out)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Entry point of ``vnav-demo sweep``; returns the exit status."""
+    try:
+        plan, out_dir = _validate(args)
+    except InputError as exc:
+        _error(str(exc))
+        return EXIT_BAD_INPUT
+    try:
+        with stop_on_signals(), outputs.directory_lock(out_dir):
+            return _sweep(plan, out_dir, args)
+    except BlockingIOError:
+        _error(f"another vnav-demo command is writing into {out_dir}; wait for it to finish")
+        return EXIT_BAD_INPUT
+    except SweepError as exc:
+        _error(str(exc))
+        return EXIT_BAD_INPUT
+    except OSError as exc:
+        _error(f"cannot write the sweep's files: {exc}; finished episodes are kept in {out_dir}")
+        return EXIT_INCOMPLETE
+    except (KeyboardInterrupt, Signalled) as exc:  # while writing the tables or recordings
+        signum = exc.signum if isinstance(exc, Signalled) else signal.SIGINT
+        _error(f"stopped by {signal.Signals(signum).name}; finished episodes are kept")
+        return 128 + signum
+
+
+def _sweep(plan: SweepPlan, out_dir: Path, args: argparse.Namespace) -> int:
+    store = SweepStore.open(out_dir, plan, args.resume)
+    pending = store.pending()
+    if not args.quiet:
+        say(_header(plan, store, pending, args))
+    outcome = _run_pending(store, pending, args)
+    store.write_tables()
+    complete = not store.pending()
+    recordings = _record_worst(store, out_dir, args) if complete and args.record_worst else {}
+    _write_summary(store, out_dir, complete, recordings)
+    if not args.quiet:
+        say(_final(store, out_dir, outcome, args))
+    if outcome.stopped_by is not None:
+        name = signal.Signals(outcome.stopped_by).name
+        _error(
+            f"stopped by {name}: {len(store.episodes)} of {len(plan.episodes)} episodes done; "
+            f"finish with: vnav-demo sweep {args.file} --out {out_dir} --resume"
+        )
+        return 128 + outcome.stopped_by
+    if outcome.failures:
+        first = outcome.failures[0]
+        _error(
+            f"{len(outcome.failures)} episodes could not run (point {first.point} seed "
+            f"{first.seed}: {first.error}); --resume runs them again"
+        )
+        return EXIT_INCOMPLETE
+    passed = all(e.row["passed"] for e in store.episodes.values())
+    return EXIT_PASSED if passed else EXIT_CHECK_FAILED
+
+
+def _header(plan: SweepPlan, store: SweepStore, pending: list, args: argparse.Namespace) -> str:
+    where = (
+        "in this process"
+        if args.workers == 0
+        else f"on Ray ({args.address or 'local'}, "
+        f"{args.workers or engines.default_workers()} workers)"
+    )
+    done = len(plan.episodes) - len(pending)
+    resumed = f", {done} done before" if done else ""
+    return (
+        f"sweep {plan.scenario}: {len(plan.points)} grid points x {len(plan.seeds)} seeds = "
+        f"{len(plan.episodes)} episodes{resumed}; {len(pending)} to run {where}"
+    )
+
+
+def _run_pending(store: SweepStore, pending: list, args: argparse.Namespace) -> _Run:
+    """Run the pending episodes, journalling each as it finishes, until done or stopped."""
+    out = _Run()
+    if not pending:
+        return out
+    tasks = [engines.Task(p, s, store.plan.points[p].scenario_toml) for p, s in pending]
+    bar = _Progress(len(tasks), enabled=not args.quiet)
+    engine = None
+    start = time.perf_counter()
+    try:
+        if args.workers == 0:
+            engine = engines.SerialEngine()
+        else:
+            engine = engines.RayEngine(args.workers, args.address)
+            if not args.quiet:
+                say(f"  Ray ready in {engine.startup_s:.1f} s ({engine.workers} workers)")
+        start = time.perf_counter()
+        for result in engine.run(tasks):
+            if isinstance(result, engines.Failure):
+                out.failures.append(result)
+            else:
+                store.add(result)
+                out.ran += 1
+            bar(out.ran + len(out.failures), time.perf_counter() - start)
+    except KeyboardInterrupt:
+        out.stopped_by = signal.SIGINT
+    except Signalled as exc:
+        out.stopped_by = exc.signum
+    finally:
+        bar.clear()
+        out.wall_s = time.perf_counter() - start
+        if engine is not None:
+            engine.close()
+    return out
+
+
+class _Progress:
+    """A one-line bar on stderr (a terminal only): episodes done, rate, time left."""
+
+    def __init__(self, total: int, enabled: bool) -> None:
+        self.total, self.enabled = total, enabled and sys.stderr.isatty()
+
+    def __call__(self, done: int, elapsed_s: float) -> None:
+        if not self.enabled:
+            return
+        rate = done / elapsed_s if elapsed_s > 0 else 0.0
+        left = (self.total - done) / rate if rate > 0 else math.inf
+        filled = int(30 * done / self.total)
+        sys.stderr.write(
+            f"\r[{'#' * filled}{'.' * (30 - filled)}] {done}/{self.total} episodes  "
+            f"{rate:.2f}/s  {_duration(left)} left "
+        )
+        sys.stderr.flush()
+
+    def clear(self) -> None:
+        if self.enabled:
+            sys.stderr.write("\r" + " " * (WIDTH - 1) + "\r")
+            sys.stderr.flush()
+
+
+def _duration(s: float) -> str:
+    if not math.isfinite(s):
+        return "?"
+    return f"{s:.0f} s" if s < 120 else f"{s / 60:.0f} min"
+
+
+def _record_worst(store: SweepStore, out_dir: Path, args) -> dict[tuple[int, int], str]:
+    """Run the K worst episodes again, writing their recordings into ``DIR/worst/``."""
+    worst_dir = out_dir / "worst"
+    worst_dir.mkdir(exist_ok=True)
+    written = {}
+    for e in summary.worst(store.sorted_episodes(), store.plan.rank_by, args.record_worst):
+        point = store.plan.points[e.point]
+        spec = dataclasses.replace(point.spec, name=f"{point.spec.name}-s{e.seed}")
+        outcome = pipeline.run(spec, seed=e.seed, out_dir=worst_dir)
+        written[e.point, e.seed] = str(outcome.rrd_path.relative_to(out_dir))
+    return written
+
+
+def _write_summary(
+    store: SweepStore, out_dir: Path, complete: bool, recordings: dict[tuple[int, int], str]
+) -> None:
+    """``plots/*.png`` and then ``summary.json``, from every finished episode."""
+    import json
+
+    import numpy as np
+
+    episodes = store.sorted_episodes()
+    plots_dir = out_dir / "plots"
+    plots_dir.mkdir(exist_ok=True)
+    for name, key in plots.plot_names(store.plan).items():
+        if key is None:
+            png = plots.error_vs_range_png(store.plan, _estimate_arrays(episodes, np))
+        else:
+            png = plots.error_vs_key_png(store.plan, episodes, key)
+        outputs.write_atomic(plots_dir / name, lambda tmp, png=png: tmp.write_bytes(png))
+    doc = summary.build(
+        store.plan,
+        episodes,
+        out_dir=str(out_dir),
+        point_files=[store.point_file(p.index) for p in store.plan.points],
+        complete=complete,
+        recordings=recordings,
+    )
+    text = json.dumps(doc, indent=1, allow_nan=False) + "\n"
+    outputs.write_atomic(out_dir / "summary.json", lambda tmp: tmp.write_text(text))
+
+
+def _estimate_arrays(episodes: list[Episode], np) -> dict:
+    return {
+        "method": np.array([m for e in episodes for m in e.estimates["method"]], dtype=str),
+        "range_m": np.array([r for e in episodes for r in e.estimates["range_m"]], dtype=float),
+        "error_m": np.array([r for e in episodes for r in e.estimates["error_m"]], dtype=float),
+    }
+
+
+def _final(store: SweepStore, out_dir: Path, run: _Run, args) -> str:
+    """The printed summary: counts, a few lines per grid point, the files, the worst seed."""
+    plan = store.plan
+    episodes = store.sorted_episodes()
+    statuses = [e.row["status"] for e in episodes]
+    rate = f", {run.ran / run.wall_s:.2f} episodes/s" if run.ran and run.wall_s > 0 else ""
+    lines = [
+        f"{len(episodes)} of {len(plan.episodes)} episodes: {statuses.count('passed')} passed, "
+        f"{statuses.count('failed')} failed, {statuses.count('diverged')} diverged "
+        f"({run.ran} run in {run.wall_s:.1f} s{rate})"
+    ]
+    rank = plan.rank_by
+    for p in plan.points[:SHOWN_POINTS]:
+        mine = [e for e in episodes if e.point == p.index]
+        if not mine:
+            continue
+        medians = [e.row[method_column(rank, "median")] for e in mine]
+        finite = [m for m in medians if math.isfinite(m)]
+        figure = (
+            f"{rank} median {statistics.median(finite):.3f} m" if finite else f"no {rank} estimate"
+        )
+        (w,) = summary.worst(mine, rank, 1)
+        lines.append(f"  p{p.index}: {p.label}")
+        lines.append(
+            f"      passed {sum(e.row['passed'] for e in mine)}/{len(mine)}, {figure}, "
+            f"worst seed {w.seed}"
+        )
+    if len(plan.points) > SHOWN_POINTS:
+        lines.append(f"  ... {len(plan.points) - SHOWN_POINTS} more grid points in summary.json")
+    lines.append(f"wrote {out_dir}/results.parquet, estimates.parquet, summary.json, plots/")
+    if episodes:
+        (w,) = summary.worst(episodes, rank, 1)
+        lines.append(
+            "worst: " + summary.replay_command(str(out_dir), store.point_file(w.point), w.seed)
+        )
+    return "\n".join(lines)

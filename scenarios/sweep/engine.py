@@ -1,0 +1,197 @@
+"""Where a sweep's episodes run: in this process, or on Ray actors (local or a cluster).
+
+Ray's pattern for simulation sweeps is one task per episode with the seed set inside it; here
+each worker is a Ray *actor* holding an ``EpisodeRunner``, so that its OpenGL context and the
+scenes it built survive from one episode to the next (an EGL context cannot be pickled or
+carried across ``fork``: it is made inside the worker, on its first episode). Each actor asks
+Ray for one CPU and runs with one rendering thread (Mesa's llvmpipe: ``LP_NUM_THREADS=1``) and
+single-threaded BLAS and OpenCV, so N workers keep N cores busy instead of fighting over them.
+
+Results come back in the order episodes finish; the episode, not the order, fixes the numbers.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import signal
+import time
+from collections import deque
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+from typing import Any
+
+from scenarios.sweep.episode import Episode, EpisodeRunner
+
+__all__ = [
+    "WORKER_ENV",
+    "Failure",
+    "RayEngine",
+    "SerialEngine",
+    "Task",
+    "default_workers",
+    "ray_missing",
+]
+
+logger = logging.getLogger(__name__)
+
+WORKER_ENV = {
+    "LP_NUM_THREADS": "1",  # Mesa llvmpipe's rasteriser threads (default: one per core)
+    "OMP_NUM_THREADS": "1",
+    "OPENBLAS_NUM_THREADS": "1",
+    "OPENCV_FOR_THREADS_NUM": "1",
+}
+"""The environment of every Ray worker: one thread each for rendering, BLAS and OpenCV."""
+
+IN_FLIGHT_PER_WORKER = 2
+"""Episodes queued on each actor: the next starts as soon as one ends."""
+
+
+@dataclass(frozen=True)
+class Task:
+    """One episode to run: the grid point's scenario file and the seed."""
+
+    point: int
+    seed: int
+    scenario_toml: str
+
+
+@dataclass(frozen=True)
+class Failure:
+    """An episode that could not run (an internal error or a lost worker): not a result;
+    ``--resume`` runs it again."""
+
+    point: int
+    seed: int
+    error: str
+
+
+def default_workers() -> int:
+    """The cores this process may use."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        return os.cpu_count() or 1
+
+
+def ray_missing() -> str | None:
+    """Why Ray cannot be used (not installed), or None."""
+    try:
+        import ray  # noqa: F401
+    except ImportError:
+        return "Ray is not installed: pip install 'vnav-sim[sweep]'"
+    return None
+
+
+class SerialEngine:
+    """Every episode in this process, one after another (``--workers 0``: for debugging)."""
+
+    workers = 0
+    startup_s = 0.0
+
+    def __init__(self) -> None:
+        self._runner = EpisodeRunner()
+
+    def run(self, tasks: Iterable[Task]) -> Iterator[Episode | Failure]:
+        for task in tasks:
+            yield self._runner.run(task.scenario_toml, task.point, task.seed)
+
+    def close(self) -> None:
+        self._runner.close()
+
+
+class _Worker(EpisodeRunner):
+    """An ``EpisodeRunner`` with one thread for OpenCV and a ``ready`` probe."""
+
+    def __init__(self) -> None:
+        import cv2
+
+        cv2.setNumThreads(1)
+        super().__init__()
+
+    def ready(self) -> int:
+        return os.getpid()
+
+
+class RayEngine:
+    """Episodes on ``workers`` Ray actors.
+
+    Parameters
+    ----------
+    workers : int or None
+        Actors to start; None: one per core of this machine, or per CPU of the cluster.
+    address : str or None
+        None starts a local Ray instance with ``workers`` CPUs (stopped by ``close``);
+        ``"auto"`` or ``"ray://host:port"`` joins an existing cluster, whose nodes must have
+        vnav-sim installed.
+
+    Attributes
+    ----------
+    startup_s : float
+        Seconds to start (or join) Ray and get every actor ready.
+    """
+
+    def __init__(self, workers: int | None, address: str | None = None) -> None:
+        import ray
+
+        self._ray = ray
+        start = time.perf_counter()
+        quiet: dict[str, Any] = {"logging_level": logging.ERROR, "log_to_driver": False}
+        # Ray's core installs its own SIGTERM handler (it exits at once); the command's own
+        # handlers stop a sweep cleanly, keeping what finished, so they are put back.
+        handlers = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
+        self._owns_ray = address is None
+        if address is None:
+            workers = workers or default_workers()
+            ray.init(num_cpus=workers, include_dashboard=False, **quiet)
+        else:
+            ray.init(address=address, **quiet)
+            workers = workers or max(1, int(ray.cluster_resources().get("CPU", 1)))
+        for signum, handler in handlers.items():
+            signal.signal(signum, handler)
+        self.workers = workers
+        # No restarts or retries: a lost worker's episodes come back as failures, which the
+        # command reports and --resume runs again.
+        actor = ray.remote(num_cpus=1, runtime_env={"env_vars": WORKER_ENV})(_Worker)
+        self._actors = [actor.remote() for _ in range(workers)]
+        ray.get([a.ready.remote() for a in self._actors])
+        self.startup_s = time.perf_counter() - start
+
+    def run(self, tasks: Iterable[Task]) -> Iterator[Episode | Failure]:
+        """Run ``tasks``, yielding each result as it comes (in the order episodes finish)."""
+        ray = self._ray
+        queue = deque(tasks)
+        free = [a for a in self._actors for _ in range(IN_FLIGHT_PER_WORKER)]
+        pending: dict[Any, tuple[Task, Any]] = {}
+        while queue or pending:
+            while queue and free:
+                task, actor = queue.popleft(), free.pop(0)
+                ref = actor.run.remote(task.scenario_toml, task.point, task.seed)
+                pending[ref] = (task, actor)
+            done, _ = ray.wait(list(pending), num_returns=1)
+            for ref in done:
+                task, actor = pending.pop(ref)
+                free.append(actor)
+                try:
+                    yield ray.get(ref)
+                except ray.exceptions.RayError as exc:
+                    yield Failure(task.point, task.seed, _one_line(exc))
+
+    def close(self) -> None:
+        """Stop the actors (on a cluster) and leave Ray (stopping it if this engine started it:
+        that stops the actors too)."""
+        if not self._owns_ray:
+            for a in self._actors:
+                try:
+                    self._ray.kill(a)
+                except Exception:  # already gone (a cluster shutting down): nothing to stop
+                    logger.debug("could not kill a worker", exc_info=True)
+        self._actors = []
+        self._ray.shutdown()
+
+
+def _one_line(exc: BaseException) -> str:
+    """A Ray error's cause in one line (Ray wraps the worker's traceback in its message)."""
+    cause = getattr(exc, "cause", None) or exc
+    text = str(cause).strip().splitlines()
+    return f"{type(cause).__name__}: {text[-1] if text else ''}"

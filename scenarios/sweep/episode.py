@@ -1,0 +1,185 @@
+"""One episode of a sweep: a grid point's scenario run with one seed, judged, in numbers.
+
+An episode is a pure function of the point's scenario and the seed: every column of its row
+but ``wall_s`` is the same wherever and however it runs (in the command's process, on a Ray
+worker, replayed by ``vnav-demo run``); the tests compare them. The statistics are the JSON
+report's (``scenarios.report``), so a row and ``vnav-demo run``'s report agree to the digit.
+
+``EpisodeRunner`` is what a worker holds: the scenes it has built (``sim.scene_cache``), so
+that the next episode of the same grid point reuses the world and its OpenGL context.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import tomllib
+from dataclasses import dataclass, field
+from typing import Any
+
+from scenarios import checks, pipeline
+from scenarios.records import RunResult
+from scenarios.spec import ScenarioSpec, from_dict
+from sim.scene_cache import SceneCache
+from sim.world import SimulationError
+from vnav.methods import METHOD_NAMES
+
+__all__ = [
+    "ESTIMATE_COLUMNS",
+    "STATS",
+    "Episode",
+    "EpisodeRunner",
+    "method_column",
+    "row_columns",
+    "run_episode",
+]
+
+STATS = ("count", "mean", "median", "rmse", "max")
+"""Per-method error statistics in each row (``scenarios.report``'s, metres but ``count``)."""
+
+ESTIMATE_COLUMNS = ("tick", "t_s", "cone", "method", "range_m", "error_m")
+"""Columns of an episode's estimates: one row per matched detection and method."""
+
+
+def method_column(method: str, stat: str) -> str:
+    """A row's column for ``method``'s statistic: ``depth_image.median_m``, ``naive.count``."""
+    return f"{method}.{stat}" if stat == "count" else f"{method}.{stat}_m"
+
+
+def row_columns() -> list[str]:
+    """An episode row's columns, in order (the sweep adds the point, the seed, the grid)."""
+    head = ["status", "passed", "failed_checks", "message", "camera_ticks", "detections"]
+    head += ["matched_detections", "cones_in_view", "cones_detected", "detection_rate"]
+    per_method = [method_column(m, s) for m in METHOD_NAMES for s in STATS]
+    return [*head, *per_method, "simulated_s", "wall_s"]
+
+
+@dataclass
+class Episode:
+    """What one episode gives back.
+
+    Attributes
+    ----------
+    point, seed : int
+    row : dict
+        One value per ``row_columns()``: ``status`` is ``passed``, ``failed`` (a check failed
+        or had no data; ``failed_checks`` names them) or ``diverged`` (the flight diverged;
+        ``message`` says when); errors are NaN where a method gave none.
+    estimates : dict of str to list
+        ``ESTIMATE_COLUMNS``, one entry per matched detection and method with an estimate.
+    """
+
+    point: int
+    seed: int
+    row: dict[str, Any]
+    estimates: dict[str, list] = field(default_factory=dict)
+
+
+def _nan_if_none(value: float | int | None) -> float:
+    return math.nan if value is None else float(value)
+
+
+def _row(run: RunResult, report: dict[str, Any], judged: list[checks.CheckResult]) -> dict:
+    detected, seen = checks.detection_counts(run)
+    failed = [c.name for c in judged if c.outcome.fails_run]
+    row: dict[str, Any] = {
+        "status": "passed" if report["passed"] else "failed",
+        "passed": bool(report["passed"]),
+        "failed_checks": "; ".join(failed),
+        "message": "",
+        "camera_ticks": int(report["camera_ticks"]),
+        "detections": int(report["detections"]),
+        "matched_detections": int(report["matched_detections"]),
+        "cones_in_view": seen,
+        "cones_detected": detected,
+        "detection_rate": detected / seen if seen else math.nan,
+    }
+    for m in METHOD_NAMES:
+        stats = report["methods"][m]["position_error_m"]
+        for s in STATS:
+            value = stats[s]
+            row[method_column(m, s)] = int(value) if s == "count" else _nan_if_none(value)
+    row["simulated_s"] = float(report["simulated_s"])
+    return row
+
+
+def _estimates(run: RunResult) -> dict[str, list]:
+    out: dict[str, list] = {c: [] for c in ESTIMATE_COLUMNS}
+    for t in run.ticks:
+        for d in t.detections:
+            if d.cone_index is None:
+                continue
+            for m in METHOD_NAMES:
+                if m in d.errors_m:
+                    for c, v in zip(
+                        ESTIMATE_COLUMNS,
+                        (t.tick, t.t_s, d.cone_index, m, d.range_m, d.errors_m[m]),
+                        strict=True,
+                    ):
+                        out[c].append(v)
+    return out
+
+
+def _diverged(spec: ScenarioSpec, exc: SimulationError) -> dict[str, Any]:
+    row: dict[str, Any] = dict.fromkeys(row_columns(), math.nan)
+    row.update(
+        status="diverged",
+        passed=False,
+        failed_checks="",
+        message=f"the simulation diverged: {exc}",
+        camera_ticks=0,
+        detections=0,
+        matched_detections=0,
+        cones_in_view=0,
+        cones_detected=0,
+    )
+    row.update({method_column(m, "count"): 0 for m in METHOD_NAMES})
+    return row
+
+
+def run_episode(
+    spec: ScenarioSpec, point: int, seed: int, scenes: SceneCache | None = None
+) -> Episode:
+    """Run, judge and measure ``spec`` with ``seed`` (no files written).
+
+    A diverging flight is a result (status ``diverged``), not an error: it is as much a
+    property of the grid point and seed as an error figure.
+    """
+    start = time.perf_counter()
+    try:
+        outcome = pipeline.run(spec, seed=seed, scenes=scenes)
+    except SimulationError as exc:
+        row, estimates = _diverged(spec, exc), {c: [] for c in ESTIMATE_COLUMNS}
+    else:
+        row = _row(outcome.result, outcome.report, outcome.judged)
+        estimates = _estimates(outcome.result)
+    row["wall_s"] = time.perf_counter() - start
+    return Episode(point, seed, row, estimates)
+
+
+class EpisodeRunner:
+    """Runs episodes in one process, keeping the scenes it builds (``SceneCache``).
+
+    This is the class a Ray worker holds (``scenarios.sweep.engine``): created inside the
+    worker, its OpenGL contexts are made there too.
+    """
+
+    def __init__(self) -> None:
+        self._scenes = SceneCache(capacity=2)
+        self._specs: dict[str, ScenarioSpec] = {}
+
+    def run(self, scenario_toml: str, point: int, seed: int) -> Episode:
+        """The episode of the grid point whose scenario file is ``scenario_toml``."""
+        spec = self._specs.get(scenario_toml)
+        if spec is None:
+            spec = from_dict(tomllib.loads(scenario_toml), where=f"grid point {point}")
+            self._specs = {scenario_toml: spec}  # one point at a time, mostly
+        return run_episode(spec, point, seed, self._scenes)
+
+    def scenes_built(self) -> int:
+        """Scenes this runner has built (fewer than the episodes when they are reused)."""
+        return self._scenes.builds
+
+    def close(self) -> None:
+        """Free the scenes' rendering contexts."""
+        self._scenes.close()

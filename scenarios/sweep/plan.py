@@ -1,0 +1,258 @@
+"""A sweep file, read and expanded into grid points, each a checked scenario.
+
+A sweep file (TOML)::
+
+    scenario = "approach"              # a built-in name, or a scenario file (path relative
+                                       # to the sweep file's directory, or absolute)
+    seeds = 50                         # episodes per grid point: seeds 1..50 (or a list)
+    rank_by = "depth_image"            # optional: whose median error ranks the worst seeds
+    [grid]                             # dotted keys into the scenario; full product
+    "camera.pitch_down_deg" = [10.0, 30.0, 50.0]
+    "noise.attitude_std_deg" = [0.0, 0.5, 1.0]
+
+A grid key is a path into the scenario's tables (``camera.pitch_down_deg``); a number
+indexes a list (``flight.waypoints.2.position_w``); a table the scenario leaves out is made
+(``noise.attitude_std_deg`` on a scenario without ``[noise]``). A key with one value fixes it
+for the whole sweep. Grid points are numbered in row-major order of the keys as written.
+
+Every grid point is written out as a scenario file (``toml_out.dumps(exact=True)``) and parsed
+back by the scenario parser before anything runs: a bad value stops the sweep with a message
+naming the grid point and the key, and each point's file is what ``vnav-demo run FILE --seed S``
+replays, number for number.
+"""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+import itertools
+import json
+import math
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from scenarios import builtin, schema, toml_out
+from scenarios.spec import ScenarioError, ScenarioSpec, from_dict, read_toml
+from vnav.methods import METHOD_NAMES
+
+__all__ = ["MAX_EPISODES", "GridPoint", "SweepError", "SweepPlan", "label", "load", "plan"]
+
+MAX_EPISODES = 1_000_000
+"""Most episodes one sweep may hold (grid points x seeds)."""
+MAX_SEED = 2**63 - 1
+_TOP_KEYS = ("scenario", "seeds", "grid", "rank_by")
+
+
+class SweepError(ValueError):
+    """A sweep file that cannot be run: the message names the file, and the key or grid point."""
+
+
+@dataclass(frozen=True)
+class GridPoint:
+    """One combination of the grid's values, and the scenario it makes.
+
+    Attributes
+    ----------
+    index : int
+        Position in the grid (row-major in the keys' order), from 0.
+    values : dict
+        Each grid key (dotted) to its value here.
+    scenario_toml : str
+        The scenario as a file, floats in full: parsed, it gives ``spec`` exactly.
+    spec : ScenarioSpec
+    """
+
+    index: int
+    values: dict[str, Any]
+    scenario_toml: str
+    spec: ScenarioSpec
+
+    @property
+    def label(self) -> str:
+        """``key = value, ...`` in the grid's order (``-`` for a grid with no keys)."""
+        return label(self.values)
+
+
+@dataclass(frozen=True)
+class SweepPlan:
+    """A sweep: a scenario, the grid points made from it, the seeds run at each.
+
+    Attributes
+    ----------
+    path : str
+        The sweep file, as given.
+    scenario : str
+        The scenario as the file names it (a built-in name or a path).
+    keys : tuple of str
+        The grid's dotted keys, in the file's order.
+    seeds : tuple of int
+    points : tuple of GridPoint
+    rank_by : str
+        The method whose median error ranks episodes (``worst`` first).
+    """
+
+    path: str
+    scenario: str
+    keys: tuple[str, ...]
+    seeds: tuple[int, ...]
+    points: tuple[GridPoint, ...]
+    rank_by: str
+
+    @property
+    def episodes(self) -> list[tuple[int, int]]:
+        """Every ``(point index, seed)``, point by point (a worker then mostly keeps its scene)."""
+        return [(p.index, s) for p in self.points for s in self.seeds]
+
+    @property
+    def fingerprint(self) -> str:
+        """A hash of what the sweep runs (every point's scenario, the seeds): ``--resume``
+        refuses a directory whose sweep has another."""
+        text = json.dumps([[p.scenario_toml for p in self.points], list(self.seeds)])
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def label(values: dict[str, Any]) -> str:
+    """Grid values as ``key = value, ...`` (``-`` for none): how messages and tables name a
+    grid point."""
+    return ", ".join(f"{k} = {_show(v)}" for k, v in values.items()) or "-"
+
+
+def _show(v: Any) -> str:
+    return json.dumps(v) if not isinstance(v, float) else repr(v)
+
+
+def load(path: str | Path) -> SweepPlan:
+    """Read and expand a sweep file; ``SweepError`` names what is wrong."""
+    try:
+        data = read_toml(path, what="sweep file")
+    except ScenarioError as exc:
+        raise SweepError(str(exc)) from None
+    return plan(data, str(path), base_dir=Path(path).parent)
+
+
+def plan(data: dict[str, Any], where: str, base_dir: Path = Path()) -> SweepPlan:
+    """Expand parsed sweep-file ``data`` into checked grid points.
+
+    Raises
+    ------
+    SweepError
+        An unknown or missing key, bad seeds, an empty grid list, a grid key that is not a
+        path into the scenario, or a grid point the scenario parser refuses.
+    """
+    unknown = sorted(set(data) - set(_TOP_KEYS))
+    if unknown:
+        raise SweepError(f"{where}: {unknown[0]}: unknown key; expected one of {list(_TOP_KEYS)}")
+    if "scenario" not in data or not isinstance(data["scenario"], str):
+        raise SweepError(f"{where}: scenario: required: a built-in name or a scenario file path")
+    base = _base_scenario(data["scenario"], where, base_dir)
+    seeds = _seeds(data.get("seeds", 1), where)
+    rank_by = data.get("rank_by", "depth_image")
+    if rank_by not in METHOD_NAMES:
+        raise SweepError(f"{where}: rank_by: must be one of {list(METHOD_NAMES)}, got {rank_by!r}")
+    grid = data.get("grid", {})
+    if not isinstance(grid, dict):
+        raise SweepError(f"{where}: grid: must be a table of key = [values]")
+    for key, values in grid.items():
+        if not isinstance(values, list) or not values:
+            raise SweepError(f"{where}: grid.{key}: must be a non-empty list of values")
+    n_points = math.prod(len(v) for v in grid.values())
+    if n_points * len(seeds) > MAX_EPISODES:
+        raise SweepError(
+            f"{where}: {n_points} grid points x {len(seeds)} seeds is more than "
+            f"{MAX_EPISODES} episodes"
+        )
+    name = _point_name(base["name"], n_points)
+    points = tuple(
+        _point(base, dict(zip(grid, combo, strict=True)), i, name(i), where)
+        for i, combo in enumerate(itertools.product(*grid.values()))
+    )
+    return SweepPlan(where, data["scenario"], tuple(grid), seeds, points, rank_by)
+
+
+def _base_scenario(source: str, where: str, base_dir: Path) -> dict[str, Any]:
+    """The scenario's tables: a built-in's, or a file's (relative to the sweep file)."""
+    is_file = source.endswith(".toml") or "/" in source
+    try:
+        if not is_file:
+            if source not in builtin.REGISTRY:
+                raise ScenarioError(
+                    f"unknown built-in {source!r}; valid names: {', '.join(builtin.names())}"
+                )
+            return builtin.REGISTRY[source]()
+        path = Path(source)
+        data = read_toml(path if path.is_absolute() else base_dir / path)
+        from_dict(copy.deepcopy(data), where=str(path))  # its own errors, named as its own
+        return data
+    except ScenarioError as exc:
+        raise SweepError(f"{where}: scenario: {exc}") from None
+
+
+def _seeds(raw: Any, where: str) -> tuple[int, ...]:
+    """``n`` means seeds 1..n; a list is taken as written (distinct, in [0, 2**63 - 1])."""
+    if isinstance(raw, int) and not isinstance(raw, bool):
+        if not 1 <= raw <= MAX_EPISODES:
+            raise SweepError(f"{where}: seeds: must be in [1, {MAX_EPISODES}], got {raw}")
+        return tuple(range(1, raw + 1))
+    ok = isinstance(raw, list) and raw and all(type(s) is int and 0 <= s <= MAX_SEED for s in raw)
+    if not ok or len(set(raw)) != len(raw):
+        raise SweepError(
+            f"{where}: seeds: must be a count (seeds 1..n) or a list of distinct seeds in "
+            f"[0, 2**63 - 1], got {raw!r}"
+        )
+    return tuple(raw)
+
+
+def _point_name(base_name: str, n_points: int):
+    """Grid point ``i``'s scenario name, ``<base>-p<i>`` (zero-padded), within the name limit."""
+    digits = len(str(max(n_points - 1, 0)))
+    stem = base_name[: schema.MAX_NAME_CHARS - digits - 2]
+    return lambda i: f"{stem}-p{i:0{digits}d}"
+
+
+def _point(
+    base: dict[str, Any], values: dict[str, Any], index: int, name: str, where: str
+) -> GridPoint:
+    """Grid point ``index``: the base scenario with ``values`` set, written out and parsed."""
+    here = f"{where}: grid point {index} ({label(values)})"
+    scenario = copy.deepcopy(base)
+    for key, value in values.items():
+        _set(scenario, key, value, here)
+    scenario["name"] = name
+    try:
+        text = toml_out.dumps(scenario, exact=True)
+        spec = from_dict(tomllib.loads(text), where=here)
+    except ScenarioError as exc:
+        raise SweepError(str(exc)) from None
+    except (ValueError, TypeError) as exc:  # a value TOML cannot hold where it was put
+        raise SweepError(f"{here}: {exc}") from None
+    return GridPoint(index, values, text, spec)
+
+
+def _set(scenario: dict[str, Any], key: str, value: Any, here: str) -> None:
+    """Set the dotted ``key`` in ``scenario`` to ``value``, making missing tables."""
+    parts = key.split(".")
+    if parts[0] == "name":
+        raise SweepError(f"{here}: {key}: the sweep names each grid point; sweep another key")
+    node: Any = scenario
+    for depth, part in enumerate(parts):
+        last = depth == len(parts) - 1
+        where = ".".join(parts[: depth + 1])
+        if isinstance(node, list):
+            if not part.isdigit() or int(part) >= len(node):
+                raise SweepError(
+                    f"{here}: {key}: {'.'.join(parts[:depth])} is a list of {len(node)}; "
+                    f"index it with a number below {len(node)}"
+                )
+            part = int(part)  # type: ignore[assignment]
+        elif not isinstance(node, dict):
+            raise SweepError(f"{here}: {key}: {'.'.join(parts[:depth])} is not a table")
+        if last:
+            node[part] = value
+        else:
+            if isinstance(node, dict) and node.get(part) is None:
+                node[part] = {}
+            node = node[part]
+            if not isinstance(node, dict | list):
+                raise SweepError(f"{here}: {key}: {where} is a value, not a table")

@@ -1,0 +1,167 @@
+"""``summary.json``: a sweep's statistics per grid point, and its worst episodes to replay.
+
+Per grid point, across its seeds: the pass rate, the detection rate, and per method the
+median, 90th percentile and maximum of the episodes' own median and RMS errors, plus the
+statistics of every estimate pooled (``vnav.metrics.error_stats``). Episodes are ranked worst
+first: a diverged flight, then a failed check, then a pass; within each, the largest median
+error of ``rank_by`` (an episode where it gave no estimate counts as worst); then the seed.
+Every number here is computed from the rows of ``results.parquet`` and ``estimates.parquet``
+beside it (the tests recompute them from the files).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from scenarios.sweep.episode import Episode, method_column
+from scenarios.sweep.plan import SweepPlan
+from vnav import metrics
+from vnav.methods import METHOD_NAMES
+
+__all__ = ["SUMMARY_VERSION", "build", "rank_key", "replay_command", "worst"]
+
+SUMMARY_VERSION = 1
+_STATUS_ORDER = {"diverged": 0, "failed": 1, "passed": 2}
+
+
+def _num(x: float | None) -> float | None:
+    """A finite float, or None (JSON has no NaN)."""
+    return None if x is None or not math.isfinite(x) else float(x)
+
+
+def rank_key(episode: Episode, rank_by: str) -> tuple[int, float, int]:
+    """Sort key putting the worst episode first (see the module doc)."""
+    median = episode.row[method_column(rank_by, "median")]
+    return (
+        _STATUS_ORDER[episode.row["status"]],
+        -math.inf if math.isnan(median) else -median,
+        episode.seed,
+    )
+
+
+def worst(episodes: list[Episode], rank_by: str, k: int) -> list[Episode]:
+    """The ``k`` worst ``episodes``, worst first."""
+    return sorted(episodes, key=lambda e: rank_key(e, rank_by))[:k]
+
+
+def replay_command(out_dir: str, point_file: str, seed: int) -> str:
+    """The command that runs an episode again, with its recording."""
+    return f"vnav-demo run {out_dir.rstrip('/')}/{point_file} --seed {seed}"
+
+
+def _spread(values: list[float]) -> dict[str, float | None]:
+    """Median, 90th percentile and maximum of the finite ``values`` (None if there are none)."""
+    a = np.array([v for v in values if math.isfinite(v)], dtype=np.float64)
+    if not a.size:
+        return {"median": None, "p90": None, "max": None}
+    return {
+        "median": float(np.median(a)),
+        "p90": float(np.percentile(a, 90.0)),
+        "max": float(a.max()),
+    }
+
+
+def _method(episodes: list[Episode], method: str) -> dict[str, Any]:
+    errors = np.array(
+        [
+            err
+            for e in episodes
+            for m, err in zip(e.estimates["method"], e.estimates["error_m"], strict=True)
+            if m == method
+        ],
+        dtype=np.float64,
+    )
+    return {
+        "episodes_with_estimates": sum(e.row[method_column(method, "count")] > 0 for e in episodes),
+        "median_m": _spread([e.row[method_column(method, "median")] for e in episodes]),
+        "rmse_m": _spread([e.row[method_column(method, "rmse")] for e in episodes]),
+        "pooled": {
+            k: int(v) if k == "count" else _num(v) for k, v in metrics.error_stats(errors).items()
+        },
+    }
+
+
+def _point(
+    plan: SweepPlan, index: int, episodes: list[Episode], out_dir: str, point_file: str
+) -> dict[str, Any]:
+    rates = [e.row["detection_rate"] for e in episodes]
+    finite_rates = [r for r in rates if math.isfinite(r)]
+    entry: dict[str, Any] = {
+        "index": index,
+        "values": plan.points[index].values,
+        "scenario_file": point_file,
+        "episodes": len(episodes),
+        "passed": sum(e.row["passed"] for e in episodes),
+        "diverged": sum(e.row["status"] == "diverged" for e in episodes),
+        "pass_rate": (sum(e.row["passed"] for e in episodes) / len(episodes)) if episodes else None,
+        "detection_rate": {
+            "mean": float(np.mean(finite_rates)) if finite_rates else None,
+            "min": float(np.min(finite_rates)) if finite_rates else None,
+        },
+        "methods": {m: _method(episodes, m) for m in METHOD_NAMES},
+        "worst": None,
+    }
+    if episodes:
+        (w,) = worst(episodes, plan.rank_by, 1)
+        entry["worst"] = _worst_entry(plan, w, out_dir, point_file)
+    return entry
+
+
+def _worst_entry(plan: SweepPlan, e: Episode, out_dir: str, point_file: str) -> dict[str, Any]:
+    return {
+        "point": e.point,
+        "seed": e.seed,
+        "status": e.row["status"],
+        "failed_checks": e.row["failed_checks"],
+        f"{plan.rank_by}.median_m": _num(e.row[method_column(plan.rank_by, "median")]),
+        "replay": replay_command(out_dir, point_file, e.seed),
+    }
+
+
+def build(
+    plan: SweepPlan,
+    episodes: list[Episode],
+    *,
+    out_dir: str,
+    point_files: list[str],
+    complete: bool,
+    recordings: dict[tuple[int, int], str] | None = None,
+    n_worst: int = 10,
+) -> dict[str, Any]:
+    """The summary as a JSON-ready dict.
+
+    ``episodes`` are the finished ones; ``complete`` says whether that is every planned one.
+    ``recordings`` maps ``(point, seed)`` to a recording written for it (``--record-worst``).
+    """
+    by_point: dict[int, list[Episode]] = {p.index: [] for p in plan.points}
+    for e in episodes:
+        by_point[e.point].append(e)
+    statuses = [e.row["status"] for e in episodes]
+    ranked = worst(episodes, plan.rank_by, n_worst)
+    recordings = recordings or {}
+    return {
+        "summary_version": SUMMARY_VERSION,
+        "sweep_file": plan.path,
+        "scenario": plan.scenario,
+        "fingerprint": plan.fingerprint,
+        "complete": complete,
+        "episodes": {
+            "planned": len(plan.episodes),
+            "done": len(episodes),
+            **{s: statuses.count(s) for s in _STATUS_ORDER},
+        },
+        "keys": list(plan.keys),
+        "seeds": list(plan.seeds),
+        "rank_by": plan.rank_by,
+        "points": [_point(plan, i, eps, out_dir, point_files[i]) for i, eps in by_point.items()],
+        "worst": [
+            {
+                **_worst_entry(plan, e, out_dir, point_files[e.point]),
+                "recording": recordings.get((e.point, e.seed)),
+            }
+            for e in ranked
+        ],
+    }

@@ -1,0 +1,300 @@
+"""vnav-demo sweep, end to end: serial and on a local Ray instance (1 and 2 workers), the same
+rows bit for bit; --resume after an interruption; the tables against summary.json; the worst
+seed replayed by vnav-demo run; bad input.
+
+The sweep: frame-problem cut to 2 s, two grid points (attitude noise 0 and 1 deg) x 3 seeds,
+so that seeds give different numbers where there is noise.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+from scenarios.sweep import engine as engines
+from scenarios.sweep.episode import row_columns
+from vnav import metrics
+from vnav.methods import METHOD_NAMES
+
+SWEEP = """\
+scenario = "frame-problem"
+seeds = 3
+[grid]
+"noise.attitude_std_deg" = [0.0, 1.0]
+"duration_s" = [2.0]
+"""
+
+
+def sweep_cli(*args: str, cwd: Path, timeout: float = 300) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "scenarios", "sweep", *args],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
+
+
+@pytest.fixture(scope="module")
+def work(tmp_path_factory) -> Path:
+    root = tmp_path_factory.mktemp("sweep")
+    (root / "small.toml").write_text(SWEEP)
+    return root
+
+
+@pytest.fixture(scope="module")
+def serial(work) -> Path:
+    proc = sweep_cli("small.toml", "--out", "serial", "--workers", "0", cwd=work)
+    assert proc.returncode == 1, proc.stderr  # the noisy point fails frame-problem's checks
+    return work / "serial"
+
+
+def rows(out: Path) -> list[dict]:
+    """results.parquet without the one machine-dependent column."""
+    return pq.read_table(out / "results.parquet").drop(["wall_s"]).to_pylist()
+
+
+def same(a, b) -> bool:
+    """Equal, NaN equal to NaN (Arrow's and Python's == say NaN != NaN)."""
+    if isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b):
+        return True
+    return a == b
+
+
+def assert_same_rows(a: list[dict], b: list[dict]) -> None:
+    assert len(a) == len(b)
+    for x, y in zip(a, b, strict=True):
+        assert x.keys() == y.keys()
+        different = [k for k in x if not same(x[k], y[k])]
+        assert not different, (x["point"], x["seed"], different)
+
+
+def test_serial_rows(serial):
+    table = pq.read_table(serial / "results.parquet")
+    assert table.column_names == [
+        "point",
+        "seed",
+        "noise.attitude_std_deg",
+        "duration_s",
+        *row_columns(),
+    ]
+    got = rows(serial)
+    assert [(r["point"], r["seed"]) for r in got] == [(p, s) for p in (0, 1) for s in (1, 2, 3)]
+    noiseless = [r["depth_image.median_m"] for r in got if r["point"] == 0]
+    noisy = [r["depth_image.median_m"] for r in got if r["point"] == 1]
+    assert len(set(noiseless)) == 1  # no noise: the seed changes nothing
+    assert len(set(noisy)) == 3  # 1 deg of attitude noise: each seed its own
+    assert all(r["status"] == "passed" for r in got if r["point"] == 0)
+    assert all(r["status"] == "failed" and r["failed_checks"] for r in got if r["point"] == 1)
+
+
+@pytest.mark.parametrize("workers", ["1", "2"])
+def test_ray_workers_give_the_serial_rows(work, serial, workers):
+    out = f"ray{workers}"
+    proc = sweep_cli("small.toml", "--out", out, "--workers", workers, cwd=work)
+    assert proc.returncode == 1, proc.stderr
+    assert f"{workers} workers" in proc.stdout
+    assert_same_rows(rows(work / out), rows(serial))
+    assert_same_rows(
+        pq.read_table(work / out / "estimates.parquet").to_pylist(),
+        pq.read_table(serial / "estimates.parquet").to_pylist(),
+    )
+
+
+def test_ray_engine_reuses_each_workers_scene(work, serial):
+    """One actor runs all 6 episodes and builds the scene once: the two grid points differ in
+    noise only, so they share a scene (``SceneConfig``)."""
+    from scenarios.sweep.plan import load
+
+    plan = load(work / "small.toml")
+    engine = engines.RayEngine(workers=1)
+    try:
+        tasks = [engines.Task(p, s, plan.points[p].scenario_toml) for p, s in plan.episodes]
+        results = list(engine.run(tasks))
+        (actor,) = engine._actors
+        import ray
+
+        built = ray.get(actor.scenes_built.remote())
+    finally:
+        engine.close()
+    assert len({p.spec.scene for p in plan.points}) == 1
+    assert len(results) == 6 and built == 1
+
+
+def test_summary_agrees_with_the_tables(serial):
+    summary = json.loads((serial / "summary.json").read_text())
+    table = rows(serial)
+    estimates = pq.read_table(serial / "estimates.parquet").to_pylist()
+    assert summary["complete"] is True
+    assert summary["episodes"] == {"planned": 6, "done": 6, "passed": 3, "failed": 3, "diverged": 0}
+    for point in summary["points"]:
+        mine = [r for r in table if r["point"] == point["index"]]
+        assert point["episodes"] == len(mine)
+        assert point["pass_rate"] == sum(r["passed"] for r in mine) / len(mine)
+        for m in METHOD_NAMES:
+            medians = np.array([r[f"{m}.median_m"] for r in mine])
+            medians = medians[np.isfinite(medians)]
+            got = point["methods"][m]
+            if medians.size:
+                assert got["median_m"]["median"] == pytest.approx(np.median(medians), abs=0)
+                assert got["median_m"]["p90"] == pytest.approx(np.percentile(medians, 90), abs=0)
+            else:
+                assert got["median_m"]["median"] is None
+            errors = [
+                e["error_m"] for e in estimates if e["point"] == point["index"] and e["method"] == m
+            ]
+            pooled = metrics.error_stats(np.array(errors, dtype=float))
+            assert got["pooled"]["count"] == len(errors) == sum(r[f"{m}.count"] for r in mine)
+            if errors:
+                assert got["pooled"]["median"] == pytest.approx(pooled["median"], abs=0)
+        worst = max(mine, key=lambda r: (not r["passed"], r["depth_image.median_m"]))
+        assert point["worst"]["seed"] == worst["seed"]
+
+
+def test_worst_seed_replays_to_the_same_numbers(work, serial):
+    summary = json.loads((serial / "summary.json").read_text())
+    worst = summary["worst"][0]
+    assert worst["point"] == 1  # the noisy point's episodes failed
+    command = worst["replay"].split()
+    assert command[:2] == ["vnav-demo", "run"]
+    proc = subprocess.run(
+        [sys.executable, "-m", "scenarios", *command[1:], "--out", "replay", "--quiet"],
+        cwd=work,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert proc.returncode == 1, proc.stderr
+    (report_path,) = (work / "replay").glob("*.json")
+    report = json.loads(report_path.read_text())
+    (row,) = [r for r in rows(serial) if (r["point"], r["seed"]) == (1, worst["seed"])]
+    for m in METHOD_NAMES:
+        for stat, value in report["methods"][m]["position_error_m"].items():
+            if stat in ("count", "mean", "median", "rmse", "max"):
+                column = f"{m}.{stat}" if stat == "count" else f"{m}.{stat}_m"
+                assert same(row[column], math.nan if value is None else value), column
+    assert row["detections"] == report["detections"]
+
+
+def test_plots_are_pngs(serial):
+    names = sorted(p.name for p in (serial / "plots").iterdir())
+    assert names == ["error_vs_noise.attitude_std_deg.png", "error_vs_range.png"]
+    for name in names:
+        data = (serial / "plots" / name).read_bytes()
+        assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10_000
+
+
+def test_resume_after_an_interruption_runs_only_the_missing_episodes(work, serial):
+    """SIGTERM once the first episode is journalled; --resume finishes without touching it."""
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "scenarios",
+            "sweep",
+            "small.toml",
+            "--out",
+            "cut",
+            "--workers",
+            "0",
+        ],
+        cwd=work,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    journal = work / "cut" / "episodes"
+    deadline = time.monotonic() + 120
+    while not (journal.is_dir() and any(journal.glob("*.json"))):
+        assert time.monotonic() < deadline and proc.poll() is None
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 128 + signal.SIGTERM
+    assert "--resume" in err and len(err.strip().splitlines()) == 1
+    before = {p.name: p.stat().st_mtime_ns for p in journal.glob("*.json")}
+    assert 1 <= len(before) < 6
+    partial = json.loads((work / "cut" / "summary.json").read_text())
+    assert partial["complete"] is False
+    assert partial["episodes"]["done"] == len(before) == len(rows(work / "cut"))
+
+    again = sweep_cli("small.toml", "--out", "cut", "--workers", "0", cwd=work)
+    assert again.returncode == 2 and "--resume" in again.stderr
+    resumed = sweep_cli("small.toml", "--out", "cut", "--workers", "0", "--resume", cwd=work)
+    assert resumed.returncode == 1, resumed.stderr
+    assert f"{6 - len(before)} to run" in resumed.stdout
+    after = {p.name: p.stat().st_mtime_ns for p in journal.glob("*.json")}
+    assert len(after) == 6 and all(after[k] == v for k, v in before.items())
+    assert_same_rows(rows(work / "cut"), rows(serial))
+    assert json.loads((work / "cut" / "summary.json").read_text())["complete"] is True
+
+
+def test_record_worst(work, serial):
+    proc = sweep_cli(
+        "small.toml",
+        "--out",
+        "serial",
+        "--workers",
+        "0",
+        "--resume",
+        "--record-worst",
+        "1",
+        cwd=work,
+    )
+    assert proc.returncode == 1, proc.stderr
+    summary = json.loads((serial / "summary.json").read_text())
+    worst = summary["worst"][0]
+    assert worst["recording"] == f"worst/frame-problem-p1-s{worst['seed']}.rrd"
+    report = json.loads((serial / worst["recording"]).with_suffix(".json").read_text())
+    (row,) = [r for r in rows(serial) if (r["point"], r["seed"]) == (1, worst["seed"])]
+    assert (
+        report["methods"]["depth_image"]["position_error_m"]["median"]
+        == row["depth_image.median_m"]
+    )
+
+
+@pytest.mark.parametrize(
+    ("text", "args", "message"),
+    [
+        (SWEEP + '"camera.pitch_down_deg" = [100.0]\n', [], "grid point 0"),
+        ("scenario = 'nope'\n", [], "unknown built-in 'nope'"),
+        ("scenario = [\n", [], "invalid TOML"),
+        (SWEEP, ["--workers", "-1"], "--workers must be 0"),
+        (SWEEP, ["--workers", "0", "--address", "auto"], "cannot go with --address"),
+        (SWEEP, ["--record-worst", "-2"], "--record-worst"),
+    ],
+)
+def test_bad_input_exits_2_with_one_line(tmp_path, text, args, message):
+    (tmp_path / "bad.toml").write_text(text)
+    proc = sweep_cli("bad.toml", "--out", "o", *args, cwd=tmp_path, timeout=60)
+    assert proc.returncode == 2
+    assert message in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "o" / "sweep.json").exists()
+
+
+def test_another_sweep_in_the_same_directory_is_refused(work, serial):
+    (work / "other.toml").write_text(SWEEP.replace("seeds = 3", "seeds = 4"))
+    proc = sweep_cli("other.toml", "--out", "serial", "--resume", cwd=work, timeout=60)
+    assert proc.returncode == 2 and "holds another sweep" in proc.stderr
+
+
+def test_without_ray_the_command_says_how_to_install_it(monkeypatch, tmp_path, capsys):
+    from scenarios import cli
+
+    (tmp_path / "s.toml").write_text(SWEEP)
+    monkeypatch.setattr(engines, "ray_missing", lambda: "Ray is not installed: pip install x")
+    status = cli.main(["sweep", str(tmp_path / "s.toml"), "--out", str(tmp_path / "o")])
+    assert status == 2
+    assert "Ray is not installed" in capsys.readouterr().err

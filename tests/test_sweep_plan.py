@@ -1,0 +1,114 @@
+"""scenarios.sweep.plan: sweep files expanded into grid points the scenario parser accepts."""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import tomllib
+
+import pytest
+
+from scenarios import builtin, spec, toml_out
+from scenarios.sweep.plan import SweepError, load, plan
+
+
+def test_grid_is_the_full_product_in_row_major_order():
+    grid = {"camera.pitch_down_deg": [10.0, 30.0, 50.0], "noise.attitude_std_deg": [0.0, 0.5]}
+    p = plan({"scenario": "approach", "seeds": 4, "grid": grid}, "s.toml")
+    assert p.seeds == (1, 2, 3, 4)
+    assert [tuple(pt.values.values()) for pt in p.points] == list(itertools.product(*grid.values()))
+    assert p.episodes == [(i, s) for i in range(6) for s in (1, 2, 3, 4)]
+    for pt in p.points:
+        assert pt.spec.scene.camera.pitch_down_deg == pt.values["camera.pitch_down_deg"]
+        assert pt.spec.noise.attitude_std_deg == pt.values["noise.attitude_std_deg"]
+        assert pt.spec.name == f"approach-p{pt.index}"
+
+
+def test_point_files_parse_back_to_the_same_scenario_exactly():
+    """Floats in full: a value the sweep's rounding would change (toml_out's 6 digits)."""
+    value = 33.690067525979785
+    p = plan({"scenario": "orbit", "grid": {"camera.pitch_down_deg": [value]}}, "s.toml")
+    (pt,) = p.points
+    assert spec.from_dict(tomllib.loads(pt.scenario_toml)) == pt.spec
+    assert pt.spec.scene.camera.pitch_down_deg == value
+    base = {**builtin.REGISTRY["orbit"](), "name": pt.spec.name}
+    base["camera"] = {**base["camera"], "pitch_down_deg": value}
+    assert pt.spec == spec.from_dict(base)
+    rounded = spec.from_dict(tomllib.loads(toml_out.dumps(base)))
+    assert rounded.scene.camera.pitch_down_deg != value  # why exact=True is needed
+
+
+def test_list_index_and_missing_tables():
+    grid = {"flight.waypoints.2.position_w": [[-6.0, 0.0, 3.0]], "timing.image_latency_s": [0.05]}
+    (pt,) = plan({"scenario": "approach", "grid": grid}, "s.toml").points
+    assert pt.spec.flight.waypoints[2].position_w == (-6.0, 0.0, 3.0)
+    assert pt.spec.timing.image_latency_s == 0.05
+
+
+def test_seed_list_and_rank_by():
+    p = plan({"scenario": "approach", "seeds": [7, 3], "rank_by": "ground_plane"}, "s.toml")
+    assert p.seeds == (7, 3) and p.rank_by == "ground_plane" and len(p.points) == 1
+
+
+def test_fingerprint_changes_with_what_runs():
+    a = plan({"scenario": "approach", "seeds": 2}, "s.toml")
+    assert a.fingerprint == plan({"scenario": "approach", "seeds": 2}, "t.toml").fingerprint
+    assert a.fingerprint != plan({"scenario": "approach", "seeds": 3}, "s.toml").fingerprint
+    grid = {"camera.pitch_down_deg": [20.0]}
+    assert (
+        a.fingerprint != plan({"scenario": "approach", "seeds": 2, "grid": grid}, "s").fingerprint
+    )
+
+
+def test_scenario_file_relative_to_the_sweep_file(tmp_path):
+    scenario = {**builtin.REGISTRY["frame-problem"](), "name": "mine"}
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "sub" / "mine.toml").write_text(toml_out.dumps(scenario))
+    (tmp_path / "sweep.toml").write_text('scenario = "sub/mine.toml"\nseeds = 2\n')
+    p = load(tmp_path / "sweep.toml")
+    assert p.points[0].spec == dataclasses.replace(
+        spec.load_toml(tmp_path / "sub" / "mine.toml"), name="mine-p0"
+    )
+
+
+@pytest.mark.parametrize(
+    ("data", "message"),
+    [
+        ({"seeds": 2}, "scenario: required"),
+        ({"scenario": "nope"}, "unknown built-in 'nope'"),
+        ({"scenario": "approach", "seed": 2}, "seed: unknown key"),
+        ({"scenario": "approach", "seeds": 0}, "seeds: must be in"),
+        ({"scenario": "approach", "seeds": [1, 1]}, "distinct"),
+        ({"scenario": "approach", "seeds": True}, "seeds"),
+        ({"scenario": "approach", "rank_by": "best"}, "rank_by: must be one of"),
+        ({"scenario": "approach", "grid": {"camera.pitch_down_deg": []}}, "non-empty list"),
+        ({"scenario": "approach", "grid": {"name": ["x"]}}, "names each grid point"),
+        (
+            {"scenario": "approach", "grid": {"camera.pitch_down_deg": [10.0, 95.0]}},
+            "grid point 1 (camera.pitch_down_deg = 95.0): camera: CameraConfig.pitch_down_deg must",
+        ),
+        (
+            {"scenario": "approach", "grid": {"camera.tilt_deg": [1.0]}},
+            "grid point 0 (camera.tilt_deg = 1.0): camera.tilt_deg: unknown key",
+        ),
+        (
+            {"scenario": "approach", "grid": {"flight.waypoints.9.t": [1.0]}},
+            "flight.waypoints is a list of 3",
+        ),
+        (
+            {"scenario": "approach", "grid": {"camera_rate_hz.x": [1.0]}},
+            "camera_rate_hz is a value, not a table",
+        ),
+    ],
+)
+def test_bad_sweeps_are_refused_naming_the_key(data, message):
+    with pytest.raises(SweepError) as info:
+        plan(data, "s.toml")
+    assert message in str(info.value)
+    assert str(info.value).startswith("s.toml: ")
+    assert "\n" not in str(info.value)
+
+
+def test_missing_sweep_file(tmp_path):
+    with pytest.raises(SweepError, match="no such sweep file"):
+        load(tmp_path / "none.toml")
