@@ -24,6 +24,13 @@ import pytest
         ("scenarios.panel", ("mujoco", "rerun")),
         ("scenarios.plots", ("mujoco", "rerun", "matplotlib")),
         ("scenarios.viewer", ("mujoco",)),
+        # A sweep's plan, tables, summary and plots need no simulator; the command loads Ray
+        # only when it runs, so that without it the command can say how to install it.
+        ("scenarios.sweep.plan", ("mujoco", "rerun", "ray", "pyarrow")),
+        ("scenarios.sweep.store", ("mujoco", "rerun", "ray")),
+        ("scenarios.sweep.summary", ("mujoco", "rerun", "ray", "pyarrow")),
+        ("scenarios.sweep.plots", ("mujoco", "rerun", "ray", "pyarrow")),
+        ("scenarios.sweep.command", ("ray",)),
     ],
 )
 def test_module_does_not_load(module, absent):

@@ -59,6 +59,8 @@ def _kind(command: str) -> str:
         return "serve"  # started, asked for its page, stopped
     if re.fullmatch(r"\.venv/bin/rerun \S+\.rrd", command):
         return "viewer"  # opens a window: checked to name a file the README makes
+    if command.startswith(".venv/bin/vnav-demo sweep "):
+        return "sweep"  # run in order by test_sweep_commands_run, with the README's sweep file
     if command.startswith(".venv/bin/vnav-demo "):
         return "run"
     raise AssertionError(f"README command with no test: {command!r}")
@@ -67,7 +69,8 @@ def _kind(command: str) -> str:
 def test_every_block_of_the_readme_is_tested() -> None:
     languages = {lang for lang, _ in re.findall(r"```(\w*)\n(.*?)```", README, re.S)}
     assert languages == {"bash", "toml", "python"}
-    assert {_kind(c) for c in COMMANDS} == {"setup", "serve", "viewer", "run"}
+    assert {_kind(c) for c in COMMANDS} == {"setup", "serve", "viewer", "run", "sweep"}
+    assert len(_blocks("toml")) == 2  # a scenario, a sweep: each has its test
 
 
 def _shell(command: str, cwd: Path, timeout_s: float = 300.0) -> subprocess.CompletedProcess:
@@ -220,8 +223,14 @@ def test_screenshot_script_renders_without_a_display() -> None:
 # ------------------------------------------------------------------ the TOML example
 
 
+def _toml_block(kind: str) -> str:
+    """The README's scenario example (``kind="scenario"``) or sweep example (``"sweep"``)."""
+    (block,) = [b for b in _blocks("toml") if ("[grid]" in b) == (kind == "sweep")]
+    return block
+
+
 def test_toml_example_runs_and_passes_with_the_cone_well_inside_the_image(tmp_path: Path):
-    (block,) = _blocks("toml")
+    block = _toml_block("scenario")
     spec = from_dict(tomllib.loads(block), where="README.md")
     path = tmp_path / "example.toml"
     path.write_text(block)
@@ -234,6 +243,33 @@ def test_toml_example_runs_and_passes_with_the_cone_well_inside_the_image(tmp_pa
     result = pipeline.run(spec).result
     assert all(t.cones_in_view == [0] for t in result.ticks)
     assert not any(d.detection.touches_border for t in result.ticks for d in t.detections)
+
+
+# ------------------------------------------------------------------------- sweeps
+
+
+def test_sweep_commands_run(tmp_path: Path) -> None:
+    """The README's sweep file saved as it says, then its sweep commands in order: the first
+    runs every episode on Ray (exit 1: the noisy points fail, as the README says), the second
+    finds nothing left to run and writes the same tables."""
+    (tmp_path / "my-sweep.toml").write_text(_toml_block("sweep"))
+    commands = [c for c in COMMANDS if _kind(c) == "sweep"]
+    assert len(commands) == 2 and "--resume" in commands[1]
+    outs = []
+    for command in commands:
+        proc = _shell(command, tmp_path, timeout_s=600.0)
+        assert proc.returncode == 1, f"{command}\n{proc.stdout}\n{proc.stderr}"
+        assert proc.stderr == "", proc.stderr
+        out = tmp_path / re.search(r"--out (\S+)", command)[1]
+        outs.append((out / "results.parquet").read_bytes())
+    assert "0 to run" in proc.stdout and outs[0] == outs[1]
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["complete"] and summary["episodes"]["done"] == 30
+    for point in summary["points"]:
+        noisy = point["values"]["noise.attitude_std_deg"] > 0.0
+        assert point["pass_rate"] == (0.0 if noisy else 1.0)
+        median = point["methods"]["depth_image"]["median_m"]["median"]
+        assert (0.12 < median < 0.2) if noisy else (median < 0.03)  # "about 2 cm to 16 cm"
 
 
 # --------------------------------------------------------------- the Python example
@@ -256,11 +292,12 @@ def test_python_example_prints_what_its_comment_says(capsys) -> None:
 
 
 def test_dependencies_are_each_explained() -> None:
-    """Every runtime dependency and every package of the test extra is named in the README's
-    paragraph on what gets installed and why."""
+    """Every runtime dependency and every package of the test and sweep extras is named in the
+    README's paragraph on what gets installed and why."""
     paragraph = README.split("What gets installed, and why:", 1)[1].split("\n\n", 1)[0].lower()
     pyproject = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
-    requirements = pyproject["dependencies"] + pyproject["optional-dependencies"]["test"]
+    extras = pyproject["optional-dependencies"]
+    requirements = pyproject["dependencies"] + extras["test"] + extras["sweep"]
     called = {"opencv-python-headless": "opencv", "rerun-sdk": "rerun"}
     for requirement in requirements:
         name = re.match(r"[A-Za-z0-9_.-]+", requirement)[0].lower()

@@ -22,7 +22,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from scenarios.sweep import engine as engines
-from scenarios.sweep.episode import row_columns
+from scenarios.sweep.rows import row_columns
 from vnav import metrics
 from vnav.methods import METHOD_NAMES
 

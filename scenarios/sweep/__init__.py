@@ -3,6 +3,7 @@
 ``vnav-demo sweep FILE.toml`` (``scenarios.sweep.command``)::
 
     plan      scenarios.sweep.plan      the sweep file; every grid point parsed as a scenario
+    rows      scenarios.sweep.rows      an episode's row and estimates: the columns
     episode   scenarios.sweep.episode   one (point, seed): run, judge, one row of numbers
     engine    scenarios.sweep.engine    episodes in this process or on Ray actors
     store     scenarios.sweep.store     journal, results.parquet, estimates.parquet, --resume

@@ -34,8 +34,8 @@ from scenarios.run_command import (
 )
 from scenarios.sweep import engine as engines
 from scenarios.sweep import plots, summary
-from scenarios.sweep.episode import Episode, method_column
 from scenarios.sweep.plan import SweepError, SweepPlan, load
+from scenarios.sweep.rows import Episode, method_column
 from scenarios.sweep.store import SweepStore, pyarrow_missing
 
 __all__ = ["run"]

@@ -21,7 +21,8 @@ from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
-from scenarios.sweep.episode import Episode, EpisodeRunner
+from scenarios.sweep.episode import EpisodeRunner
+from scenarios.sweep.rows import Episode
 
 __all__ = [
     "WORKER_ENV",
@@ -101,12 +102,15 @@ class SerialEngine:
 
 
 class _Worker(EpisodeRunner):
-    """An ``EpisodeRunner`` with one thread for OpenCV and a ``ready`` probe."""
+    """An ``EpisodeRunner`` with OpenCV's threads as the environment says, and a ``ready``
+    probe."""
 
     def __init__(self) -> None:
-        import cv2
+        threads = os.environ.get("OPENCV_FOR_THREADS_NUM")
+        if threads:
+            import cv2
 
-        cv2.setNumThreads(1)
+            cv2.setNumThreads(int(threads))
         super().__init__()
 
     def ready(self) -> int:
@@ -124,6 +128,8 @@ class RayEngine:
         None starts a local Ray instance with ``workers`` CPUs (stopped by ``close``);
         ``"auto"`` or ``"ray://host:port"`` joins an existing cluster, whose nodes must have
         vnav-sim installed.
+    env : dict, optional
+        The workers' environment variables (default ``WORKER_ENV``; the benchmark compares).
 
     Attributes
     ----------
@@ -131,7 +137,9 @@ class RayEngine:
         Seconds to start (or join) Ray and get every actor ready.
     """
 
-    def __init__(self, workers: int | None, address: str | None = None) -> None:
+    def __init__(
+        self, workers: int | None, address: str | None = None, env: dict[str, str] | None = None
+    ) -> None:
         import ray
 
         self._ray = ray
@@ -152,7 +160,8 @@ class RayEngine:
         self.workers = workers
         # No restarts or retries: a lost worker's episodes come back as failures, which the
         # command reports and --resume runs again.
-        actor = ray.remote(num_cpus=1, runtime_env={"env_vars": WORKER_ENV})(_Worker)
+        env = WORKER_ENV if env is None else env
+        actor = ray.remote(num_cpus=1, runtime_env={"env_vars": env})(_Worker)
         self._actors = [actor.remote() for _ in range(workers)]
         ray.get([a.ready.remote() for a in self._actors])
         self.startup_s = time.perf_counter() - start

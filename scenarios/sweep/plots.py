@@ -18,8 +18,8 @@ from typing import Any
 
 import numpy as np
 
-from scenarios.sweep.episode import Episode, method_column
 from scenarios.sweep.plan import SweepPlan
+from scenarios.sweep.rows import Episode, method_column
 from vnav.methods import METHODS
 
 __all__ = ["LOG_SPAN", "MIN_PER_BIN", "error_vs_key_png", "error_vs_range_png", "plot_names"]

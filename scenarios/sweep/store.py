@@ -26,8 +26,8 @@ from pathlib import Path
 from typing import Any
 
 from scenarios.outputs import OutputError, write_atomic
-from scenarios.sweep.episode import ESTIMATE_COLUMNS, Episode, row_columns
 from scenarios.sweep.plan import SweepError, SweepPlan
+from scenarios.sweep.rows import ESTIMATE_COLUMNS, Episode, row_columns
 
 __all__ = ["DERIVED", "MANIFEST", "SweepStore", "pyarrow_missing"]
 

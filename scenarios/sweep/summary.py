@@ -16,8 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from scenarios.sweep.episode import Episode, method_column
 from scenarios.sweep.plan import SweepPlan
+from scenarios.sweep.rows import Episode, method_column
 from vnav import metrics
 from vnav.methods import METHOD_NAMES
 
