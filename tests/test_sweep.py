@@ -12,6 +12,7 @@ import json
 import math
 import os
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -103,12 +104,94 @@ def test_ray_workers_give_the_serial_rows(work, serial, workers):
     out = f"ray{workers}"
     proc = sweep_cli("small.toml", "--out", out, "--workers", workers, cwd=work)
     assert proc.returncode == 1, proc.stderr
-    assert f"{workers} workers" in proc.stdout
+    assert f"({workers} local workers)" in proc.stdout
     assert_same_rows(rows(work / out), rows(serial))
     assert_same_rows(
         pq.read_table(work / out / "estimates.parquet").to_pylist(),
         pq.read_table(serial / "estimates.parquet").to_pylist(),
     )
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture
+def ray_cluster():
+    """A Ray cluster of 2 CPUs started as a user would (``ray start --head``), stopped after."""
+    port = _free_port()
+    env = {**os.environ, "RAY_AUTH_MODE": "disabled"}  # no token to hand to the sweep
+    command = [str(Path(sys.executable).parent / "ray"), "start", "--head", "--block"]
+    command += ["--num-cpus", "2", "--port", str(port)]
+    command += ["--include-dashboard", "false", "--disable-usage-stats"]
+    # `ray start` records its address for `--address auto` and leaves the record behind.
+    record = Path("/tmp/ray/ray_current_cluster")
+    recorded = record.read_bytes() if record.exists() else None
+    head = subprocess.Popen(
+        command,
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    try:
+        deadline = time.monotonic() + 120
+        while True:
+            try:
+                socket.create_connection(("127.0.0.1", port), timeout=1).close()
+                break
+            except OSError:
+                assert time.monotonic() < deadline and head.poll() is None, "ray start failed"
+                time.sleep(0.2)
+        yield f"127.0.0.1:{port}", env
+    finally:
+        head.terminate()
+        head.wait(timeout=120)
+        if recorded is None:
+            record.unlink(missing_ok=True)
+        else:
+            record.write_bytes(recorded)
+
+
+def test_an_existing_cluster_gives_the_serial_rows(work, serial, ray_cluster):
+    """--address joins a cluster and nothing else changes; asking for more workers than the
+    cluster has CPUs is refused, as is an address where nothing answers."""
+    address, env = ray_cluster
+    args = [sys.executable, "-m", "scenarios", "sweep", "small.toml", "--address", address]
+    proc = subprocess.run(
+        [*args, "--out", "cluster"], cwd=work, env=env, capture_output=True, text=True, timeout=300
+    )
+    assert proc.returncode == 1, proc.stderr
+    assert f"on the Ray cluster at {address} (a worker per CPU)" in proc.stdout
+    assert "(2 workers)" in proc.stdout
+    assert_same_rows(rows(work / "cluster"), rows(serial))
+    proc = subprocess.run(
+        [*args, "--out", "more", "--workers", "3"],
+        cwd=work,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert proc.returncode == 2 and "has 2 CPUs: 3 workers" in proc.stderr
+    assert not (work / "more" / "sweep.json").exists()
+
+
+def test_an_address_where_nothing_answers_is_refused_at_once(work):
+    start = time.monotonic()
+    proc = sweep_cli(
+        "small.toml",
+        "--out",
+        "none",
+        "--address",
+        f"127.0.0.1:{_free_port()}",
+        cwd=work,
+        timeout=60,
+    )
+    assert proc.returncode == 2 and "cannot reach the Ray cluster" in proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1 and time.monotonic() - start < 30
+    assert not (work / "none" / "sweep.json").exists()
 
 
 def test_ray_engine_reuses_each_workers_scene(work, serial):

@@ -103,7 +103,15 @@ def _sweep(plan: SweepPlan, out_dir: Path, args: argparse.Namespace) -> int:
     pending = store.pending()
     if not args.quiet:
         say(_header(plan, store, pending, args))
-    outcome = _run_pending(store, pending, args)
+    engine = _start_engine(args) if pending else None
+    if engine is None and pending:
+        return EXIT_BAD_INPUT  # said by _start_engine; nothing was written
+    try:
+        store.begin()
+        outcome = _run_pending(store, pending, engine, args)
+    finally:
+        if engine is not None:
+            engine.close()
     store.write_tables()
     complete = not store.pending()
     recordings = _record_worst(store, out_dir, args) if complete and args.record_worst else {}
@@ -129,12 +137,13 @@ def _sweep(plan: SweepPlan, out_dir: Path, args: argparse.Namespace) -> int:
 
 
 def _header(plan: SweepPlan, store: SweepStore, pending: list, args: argparse.Namespace) -> str:
-    where = (
-        "in this process"
-        if args.workers == 0
-        else f"on Ray ({args.address or 'local'}, "
-        f"{args.workers or engines.default_workers()} workers)"
-    )
+    if args.workers == 0:
+        where = "in this process"
+    elif args.address:
+        workers = f"{args.workers} workers" if args.workers else "a worker per CPU"
+        where = f"on the Ray cluster at {args.address} ({workers})"
+    else:
+        where = f"on Ray ({args.workers or engines.default_workers()} local workers)"
     done = len(plan.episodes) - len(pending)
     resumed = f", {done} done before" if done else ""
     return (
@@ -143,23 +152,29 @@ def _header(plan: SweepPlan, store: SweepStore, pending: list, args: argparse.Na
     )
 
 
-def _run_pending(store: SweepStore, pending: list, args: argparse.Namespace) -> _Run:
+def _start_engine(args: argparse.Namespace):
+    """The engine the options ask for, or None (said in one line) if Ray cannot be joined."""
+    if args.workers == 0:
+        return engines.SerialEngine()
+    try:
+        engine = engines.RayEngine(args.workers, args.address)
+    except engines.EngineError as exc:
+        _error(str(exc))
+        return None
+    if not args.quiet:
+        say(f"  Ray ready in {engine.startup_s:.1f} s ({engine.workers} workers)")
+    return engine
+
+
+def _run_pending(store: SweepStore, pending: list, engine, args: argparse.Namespace) -> _Run:
     """Run the pending episodes, journalling each as it finishes, until done or stopped."""
     out = _Run()
     if not pending:
         return out
     tasks = [engines.Task(p, s, store.plan.points[p].scenario_toml) for p, s in pending]
     bar = _Progress(len(tasks), enabled=not args.quiet)
-    engine = None
     start = time.perf_counter()
     try:
-        if args.workers == 0:
-            engine = engines.SerialEngine()
-        else:
-            engine = engines.RayEngine(args.workers, args.address)
-            if not args.quiet:
-                say(f"  Ray ready in {engine.startup_s:.1f} s ({engine.workers} workers)")
-        start = time.perf_counter()
         for result in engine.run(tasks):
             if isinstance(result, engines.Failure):
                 out.failures.append(result)
@@ -174,8 +189,6 @@ def _run_pending(store: SweepStore, pending: list, args: argparse.Namespace) -> 
     finally:
         bar.clear()
         out.wall_s = time.perf_counter() - start
-        if engine is not None:
-            engine.close()
     return out
 
 

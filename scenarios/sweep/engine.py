@@ -15,6 +15,7 @@ from __future__ import annotations
 import logging
 import os
 import signal
+import socket
 import time
 from collections import deque
 from collections.abc import Iterable, Iterator
@@ -26,6 +27,7 @@ from scenarios.sweep.rows import Episode
 
 __all__ = [
     "WORKER_ENV",
+    "EngineError",
     "Failure",
     "RayEngine",
     "SerialEngine",
@@ -46,6 +48,10 @@ WORKER_ENV = {
 
 IN_FLIGHT_PER_WORKER = 2
 """Episodes queued on each actor: the next starts as soon as one ends."""
+
+
+class EngineError(Exception):
+    """Ray could not be joined (a wrong ``--address``, a cluster not running): one line."""
 
 
 @dataclass(frozen=True)
@@ -140,31 +146,59 @@ class RayEngine:
     def __init__(
         self, workers: int | None, address: str | None = None, env: dict[str, str] | None = None
     ) -> None:
+        # Ray's C++ core logs each failed connection attempt as a warning, read when Ray is
+        # imported; the command says what failed in one line.
+        os.environ.setdefault("RAY_BACKEND_LOG_LEVEL", "error")
+        if address is not None:
+            _probe(_resolve_auto() if address == "auto" else address, address)
         import ray
 
         self._ray = ray
+        self._actors: list[Any] = []
+        self._owns_ray = address is None
         start = time.perf_counter()
+        try:
+            self.workers = self._connect(workers, address)
+            # No restarts or retries: a lost worker's episodes come back as failures, which
+            # the command reports and --resume runs again.
+            env = WORKER_ENV if env is None else env
+            actor = ray.remote(num_cpus=1, runtime_env={"env_vars": env})(_Worker)
+            self._actors = [actor.remote() for _ in range(self.workers)]
+            ray.get([a.ready.remote() for a in self._actors])
+        except BaseException:
+            self.close()
+            raise
+        self.startup_s = time.perf_counter() - start
+
+    def _connect(self, workers: int | None, address: str | None) -> int:
+        """Start or join Ray; the number of workers to start."""
+        ray = self._ray
         quiet: dict[str, Any] = {"logging_level": logging.ERROR, "log_to_driver": False}
         # Ray's core installs its own SIGTERM handler (it exits at once); the command's own
         # handlers stop a sweep cleanly, keeping what finished, so they are put back.
         handlers = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
-        self._owns_ray = address is None
-        if address is None:
-            workers = workers or default_workers()
-            ray.init(num_cpus=workers, include_dashboard=False, **quiet)
-        else:
-            ray.init(address=address, **quiet)
-            workers = workers or max(1, int(ray.cluster_resources().get("CPU", 1)))
-        for signum, handler in handlers.items():
-            signal.signal(signum, handler)
-        self.workers = workers
-        # No restarts or retries: a lost worker's episodes come back as failures, which the
-        # command reports and --resume runs again.
-        env = WORKER_ENV if env is None else env
-        actor = ray.remote(num_cpus=1, runtime_env={"env_vars": env})(_Worker)
-        self._actors = [actor.remote() for _ in range(workers)]
-        ray.get([a.ready.remote() for a in self._actors])
-        self.startup_s = time.perf_counter() - start
+        try:
+            if address is None:
+                # "local": a new instance even where a cluster started by `ray start` is
+                # running (which a bare ray.init() would join).
+                workers = workers or default_workers()
+                ray.init(address="local", num_cpus=workers, include_dashboard=False, **quiet)
+                return workers
+            try:
+                ray.init(address=address, **quiet)
+            except ConnectionError as exc:
+                raise EngineError(f"cannot join the Ray cluster at {address}: {exc}") from None
+            cpus = int(ray.cluster_resources().get("CPU", 0))
+            if workers and workers > cpus:
+                ray.shutdown()
+                raise EngineError(
+                    f"the Ray cluster at {address} has {cpus} CPUs: {workers} workers (one CPU "
+                    "each) would wait for more; ask for fewer with --workers"
+                )
+            return workers or max(1, cpus)
+        finally:
+            for signum, handler in handlers.items():
+                signal.signal(signum, handler)
 
     def run(self, tasks: Iterable[Task]) -> Iterator[Episode | Failure]:
         """Run ``tasks``, yielding each result as it comes (in the order episodes finish)."""
@@ -190,13 +224,50 @@ class RayEngine:
         """Stop the actors (on a cluster) and leave Ray (stopping it if this engine started it:
         that stops the actors too)."""
         if not self._owns_ray:
-            for a in self._actors:
+            for a in self._actors:  # on a cluster they would outlive this command
                 try:
                     self._ray.kill(a)
                 except Exception:  # already gone (a cluster shutting down): nothing to stop
                     logger.debug("could not kill a worker", exc_info=True)
         self._actors = []
         self._ray.shutdown()
+
+
+PROBE_TIMEOUT_S = 5.0
+
+
+def _resolve_auto() -> str:
+    """Where ``--address auto`` leads: ``RAY_ADDRESS``, else the cluster last started on this
+    machine by ``ray start`` (Ray's own lookup)."""
+    from ray._private.services import canonicalize_bootstrap_address
+
+    try:
+        found = canonicalize_bootstrap_address("auto")
+    except Exception:  # Ray's lookup raises ConnectionError and others where none is found
+        found = None
+    if not found:
+        raise EngineError(
+            "--address auto: no Ray cluster was started on this machine (`ray start --head`) "
+            "and RAY_ADDRESS is not set"
+        )
+    return found
+
+
+def _probe(address: str, given: str) -> None:
+    """Fail at once, in one line, where nothing answers at ``address`` (``host:port`` or
+    ``ray://host:port``; ``given`` is what the user wrote): Ray itself retries an unreachable
+    cluster for minutes."""
+    host_port = address.removeprefix("ray://")
+    host, sep, port = host_port.rpartition(":")
+    if not sep or not port.isdigit() or not host:
+        raise EngineError(f"--address must be auto, host:port or ray://host:port, got {given!r}")
+    try:
+        with socket.create_connection((host.strip("[]"), int(port)), timeout=PROBE_TIMEOUT_S):
+            pass
+    except OSError as exc:
+        reason = exc.strerror or type(exc).__name__
+        where = address if address == given else f"{address} ({given})"
+        raise EngineError(f"cannot reach the Ray cluster at {where}: {reason}") from None
 
 
 def _one_line(exc: BaseException) -> str:

@@ -71,28 +71,39 @@ class SweepStore:
         self.episodes: dict[tuple[int, int], Episode] = {}
         self._flushed_at = 0.0
         self._flush_cost_s = 0.0
+        self._new = True
 
     @classmethod
     def open(cls, out_dir: Path, plan: SweepPlan, resume: bool) -> SweepStore:
-        """The store of ``plan`` in ``out_dir``, with its journal read back.
+        """The store of ``plan`` in ``out_dir``, with its journal read back; nothing is
+        written until ``begin``.
 
         Raises
         ------
         SweepError
             ``out_dir`` holds a sweep and ``resume`` is off, or holds a different sweep.
-        OutputError
-            A file cannot be written.
         """
         store = cls(out_dir, plan)
         manifest = store.dir / MANIFEST
-        if manifest.exists():
+        store._new = not manifest.exists()
+        if not store._new:
             store._check_manifest(manifest, resume)
             store._read_journal()
-        else:
-            store._write_plan()
-        for name in DERIVED:
-            store._remove(store.dir / name)
         return store
+
+    def begin(self) -> None:
+        """Write the plan (a new sweep) and remove the files made from a previous journal.
+
+        Raises
+        ------
+        OutputError
+            A file cannot be written or removed.
+        """
+        if self._new:
+            self._write_plan()
+            self._new = False
+        for name in DERIVED:
+            self._remove(self.dir / name)
 
     # ------------------------------------------------------------------ plan and journal
     def _check_manifest(self, manifest: Path, resume: bool) -> None:
@@ -136,15 +147,14 @@ class SweepStore:
         _write_text(self.dir / MANIFEST, json.dumps(manifest, indent=1) + "\n")
 
     def _read_journal(self) -> None:
-        (self.dir / "episodes").mkdir(exist_ok=True)
         planned = set(self.plan.episodes)
         for path in sorted((self.dir / "episodes").glob("*.json")):
             try:
                 entry = json.loads(path.read_text(encoding="utf-8"))
                 episode = Episode(entry["point"], entry["seed"], entry["row"], entry["estimates"])
             except (OSError, ValueError, KeyError, TypeError):
-                # Journal files are written whole; one that does not read is not trusted.
-                path.unlink(missing_ok=True)
+                # Journal files are written whole: one that does not read was not written by
+                # a sweep; it is left alone and its episode runs again.
                 continue
             if (episode.point, episode.seed) in planned:
                 self.episodes[episode.point, episode.seed] = episode
