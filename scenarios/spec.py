@@ -392,6 +392,26 @@ def _camera(table: Any, where: str) -> CameraConfig:
         raise _err(where, "camera", str(exc)) from None
 
 
+def _at_most_physics_rate(
+    physics_hz: float, camera_rate_hz: float, timing: Timing, where: str
+) -> None:
+    """One image, and one pose, per physics step at most."""
+    if camera_rate_hz > physics_hz + 1e-9:
+        raise _err(
+            where,
+            "camera_rate_hz",
+            f"must be at most the physics rate, {physics_hz:g} Hz (one image per physics step), "
+            f"got {camera_rate_hz:g}",
+        )
+    if timing.pose_rate_hz > physics_hz + 1e-9:
+        raise _err(
+            where,
+            "timing.pose_rate_hz",
+            f"must be at most the physics rate, {physics_hz:g} Hz (one pose per physics step), "
+            f"got {timing.pose_rate_hz:g}",
+        )
+
+
 def from_dict(data: dict[str, Any], where: str = "<scenario>") -> ScenarioSpec:
     """Build a ``ScenarioSpec`` from parsed TOML (user units), as ``scenarios.schema`` declares.
 
@@ -429,22 +449,8 @@ def from_dict(data: dict[str, Any], where: str = "<scenario>") -> ScenarioSpec:
     except ValueError as exc:
         raise _err(where, "cones", str(exc)) from None
     noise = Noise(**_read(top["noise"] or {}, schema.NOISE, where, "noise"))
-    physics_hz = 1.0 / scene.timestep_s
-    if top["camera_rate_hz"] > physics_hz + 1e-9:
-        raise _err(
-            where,
-            "camera_rate_hz",
-            f"must be at most the physics rate, {physics_hz:g} Hz (one image per physics step), "
-            f"got {top['camera_rate_hz']:g}",
-        )
     timing = Timing(**_read(top["timing"] or {}, schema.TIMING, where, "timing"))
-    if timing.pose_rate_hz > physics_hz + 1e-9:
-        raise _err(
-            where,
-            "timing.pose_rate_hz",
-            f"must be at most the physics rate, {physics_hz:g} Hz (one pose per physics step), "
-            f"got {timing.pose_rate_hz:g}",
-        )
+    _at_most_physics_rate(1.0 / scene.timestep_s, top["camera_rate_hz"], timing, where)
     if not isinstance(top["lesson"], str):
         raise _err(where, "lesson", f"must be a string, got {type(top['lesson']).__name__}")
     return ScenarioSpec(

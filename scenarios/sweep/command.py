@@ -174,6 +174,7 @@ def _run_pending(store: SweepStore, pending: list, engine, args: argparse.Namesp
     tasks = [engines.Task(p, s, store.plan.points[p].scenario_toml) for p, s in pending]
     bar = _Progress(len(tasks), enabled=not args.quiet)
     start = time.perf_counter()
+    bar(0, 0.0)
     try:
         for result in engine.run(tasks):
             if isinstance(result, engines.Failure):
