@@ -146,9 +146,6 @@ class RayEngine:
     def __init__(
         self, workers: int | None, address: str | None = None, env: dict[str, str] | None = None
     ) -> None:
-        # Ray's C++ core logs each failed connection attempt as a warning, read when Ray is
-        # imported; the command says what failed in one line.
-        os.environ.setdefault("RAY_BACKEND_LOG_LEVEL", "error")
         if address is not None:
             _probe(_resolve_auto() if address == "auto" else address, address)
         import ray
