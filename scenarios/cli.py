@@ -239,7 +239,7 @@ def _add_sweep_parser(sub) -> None:
         "--address",
         default=None,
         metavar="ADDR",
-        help="join an existing Ray cluster (auto, or ray://host:port) instead of "
+        help="join an existing Ray cluster (auto, host:port or ray://host:port) instead of "
         "starting a local one; its nodes need vnav-sim installed",
     )
     p.add_argument(
