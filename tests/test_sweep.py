@@ -381,3 +381,32 @@ def test_without_ray_the_command_says_how_to_install_it(monkeypatch, tmp_path, c
     status = cli.main(["sweep", str(tmp_path / "s.toml"), "--out", str(tmp_path / "o")])
     assert status == 2
     assert "Ray is not installed" in capsys.readouterr().err
+
+
+def test_an_internal_error_costs_its_episode_only(monkeypatch, tmp_path, capsys):
+    """An episode that raises is not a row: the others are kept, the exit status is 3, and
+    --resume runs that one again."""
+    from scenarios import cli
+    from scenarios.sweep.episode import EpisodeRunner
+
+    (tmp_path / "s.toml").write_text(SWEEP)
+    real = EpisodeRunner.run
+
+    def broken(self, scenario_toml, point, seed):
+        if (point, seed) == (1, 2):
+            raise RuntimeError("a bug")
+        return real(self, scenario_toml, point, seed)
+
+    monkeypatch.setattr(EpisodeRunner, "run", broken)
+    out = tmp_path / "o"
+    args = ["sweep", str(tmp_path / "s.toml"), "--out", str(out), "--workers", "0", "--quiet"]
+    assert cli.main(args) == 3
+    err = capsys.readouterr().err
+    assert "1 episodes could not run (point 1 seed 2: RuntimeError: a bug)" in err
+    assert len(err.strip().splitlines()) == 1
+    assert len(rows(out)) == 5
+    monkeypatch.setattr(EpisodeRunner, "run", real)
+    assert cli.main([*args, "--resume"]) == 1
+    assert [(r["point"], r["seed"]) for r in rows(out)] == [
+        (p, s) for p in (0, 1) for s in (1, 2, 3)
+    ]

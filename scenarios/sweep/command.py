@@ -229,6 +229,8 @@ def _record_worst(store: SweepStore, out_dir: Path, args) -> dict[tuple[int, int
     worst_dir.mkdir(exist_ok=True)
     written = {}
     for e in summary.worst(store.sorted_episodes(), store.plan.rank_by, args.record_worst):
+        if e.row["status"] == "diverged":
+            continue  # its flight diverges again: a run that diverges writes no recording
         point = store.plan.points[e.point]
         spec = dataclasses.replace(point.spec, name=f"{point.spec.name}-s{e.seed}")
         outcome = pipeline.run(spec, seed=e.seed, out_dir=worst_dir)

@@ -101,7 +101,13 @@ class SerialEngine:
 
     def run(self, tasks: Iterable[Task]) -> Iterator[Episode | Failure]:
         for task in tasks:
-            yield self._runner.run(task.scenario_toml, task.point, task.seed)
+            try:
+                episode = self._runner.run(task.scenario_toml, task.point, task.seed)
+            except Exception as exc:  # an internal error: this episode, not the sweep
+                logger.debug("episode failed", exc_info=True)
+                yield Failure(task.point, task.seed, f"{type(exc).__name__}: {exc}")
+            else:
+                yield episode
 
     def close(self) -> None:
         self._runner.close()
