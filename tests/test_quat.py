@@ -381,3 +381,112 @@ def test_from_matrix_matches_its_lecture_form(rng):
         if abs(ref[3]) < 1e-12:  # at w = 0, q and -q are both canonical
             ref = ref if ref @ qi >= 0 else -ref
         np.testing.assert_allclose(qi, ref, atol=1e-15)
+
+
+def test_from_matrix_kernel_matches_its_lecture_form_across_chunks(rng):
+    """The chunked kernel over more than one chunk (the full chunks read through
+    cv2.transpose with ``assume_valid``, the tail through numpy): against Shepperd's form on
+    a sample of rows, the same numbers validated or not, and one matrix alone (plain floats)
+    bit for bit the same as in a stack."""
+    n = so3._CHUNK + 77
+    R = so3.exp(rotation_vectors(rng, n))
+    q = quat.from_matrix(R)
+    np.testing.assert_array_equal(quat.from_matrix(R, assume_valid=True), q)
+    for i in [*rng.integers(0, n, 300), n - 1]:
+        ref = quat._from_matrix_reference(R[i])
+        ref = ref if ref @ q[i] >= 0 else -ref  # at w = 0 both signs are canonical
+        np.testing.assert_allclose(q[i], ref, atol=1e-15)
+        np.testing.assert_array_equal(quat.from_matrix(R[i]), q[i])
+    # A stack of slices of 4x4 transforms (strided entries) reads the same numbers.
+    T = np.zeros((n, 4, 4))
+    T[:, :3, :3] = R
+    np.testing.assert_array_equal(quat.from_matrix(T[:, :3, :3], assume_valid=True), q)
+
+
+def test_from_matrix_checks_every_chunk(rng):
+    """The check fused into the kernel finds a bad matrix in any chunk, with check_rotation's
+    message; a float32 stack is allowed its widened tolerance."""
+    n = so3._CHUNK + 10
+    R = so3.exp(rotation_vectors(rng, n))
+    for i in (0, so3._CHUNK - 1, n - 1):
+        bad = R.copy()
+        bad[i] *= 1.001
+        with pytest.raises(ValueError, match=r"R is not a rotation matrix: max \|R\^T R - I\|"):
+            quat.from_matrix(bad)
+        bad[i] = R[i] * [1.0, 1.0, -1.0]
+        with pytest.raises(ValueError, match="reflection"):
+            quat.from_matrix(bad)
+        bad[i] = np.nan
+        with pytest.raises(ValueError, match="must be finite"):
+            quat.from_matrix(bad)
+    q32 = quat.from_matrix(R.astype(np.float32))
+    np.testing.assert_allclose(np.linalg.norm(q32, axis=1), 1.0, atol=1e-15)
+
+
+def test_multiply_kernel_is_its_lecture_form_bit_for_bit(rng):
+    """Above ``_SMALL_STACK`` products the chunked kernel runs: the same operations in the same
+    order as ``_multiply_reference``, so the same bits, for equal shapes, a single quaternion
+    against a stack, and stacks that broadcast."""
+    for n in (quat._SMALL_STACK + 1, quat._CHUNK + 3):
+        a = quat.normalize(rng.normal(size=(n, 4)))
+        b = quat.normalize(rng.normal(size=(n, 4)))
+        np.testing.assert_array_equal(quat.multiply(a, b), quat._multiply_reference(a, b))
+        np.testing.assert_array_equal(quat.multiply(a[0], b), quat._multiply_reference(a[0], b))
+    a = quat.normalize(rng.normal(size=(3, 1, 4)))
+    b = quat.normalize(rng.normal(size=(50, 4)))
+    np.testing.assert_array_equal(quat.multiply(a, b), quat._multiply_reference(a, b))
+    with pytest.raises(ValueError, match="must broadcast"):
+        quat.multiply(a[:, 0], b)
+
+
+def test_multiply_kernel_checks_both_factors(rng):
+    """The norm check fused into the kernel raises check_quaternion's messages, naming the
+    factor, wherever the bad quaternion sits; float32 factors keep their widened tolerance."""
+    n = quat._CHUNK + 5
+    a = quat.normalize(rng.normal(size=(n, 4)))
+    b = quat.normalize(rng.normal(size=(n, 4)))
+    for i in (0, n - 1):
+        off = b.copy()
+        off[i] *= 1.01
+        with pytest.raises(ValueError, match=r"^b must be a unit quaternion"):
+            quat.multiply(a, off)
+        off[i] = np.inf
+        with pytest.raises(ValueError, match=r"^b must be finite"):
+            quat.multiply(a, off)
+        with pytest.raises(ValueError, match=r"^a is the zero quaternion"):
+            quat.multiply(np.zeros((n, 4)), b)
+    # 1.5e-6 off unit length: beyond float64's tolerance (1e-6), within float32's (1.9e-6).
+    a[n - 1] *= 1.0 + 1.5e-6
+    with pytest.raises(ValueError, match=r"^a must be a unit quaternion"):
+        quat.multiply(a, b)
+    a32 = a.astype(np.float32)
+    np.testing.assert_allclose(quat.multiply(a32, b), quat._multiply_reference(a32, b), atol=1e-6)
+
+
+def test_to_matrix_kernel_matches_its_lecture_form(rng):
+    """``to_matrix``'s chunked kernel (``I + (2/|q|^2)(...)``, sharing its rows with
+    ``so3.exp``) against the lecture's ``R11 = q1^2 - q2^2 - q3^2 + q4^2``, ..., over more than
+    one chunk, both signs of q, and a stack of any leading shape."""
+    q = quaternions(rng, quat._CHUNK + 13)
+    q[::2] *= -1.0
+    np.testing.assert_allclose(quat.to_matrix(q), quat._to_matrix_reference(q), atol=2e-15)
+    q = quat.normalize(rng.normal(size=(2, 3, 4)))
+    np.testing.assert_allclose(quat.to_matrix(q), quat._to_matrix_reference(q), atol=2e-15)
+
+
+def test_chunked_kernels_keep_their_scratch_per_thread(rng):
+    """numpy releases the GIL inside the kernels' loops: threads running them at once (each
+    with its own scratch arrays) get the answers they get alone."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    stacks = [so3.exp(rotation_vectors(rng, quat._CHUNK + 9)) for _ in range(4)]
+    alone = [(quat.from_matrix(R), so3.log(R), quat.to_matrix(quat.from_matrix(R))) for R in stacks]
+
+    def work(R):
+        return quat.from_matrix(R), so3.log(R), quat.to_matrix(quat.from_matrix(R))
+
+    with ThreadPoolExecutor(max_workers=4) as pool:
+        together = list(pool.map(work, stacks * 3))
+    for got, want in zip(together, alone * 3, strict=True):
+        for a, b in zip(got, want, strict=True):
+            np.testing.assert_array_equal(a, b)

@@ -176,3 +176,27 @@ def test_apply_into_a_buffer_is_apply() -> None:
     for bad in (np.empty((4, 3), np.float32), np.empty((3, 4)).T, np.empty((5, 3)), p):
         with pytest.raises(ValueError, match="out must"):
             se3.apply(T, p, out=bad)
+
+
+def test_apply_kernel_matches_its_lecture_form() -> None:
+    """cv2.transform (point sets) and the BLAS path (rotations OpenCV would treat as diagonal)
+    against ``_apply_reference``, ``p R^T + t``: every shape, strided input, ``out=``, and a
+    NaN or inf coordinate spreading to its whole row exactly as in the reference."""
+    rng = np.random.default_rng(8)
+    general = se3.make(so3.exp(rng.normal(size=3)), rng.normal(size=3))
+    half_turn = se3.make(np.diag([1.0, -1.0, -1.0]), [1.0, 2.0, 3.0])
+    for T in (general, half_turn, np.eye(4)):
+        for shape in ((1, 3), (2, 3), (1000, 3), (4, 5, 3), (0, 3)):
+            p = rng.uniform(-10.0, 10.0, shape)
+            np.testing.assert_allclose(se3.apply(T, p), se3._apply_reference(T, p), atol=1e-13)
+        p = rng.uniform(-10.0, 10.0, (20, 6))[:, ::2]  # not contiguous
+        np.testing.assert_allclose(se3.apply(T, p), se3._apply_reference(T, p), atol=1e-13)
+        p = rng.uniform(-10.0, 10.0, (10, 3))
+        p[2, 1], p[3, 2], p[4] = np.nan, np.inf, np.nan
+        with np.errstate(invalid="ignore"):
+            ref = se3._apply_reference(T, p)
+        got = se3.apply(T, p, out=np.empty_like(p))
+        np.testing.assert_array_equal(np.isnan(got), np.isnan(ref))
+        np.testing.assert_allclose(got, ref, atol=1e-13)
+    assert not se3._opencv_treats_as_diagonal(general[:3, :3])
+    assert se3._opencv_treats_as_diagonal(half_turn[:3, :3])

@@ -384,3 +384,53 @@ def test_fused_rotation_errors_match_the_lecture_form() -> None:
         assert err.shape == det.shape == M.shape[:-2]
         np.testing.assert_allclose(err, _orthogonality_error(M), rtol=0, atol=1e-14)
         np.testing.assert_allclose(det, np.linalg.det(M), rtol=1e-12, atol=1e-14)
+
+
+def test_log_kernel_matches_its_lecture_form(rng) -> None:
+    """``log``'s chunked kernel (through Markley's column of 4 q q^T) against the lecture's
+    two-branch form ``_log_reference``, over more than one chunk, on uniform, tiny, near-pi
+    and exactly-pi rotations; one matrix alone (plain floats) agrees with it in a stack."""
+    n = so3._CHUNK + 33
+    v = rotation_vectors(rng, n)
+    R = so3.exp(v)
+    w = so3.log(R)
+    ref = so3._log_reference(R)
+    at_pi = np.linalg.norm(ref, axis=1) > np.pi - 1e-9
+    ref[at_pi] *= np.where(np.sum(w[at_pi] * ref[at_pi], axis=1) < 0.0, -1.0, 1.0)[:, None]
+    np.testing.assert_allclose(w, ref, rtol=0, atol=2e-15)
+    tiny = np.linalg.norm(v, axis=1) < 1e-3
+    np.testing.assert_allclose(w[tiny], v[tiny], rtol=1e-12, atol=1e-300)
+    for i in rng.integers(0, n, 200):
+        np.testing.assert_allclose(so3.log(R[i]), w[i], rtol=0, atol=1e-15)
+
+
+def test_stack_check_has_the_verdict_of_the_matrix_by_matrix_errors(rng) -> None:
+    """The chunked check (``_stack_valid``) against ``_rotation_errors``: matrices whose error
+    sits just below or just above the tolerance, in any chunk, get the same verdict."""
+    n = so3._CHUNK + 5
+    R = so3.exp(rotation_vectors(rng, n))
+    for i in (3, so3._CHUNK + 2):
+        for scale in (1.0 + 0.4e-9, 1.0 + 0.6e-9, 1.0 - 0.6e-9):
+            M = R.copy()
+            M[i] *= scale  # max |R^T R - I| ~ 2 |scale - 1|
+            err, det = so3._rotation_errors(M)
+            expected = bool(np.all(err <= 1e-9) and np.all(det > 0))
+            assert so3._stack_valid(M, 1e-9) == expected
+            assert so3.is_rotation(M) == expected
+    bad = R.copy()
+    bad[-1] = np.diag([1.0, 1.0, -1.0])
+    with pytest.raises(ValueError, match=r"reflection.*worst matrix of the stack"):
+        so3.check_rotation(bad)
+    with pytest.raises(ValueError, match="reflection"):
+        so3.log(bad)
+
+
+def test_exp_kernel_matches_its_lecture_form(rng) -> None:
+    """``exp``'s chunked kernel (Rodrigues' formula in half-angle form, with Taylor series near
+    0) against the lecture's ``cos(t) I + sin(t) [u]x + (1 - cos(t)) u u^T``, over more than
+    one chunk and for a stack of any leading shape."""
+    v = rotation_vectors(rng, so3._CHUNK + 21)
+    R = so3.exp(v)
+    np.testing.assert_allclose(R, so3._exp_reference(v), rtol=0, atol=2e-15)
+    v = rng.normal(size=(3, 4, 3))
+    np.testing.assert_allclose(so3.exp(v), so3._exp_reference(v), rtol=0, atol=2e-15)

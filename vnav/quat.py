@@ -14,11 +14,13 @@ batched over leading axes: a (..., 4) stack of quaternions. Conventions: docs/CO
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from vnav import _validate as _v
+from vnav import so3
 from vnav._validate import FloatArray
 
 __all__ = [
@@ -38,8 +40,11 @@ __all__ = [
 ]
 
 _SMALL_ANGLE = 1e-4  # below it, sin(t/2)/t comes from its Taylor series
-_CHUNK = 8192  # rows per block in `to_matrix`: keeps the temporaries in cache
+_CHUNK = 8192  # rows per block in `to_matrix` and `multiply`: keeps the temporaries in cache
 _NORM_ATOL = 1e-6  # default tolerance on | |q| - 1 |
+# Up to this many products, `multiply` runs its lecture form directly (the chunked kernel's
+# fixed cost, tens of microseconds, only pays off on longer stacks).
+_SMALL_STACK = 64
 
 
 def _squared_norm(q: FloatArray) -> FloatArray:
@@ -339,37 +344,38 @@ def to_rotvec(q: ArrayLike, *, normalize: bool = False) -> FloatArray:
     return k[..., None] * v
 
 
-def _to_matrix_block(q: FloatArray, out: FloatArray) -> tuple[float, float]:
-    """Fill ``out`` (M, 3, 3) with the rotations of ``q`` (M, 4), dividing by |q|^2.
+def _to_matrix_block(
+    q: FloatArray, out: FloatArray, b: so3._MatrixRows, transpose: Callable | None
+) -> tuple[float, float]:
+    """Fill ``out`` (m, 3, 3) with the rotations of ``q`` (m, 4), dividing by |q|^2.
 
-    Works on a contiguous transposed copy of the block, so every ufunc runs on contiguous
-    cache-resident rows, and writes the nine entries back with one transposing copy.
-    Returns the smallest and largest |q|^2 of the block (NaN if any entry is NaN).
+    ``R = I + (2/|q|^2) (w [v]x + v v^T - |v|^2 I)``, the lecture's ``R(q)`` rewritten so that
+    it shares ``vnav.so3._fill_rotation_rows`` with Rodrigues' formula. Returns the smallest
+    and largest |q|^2 of the block (NaN if any entry is NaN).
     """
-    x, y, z, w = q.T.copy()
-    res = np.empty((9, q.shape[0]))
-    xx, yy, zz = x * x, y * y, z * z
-    s = w * w
-    s += xx
-    s += yy
-    s += zz
+    b.load(q)
+    w, s, ww = b.v[5], b.A, b.B
+    np.add.reduce(b.sq[:3], axis=0, out=s)
+    np.add(s, np.multiply(w, w, out=ww), out=s)  # |q|^2 = ((xx + yy) + zz) + ww
     n2_range = (float(s.min()), float(s.max()))
-    np.divide(2.0, s, out=s)  # 2 / |q|^2
-    xy, xz, yz = x * y, x * z, y * z
-    w *= s  # from here w holds 2 w / |q|^2 (and the products below carry the factor)
-    wx, wy, wz = np.multiply(w, x, out=x), np.multiply(w, y, out=y), np.multiply(w, z, out=z)
-    for a, b, i, j in ((yy, zz, 0, 0), (xx, zz, 1, 1), (xx, yy, 2, 2)):
-        # Diagonal: 1 - 2 (b^2 + c^2) / |q|^2.
-        r = np.add(a, b, out=res[3 * i + j])
-        r *= s
-        np.subtract(1.0, r, out=r)
-    for a, b, i, j in ((xy, wz, 0, 1), (xz, wy, 2, 0), (yz, wx, 1, 2)):
-        # R_ij = 2 (a - w c) / |q|^2, R_ji = 2 (a + w c) / |q|^2.
-        a *= s
-        np.subtract(a, b, out=res[3 * i + j])
-        np.add(a, b, out=res[3 * j + i])
-    out.reshape(-1, 9)[...] = res.T
+    np.divide(2.0, s, out=s)  # B = 2 / |q|^2
+    np.multiply(w, s, out=ww)  # C = 2 w / |q|^2
+    so3._fill_rotation_rows(b, s, ww)
+    b.store(out, transpose)
     return n2_range
+
+
+def _to_matrix_reference(q: FloatArray) -> FloatArray:
+    """Lecture form of ``to_matrix`` (chapter 6) for unit quaternions (..., 4), q = [q1, q2,
+    q3, q4] with scalar q4: ``R11 = q1^2 - q2^2 - q3^2 + q4^2``, ``R12 = 2 (q1 q2 - q3 q4)``,
+    ..."""
+    q1, q2, q3, q4 = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    rows = [
+        [q1 * q1 - q2 * q2 - q3 * q3 + q4 * q4, 2 * (q1 * q2 - q3 * q4), 2 * (q1 * q3 + q2 * q4)],
+        [2 * (q1 * q2 + q3 * q4), -q1 * q1 + q2 * q2 - q3 * q3 + q4 * q4, 2 * (q2 * q3 - q1 * q4)],
+        [2 * (q1 * q3 - q2 * q4), 2 * (q2 * q3 + q1 * q4), -q1 * q1 - q2 * q2 + q3 * q3 + q4 * q4],
+    ]
+    return np.stack([np.stack(row, axis=-1) for row in rows], axis=-2)
 
 
 def to_matrix(q: ArrayLike, *, normalize: bool = False) -> FloatArray:
@@ -408,11 +414,13 @@ def to_matrix(q: ArrayLike, *, normalize: bool = False) -> FloatArray:
     lo_ok, hi_ok = ((1.0 - _NORM_ATOL) ** 2, (1.0 + _NORM_ATOL) ** 2)
     if normalize:
         lo_ok, hi_ok = np.finfo(np.float64).tiny, np.finfo(np.float64).max
+    transpose = so3._cv2_transpose() if flat.shape[0] >= _CHUNK else None
     valid = True
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         for start in range(0, flat.shape[0], _CHUNK):
-            stop = start + _CHUNK
-            lo, hi = _to_matrix_block(flat[start:stop], out[start:stop])
+            chunk = flat[start : start + _CHUNK]
+            b = so3._scratch(so3._MatrixRows, chunk.shape[0])
+            lo, hi = _to_matrix_block(chunk, out[start : start + _CHUNK], b, transpose)
             valid = valid and lo >= lo_ok and hi <= hi_ok
     if not valid:
         _v.check_finite(q, "q")
@@ -430,7 +438,9 @@ def from_matrix(R: ArrayLike, *, assume_valid: bool = False) -> FloatArray:
     ``4x^2 = 1 + 2 R00 - tr R``, ... the largest is used (Shepperd 1978), in Markley's form
     (Markley 2008, "Unit Quaternion from Rotation Matrix", J. Guid. Control Dyn. 31(2)): the
     corresponding column of the symmetric 4x4 matrix whose dominant eigenvector is q,
-    normalised. No division by a small w.
+    normalised. No division by a small w. Stacks run through a chunked kernel
+    (``vnav.so3._quaternion_block``) that also checks R in the same pass over the data;
+    ``_from_matrix_reference`` is the lecture's form, kept to test it against.
 
     Parameters
     ----------
@@ -452,35 +462,28 @@ def from_matrix(R: ArrayLike, *, assume_valid: bool = False) -> FloatArray:
         If ``R`` is not a rotation (see ``vnav.so3.check_rotation``), or with
         ``assume_valid``, if its shape is not (..., 3, 3).
     """
-    from vnav.so3 import check_rotation
-
+    if (
+        so3._clearly_rotation(R, so3._ATOL)
+        if not assume_valid
+        else type(R) is np.ndarray and R.dtype == np.float64 and R.shape == (3, 3)
+    ):  # one float64 rotation: plain floats, the same formulas as the kernel
+        q = so3._markley_column_of(R)
+        scale = math.copysign(1.0 / math.sqrt(sum(c * c for c in q)), q[3])
+        return np.array([c * scale for c in q])
+    source_dtype = getattr(R, "dtype", None)
     if assume_valid:
         R = np.asarray(R, dtype=np.float64)
         if R.ndim < 2 or R.shape[-2:] != (3, 3):
             raise ValueError(f"R must have shape (..., 3, 3); got {R.shape}")
+        tol = None
     else:
-        R = check_rotation(R)
-    shape = R.shape[:-2]
-    # The nine entries as contiguous rows: every step below is an elementwise pass over N
-    # numbers (strided views of (N, 3, 3) cost twice as much).
-    R00, R01, R02, R10, R11, R12, R20, R21, R22 = np.ascontiguousarray(R.reshape(-1, 9).T)
-    tr = R00 + R11 + R22
-    k = np.argmax(np.stack([R00, R11, R22, tr]), axis=0)
-    s01, s02, s12 = R01 + R10, R02 + R20, R12 + R21
-    d0, d1, d2 = R21 - R12, R02 - R20, R10 - R01
-    # Column k of Markley's symmetric matrix (4 q_k q), k the dominant component x, y, z, w.
-    q = np.stack(
-        [
-            np.choose(k, [1.0 + 2.0 * R00 - tr, s01, s02, d0]),
-            np.choose(k, [s01, 1.0 + 2.0 * R11 - tr, s12, d1]),
-            np.choose(k, [s02, s12, 1.0 + 2.0 * R22 - tr, d2]),
-            np.choose(k, [d0, d1, d2, 1.0 + tr]),
-        ],
-        axis=-1,
-    )
-    q /= np.sqrt(np.einsum("ni,ni->n", q, q))[:, None]
-    q *= np.where(q[:, 3] < 0.0, -1.0, 1.0)[:, None]
-    return q.reshape(*shape, 4)
+        R = _v.matrix(R, "R", finite=False)
+        tol = _v.widened_for(so3._ATOL, source_dtype)
+    q, valid = so3._map_rotations(R, so3._quaternion_block, 4, tol)
+    if not valid:
+        so3._check_rotation(R, "R", so3._ATOL, source_dtype)  # raises, saying what is wrong
+        q, _ = so3._map_rotations(R, so3._quaternion_block, 4, None)  # never expected
+    return q.reshape(*R.shape[:-2], 4)
 
 
 def _from_matrix_reference(R: np.ndarray) -> np.ndarray:
@@ -511,7 +514,10 @@ def multiply(a: ArrayLike, b: ArrayLike) -> FloatArray:
     """Hamilton product ``a (x) b``: the rotation b first, then a (lecture chapter 6).
 
     With ``a = [u; s]``, ``b = [v; t]``: ``a (x) b = [s v + t u + u x v; s t - u . v]``, so
-    ``to_matrix(multiply(a, b)) == to_matrix(a) @ to_matrix(b)``.
+    ``to_matrix(multiply(a, b)) == to_matrix(a) @ to_matrix(b)``. Stacks of more than
+    ``_SMALL_STACK`` products run through a chunked kernel that checks both norms in the same
+    pass; ``_multiply_reference`` is the lecture's form, with the same operations in the same
+    order.
 
     Parameters
     ----------
@@ -527,10 +533,100 @@ def multiply(a: ArrayLike, b: ArrayLike) -> FloatArray:
     Raises
     ------
     ValueError
-        See ``check_quaternion`` (for ``a`` and ``b``).
+        See ``check_quaternion`` (for ``a`` and ``b``); also if their shapes do not broadcast.
     """
-    a = check_quaternion(a, "a")
-    b = check_quaternion(b, "b")
+    a_in, b_in = a, b
+    a = _v.vector(a, "a", 4, finite=False)
+    b = _v.vector(b, "b", 4, finite=False)
+    try:
+        shape = np.broadcast_shapes(a.shape, b.shape)
+    except ValueError as exc:
+        raise ValueError(
+            f"a and b must broadcast against each other; got shapes {a.shape} and {b.shape}"
+        ) from exc
+    n = math.prod(shape[:-1])
+    if n <= _SMALL_STACK:
+        return _multiply_reference(check_quaternion(a_in, "a"), check_quaternion(b_in, "b"))
+    flat_a = np.broadcast_to(a, shape).reshape(-1, 4)
+    flat_b = np.broadcast_to(b, shape).reshape(-1, 4)
+    dtypes = [getattr(a_in, "dtype", None), getattr(b_in, "dtype", None)]
+    limits = [_norm_limit(_v.widened_for(_NORM_ATOL, dtype)) for dtype in dtypes]
+    out = np.empty((n, 4))
+    blocks = so3._scratch(_ProductBlocks, _CHUNK)
+    valid = True
+    with np.errstate(invalid="ignore", over="ignore"):
+        for start in range(0, n, _CHUNK):
+            stop = start + _CHUNK
+            valid = blocks.product(flat_a[start:stop], flat_b[start:stop], out[start:stop], limits)
+            if not valid:
+                break
+    if not valid:  # raises, naming the argument and what is wrong with it
+        for q, name, dtype in ((a, "a", dtypes[0]), (b, "b", dtypes[1])):
+            _check_norm(
+                _squared_norm(_v.check_finite(q, name)), name, _NORM_ATOL, source_dtype=dtype
+            )
+        return _multiply_reference(a, b)  # never expected: the two checks have one verdict
+    return out.reshape(shape)
+
+
+def _norm_limit(tol: float) -> float:
+    """The largest ``| |q|^2 - 1 |`` that ``_check_norm`` accepts at ``tol``: tol (2 + tol)."""
+    return tol * (2.0 + tol)
+
+
+class _ProductBlocks:
+    """Scratch rows of ``multiply``'s chunked kernel (one set per thread, ``so3._scratch``).
+
+    Each factor's chunk is copied once, transposed, into (6, M) rows ``[x, y, z, x, y, w]``:
+    the cyclic repeat makes ``u x v`` two (3, M) products, ``u[1:4] v[2:5] - u[2:5] v[1:4]``.
+    """
+
+    def __init__(self, m: int) -> None:
+        self.a = np.empty((6, m))
+        self.b = np.empty((6, m))
+        self.q = np.empty((4, m))
+        self.t = np.empty((4, m))
+        self.n2 = np.empty(m)
+
+    def _load(self, rows: FloatArray, q: FloatArray, limit: float) -> bool:
+        """Copy ``q`` (M, 4) into ``rows``; whether every ``| |q|^2 - 1 | <= limit``, as
+        ``_check_norm`` tests it (its largest value is at the smallest or largest |q|^2)."""
+        m = q.shape[0]
+        np.copyto(rows[:3, :m], q[:, :3].T)
+        np.copyto(rows[5, :m], q[:, 3])
+        np.copyto(rows[3:5, :m], rows[:2, :m])
+        sq = np.multiply(rows[:3, :m], rows[:3, :m], out=self.t[:3, :m])
+        n2 = np.add.reduce(sq, axis=0, out=self.n2[:m])  # ((x x + y y) + z z) + w w
+        n2 += np.multiply(rows[5, :m], rows[5, :m], out=self.t[3, :m])
+        return bool(max(abs(float(n2.min()) - 1.0), abs(float(n2.max()) - 1.0)) <= limit)
+
+    def product(self, qa: FloatArray, qb: FloatArray, out: FloatArray, limits: list[float]) -> bool:
+        """``out`` (M, 4) = qa (x) qb, normalised; False (and ``out`` unfinished) if a factor's
+        norm is out of ``limits``."""
+        m = qa.shape[0]
+        if not (self._load(self.a, qa, limits[0]) and self._load(self.b, qb, limits[1])):
+            return False
+        a, b, T = self.a[:, :m], self.b[:, :m], self.t[:3, :m]
+        v, w = self.q[:3, :m], self.q[3, :m]
+        # [s v + t u + u x v; s t - u . v] for a = [u; s], b = [v; t], in the reference's order.
+        np.multiply(a[5], b[:3], out=v)
+        v += np.multiply(b[5], a[:3], out=T)
+        v += np.multiply(a[1:4], b[2:5], out=T)
+        v -= np.multiply(a[2:5], b[1:4], out=T)
+        np.multiply(a[5], b[5], out=w)
+        np.multiply(a[:3], b[:3], out=T)
+        for i in range(3):
+            w -= T[i]
+        q = self.q[:, :m]
+        n = np.add.reduce(np.multiply(q, q, out=self.t[:, :m]), axis=0, out=self.n2[:m])
+        np.sqrt(n, out=n)
+        for j in range(4):
+            np.divide(q[j], n, out=out[:, j])
+        return True
+
+
+def _multiply_reference(a: FloatArray, b: FloatArray) -> FloatArray:
+    """Lecture form of ``multiply`` for checked unit quaternions (..., 4), broadcast."""
     ax, ay, az, aw = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
     bx, by, bz, bw = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
     q = np.stack(

@@ -21,11 +21,16 @@ from vnav._validate import FloatArray
 __all__ = ["apply", "check_pose", "check_transform", "invert", "make"]
 
 _BOTTOM = np.array([0.0, 0.0, 0.0, 1.0])
-# `apply` adds the translation to blocks of this many points at once: broadcasting a (3,)
-# vector over (N, 3) rows runs an inner loop of length 3, ~4x slower than long rows.
+# `_apply_blas` adds the translation to blocks of this many points at once: broadcasting a
+# (3,) vector over (N, 3) rows runs an inner loop of length 3, ~4x slower than long rows.
 _T_BLOCK = 512
-# Rows per chunk in `apply` (3 MB of output): the sum with t reads it back from cache.
-_CHUNK = 131072
+# Rows per chunk in `_apply_blas`. OpenBLAS runs a product on one thread when
+# M N K <= 4 * 65536 (its GEMM_MULTITHREAD_THRESHOLD): 16384 rows x 3 x 3 stays below, so no
+# worker thread is woken, and none can stall when another process holds the other core.
+_CHUNK = 16384
+# Rows per call of cv2.transform (its row count is a C int).
+_CV2_ROWS = 1 << 24
+_DBL_EPSILON = float(np.finfo(np.float64).eps)
 
 
 def make(R: ArrayLike, t: ArrayLike) -> FloatArray:
@@ -172,27 +177,20 @@ def apply(T: ArrayLike, p: ArrayLike, *, out: np.ndarray | None = None) -> Float
     ValueError
         If ``T`` is not a rigid transform, ``p`` does not end with a dimension of 3, or ``out``
         is not a C-contiguous float64 array of ``p``'s shape apart from ``p``.
+
+    Notes
+    -----
+    Point sets go through ``cv2.transform`` with the 3x4 ``T[:3]``: one single-threaded pass
+    at about the speed of a copy, steady whatever else the machine runs (docs/CONVENTIONS.md,
+    "Performance and threads"). ``_apply_reference`` is the lecture's form, kept to test it.
     """
     T = check_transform(T)
     if T.ndim != 2:
         raise ValueError(f"T must have shape (4, 4); got shape {T.shape}")
     p = _v.vector(p, "p", finite=False)
-    R = T[:3, :3]
-    t = T[:3, 3]
     if out is not None:
-        if (
-            not isinstance(out, np.ndarray)
-            or out.dtype != np.float64
-            or out.shape != p.shape
-            or not out.flags.c_contiguous
-            or not out.flags.writeable
-        ):
-            raise ValueError(
-                f"out must be a writeable C-contiguous float64 array of shape {p.shape}; got "
-                f"{getattr(out, 'dtype', type(out).__name__)} {getattr(out, 'shape', '')}"
-            )
-        if np.shares_memory(out, p):
-            raise ValueError("out must not overlap p (the chunks read p after writing out)")
+        _check_out(out, p)
+    R, t = T[:3, :3], T[:3, 3]
     if p.ndim == 1:
         if out is None:
             return R @ p + t
@@ -200,19 +198,81 @@ def apply(T: ArrayLike, p: ArrayLike, *, out: np.ndarray | None = None) -> Float
         out += t
         return out
     flat = p.reshape(-1, 3)
-    result = out
-    out = np.empty(flat.shape) if result is None else result.reshape(-1, 3)
+    result = np.empty(flat.shape) if out is None else out.reshape(-1, 3)
+    if flat.shape[0] > 0:
+        if _opencv_treats_as_diagonal(R):
+            _apply_blas(R, t, flat, result)
+        else:
+            _apply_cv2(T, flat, result)
+    return result.reshape(p.shape) if out is None else out
+
+
+def _check_out(out: object, p: FloatArray) -> None:
+    """Raise unless ``out`` is a writeable C-contiguous float64 array of ``p``'s shape, apart
+    from ``p``."""
+    if (
+        not isinstance(out, np.ndarray)
+        or out.dtype != np.float64
+        or out.shape != p.shape
+        or not out.flags.c_contiguous
+        or not out.flags.writeable
+    ):
+        raise ValueError(
+            f"out must be a writeable C-contiguous float64 array of shape {p.shape}; got "
+            f"{getattr(out, 'dtype', type(out).__name__)} {getattr(out, 'shape', '')}"
+        )
+    if np.shares_memory(out, p):
+        raise ValueError("out must not overlap p (the chunks read p after writing out)")
+
+
+def _opencv_treats_as_diagonal(R: FloatArray) -> bool:
+    """Whether cv2.transform would take ``R`` for a diagonal matrix (every off-diagonal entry
+    within DBL_EPSILON of 0) and scale each coordinate alone, skipping ``0 * nan = nan``.
+
+    Those few rotations (the identity, the half turns about the axes) go through
+    ``_apply_blas``, so that a NaN or inf coordinate spreads to its whole row whatever R is.
+    """
+    (_, b, c), (d, _, f), (g, h, _) = R.tolist()
+    return max(abs(b), abs(c), abs(d), abs(f), abs(g), abs(h)) <= _DBL_EPSILON
+
+
+def _apply_cv2(T: FloatArray, p: FloatArray, out: FloatArray) -> None:
+    """``out = p R^T + t`` for (N, 3) rows, by cv2.transform with the 3x4 matrix ``T[:3]``.
+
+    One pass over the points with the products and the translation fused, single-threaded,
+    at about the speed of a copy: never threaded BLAS (whose worker threads stall when
+    another process is busy), and none of the (N, 3) temporaries of the numpy form.
+    """
+    import cv2  # imported here: modules that never transform point sets do not load OpenCV
+
+    M = np.ascontiguousarray(T[:3])
+    src = np.ascontiguousarray(p).reshape(-1, 1, 3)  # N points as one 3-channel column
+    dst = out.reshape(-1, 1, 3)
+    for start in range(0, src.shape[0], _CV2_ROWS):
+        chunk = dst[start : start + _CV2_ROWS]
+        written = cv2.transform(src[start : start + _CV2_ROWS], M, dst=chunk)
+        if written is not chunk:  # never expected: OpenCV reallocated instead of filling dst
+            chunk[...] = written
+
+
+def _apply_blas(R: FloatArray, t: FloatArray, p: FloatArray, out: FloatArray) -> None:
+    """``out = p R^T + t`` for (N, 3) rows with numpy: per chunk (in cache for the second
+    step), one single-threaded BLAS product, then ``+ t`` on long rows of interleaved
+    ``[x0 y0 z0 x1 y1 z1 ...]``."""
     t_rows = np.tile(t, _T_BLOCK)
-    # Per chunk (a few MB, still in cache for the second step): out = p R^T in one BLAS call,
-    # then + t on long rows of interleaved [x0 y0 z0 x1 y1 z1 ...].
-    for start in range(0, flat.shape[0], _CHUNK):
-        chunk = out[start : start + _CHUNK]
-        np.matmul(flat[start : start + _CHUNK], R.T, out=chunk)
-        n_block = chunk.shape[0] // _T_BLOCK * _T_BLOCK
-        rows = chunk[:n_block].reshape(-1, 3 * _T_BLOCK)  # a view
-        np.add(rows, t_rows, out=rows)
-        chunk[n_block:] += t
-    return out.reshape(p.shape) if result is None else result
+    with np.errstate(invalid="ignore"):  # inf * 0 = nan, as cv2.transform gives it, silently
+        for start in range(0, p.shape[0], _CHUNK):
+            chunk = out[start : start + _CHUNK]
+            np.matmul(p[start : start + _CHUNK], R.T, out=chunk)
+            n_block = chunk.shape[0] // _T_BLOCK * _T_BLOCK
+            rows = chunk[:n_block].reshape(-1, 3 * _T_BLOCK)  # a view
+            np.add(rows, t_rows, out=rows)
+            chunk[n_block:] += t
+
+
+def _apply_reference(T: FloatArray, p: FloatArray) -> FloatArray:
+    """Lecture form of ``apply`` for (..., 3) points: ``p_a = p_b R^T + t`` (chapter 7)."""
+    return p @ T[:3, :3].T + T[:3, 3]
 
 
 def check_pose(T: ArrayLike, name: str = "T") -> FloatArray:
