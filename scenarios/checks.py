@@ -35,6 +35,7 @@ from vnav.uncertainty import nees_band, nees_p_value
 
 __all__ = [
     "KINDS",
+    "MOTION_FLOOR_M",
     "Check",
     "CheckKind",
     "CheckResult",
@@ -46,6 +47,10 @@ __all__ = [
     "detection_counts",
     "judge",
 ]
+
+# Below this predicted error (metres) the body held still between an image's exposure and its
+# newest pose: the prediction is rounding noise, and a ratio over it means nothing.
+MOTION_FLOOR_M = 1e-6
 
 
 class Outcome(enum.Enum):
@@ -601,9 +606,11 @@ def _latency_prediction(run: RunResult, check: Check) -> float | NoData:
     The ``depth_image`` estimate made with the newest pose received when the image arrived,
     against the first-order prediction of its error from the body's true motion between the
     exposure and that pose's stamp, ``|dp| + range |dtheta|`` (``scenarios.evaluate``); over
-    the matched detections whose newest pose was not the exposure pose."""
+    the matched detections whose newest pose was not the exposure pose and whose predicted
+    error exceeds ``MOTION_FLOOR_M`` (a body holding still predicts rounding noise, ~1e-15 m,
+    and any error over it is an absurd ratio)."""
     latest, predicted = run.latest_pose_errors()
-    moved = predicted > 0.0
+    moved = predicted > MOTION_FLOOR_M
     if np.any(moved):
         return _median(np.abs(latest[moved] / predicted[moved] - 1.0))
     missing = _no_detection(run)

@@ -131,7 +131,9 @@ def evaluate_tick(
         localize(d, camera, T_w_b_est, T_b_c_est, depth_m, far_m=far_m, **told) for d in detections
     ]
     if tracker is not None:
-        estimates = _triangulated(tracker, truth.t_s, estimates, T_w_b_est, T_b_c_est, **told)
+        # The tracker stamps each ray with the estimator's exposure time, not the simulator's.
+        t_s = truth.t_s if timing is None else timing.exposure_pose_s
+        estimates = _triangulated(tracker, t_s, estimates, T_w_b_est, T_b_c_est, **told)
     cone_of = _match(estimates, truth.cones_w)
     T_c_w = se3.invert(T_w_c)
     records = [
