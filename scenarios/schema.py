@@ -65,8 +65,9 @@ class Key:
     Attributes
     ----------
     name : str
-    kind : {"number", "vector3", "string", "choice", "any"}
-        ``any`` keys are validated by whoever consumes them (camera, checks' limits).
+    kind : {"number", "integer", "vector3", "string", "choice", "any"}
+        ``any`` keys are validated by whoever consumes them (``[camera.mount_error]``, checks'
+        limits).
     doc : str
         Meaning and unit, one line (shown by ``vnav-demo show`` and in the README).
     default : object
@@ -90,6 +91,11 @@ class Key:
         """``value`` validated (numbers as float, vectors as tuples); SchemaError otherwise."""
         if self.kind == "number":
             return number(value, path, self.lo, self.hi, self.lo_open)
+        if self.kind == "integer":
+            if isinstance(value, bool) or not isinstance(value, int):
+                raise SchemaError(f"{path}: must be an integer, got {_short(value)}")
+            number(value, path, self.lo, self.hi, self.lo_open)  # bounds and size
+            return value
         if self.kind == "vector3":
             if not isinstance(value, list) or len(value) != 3:
                 raise SchemaError(f"{path}: must be a list of 3 numbers, got {_short(value)}")
@@ -200,14 +206,20 @@ _MOUNT_ERROR_KEY = Key(
     "table: the true mount = the declared one above, then this error (camera frame)",
     None,
 )
+
+
+def _camera_key(name: str) -> Key:
+    """A ``[camera]`` key typed by its ``CameraConfig`` default (a string or a boolean where a
+    number belongs is refused here, not coerced); the ranges are ``CameraConfig``'s."""
+    default = getattr(CameraConfig(), name)
+    if name == "position_b":
+        return Key(name, "vector3", _CAMERA_DOCS[name], default, -10.0, 10.0)
+    kind = "integer" if isinstance(default, int) else "number"
+    return Key(name, kind, _CAMERA_DOCS[name], default)
+
+
 CAMERA: tuple[Key, ...] = (
-    *(
-        Key(f.name, "any", _CAMERA_DOCS[f.name], getattr(CameraConfig(), f.name))
-        if f.name != "position_b"
-        else Key(f.name, "vector3", _CAMERA_DOCS[f.name], CameraConfig().position_b, -10.0, 10.0)
-        for f in fields(CameraConfig)
-        if f.name != "mount_error"
-    ),
+    *(_camera_key(f.name) for f in fields(CameraConfig) if f.name != "mount_error"),
     _MOUNT_ERROR_KEY,
 )
 """Validated by ``sim.config.CameraConfig``, whose defaults these are (the mount within 10 m)."""

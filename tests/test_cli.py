@@ -236,6 +236,18 @@ def test_bad_usage_exit_2_one_line(tmp_path, capsys, args, message):
             r"bad\.toml: camera: CameraConfig.fovy_deg must be in \(0, 180\)",
         ),
         (
+            PITCH_90_TOML.replace("fovy_deg = 60.0", 'fovy_deg = "60"'),
+            r"bad\.toml: camera\.fovy_deg: must be a number, got '60'",
+        ),
+        (
+            PITCH_90_TOML.replace("fovy_deg = 60.0", "fovy_deg = true"),
+            r"bad\.toml: camera\.fovy_deg: must be a number, got True",
+        ),
+        (
+            PITCH_90_TOML.replace("width = 640", "width = 640.5"),
+            r"bad\.toml: camera\.width: must be an integer, got 640\.5",
+        ),
+        (
             PITCH_90_TOML.replace("[0.0, 45.0, 0.0]", "[0.0, 45.0]"),
             r"bad\.toml: flight\.keyframes\[0\]\.rpy_deg: must be a list of 3 numbers",
         ),

@@ -352,6 +352,8 @@ def test_record_worst(work, serial):
     ("text", "args", "message"),
     [
         (SWEEP + '"camera.pitch_down_deg" = [100.0]\n', [], "grid point 0"),
+        (SWEEP + '"camera.pitch_down_deg" = ["30"]\n', [], "must be a number, got '30'"),
+        (SWEEP + '"camera.pitch_down_deg" = [true]\n', [], "must be a number, got True"),
         ("scenario = 'nope'\n", [], "unknown built-in 'nope'"),
         ("scenario = [\n", [], "invalid TOML"),
         (SWEEP, ["--workers", "-1"], "--workers must be 0"),
