@@ -121,10 +121,11 @@ def _free_port() -> int:
 @pytest.fixture
 def ray_cluster():
     """A Ray cluster of 2 CPUs started as a user would (``ray start --head``), stopped after."""
-    port = _free_port()
+    port, client_port = _free_port(), _free_port()
     env = {**os.environ, "RAY_AUTH_MODE": "disabled"}  # no token to hand to the sweep
     command = [str(Path(sys.executable).parent / "ray"), "start", "--head", "--block"]
     command += ["--num-cpus", "2", "--port", str(port)]
+    command += ["--ray-client-server-port", str(client_port)]
     command += ["--include-dashboard", "false", "--disable-usage-stats"]
     # `ray start` records its address for `--address auto` and leaves the record behind.
     record = Path("/tmp/ray/ray_current_cluster")
@@ -137,14 +138,15 @@ def ray_cluster():
     )
     try:
         deadline = time.monotonic() + 120
-        while True:
-            try:
-                socket.create_connection(("127.0.0.1", port), timeout=1).close()
-                break
-            except OSError:
-                assert time.monotonic() < deadline and head.poll() is None, "ray start failed"
-                time.sleep(0.2)
-        yield f"127.0.0.1:{port}", env
+        for p in (port, client_port):
+            while True:
+                try:
+                    socket.create_connection(("127.0.0.1", p), timeout=1).close()
+                    break
+                except OSError:
+                    assert time.monotonic() < deadline and head.poll() is None, "ray start failed"
+                    time.sleep(0.2)
+        yield f"127.0.0.1:{port}", f"ray://127.0.0.1:{client_port}", env
     finally:
         head.terminate()
         head.wait(timeout=120)
@@ -155,17 +157,30 @@ def ray_cluster():
 
 
 def test_an_existing_cluster_gives_the_serial_rows(work, serial, ray_cluster):
-    """--address joins a cluster and nothing else changes; asking for more workers than the
-    cluster has CPUs is refused, as is an address where nothing answers."""
-    address, env = ray_cluster
+    """--address joins a cluster, as host:port (its GCS), ray://host:port (Ray Client) or
+    auto (the cluster `ray start` recorded), and nothing else changes; asking for more workers
+    than the cluster has CPUs is refused."""
+    address, client_address, env = ray_cluster
+    sweep = [sys.executable, "-m", "scenarios", "sweep", "small.toml", "--workers", "2"]
+    for out, given in (("cluster", address), ("client", client_address), ("auto", "auto")):
+        proc = subprocess.run(
+            [*sweep, "--address", given, "--out", out],
+            cwd=work,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=300,
+        )
+        assert proc.returncode == 1, proc.stderr
+        assert f"on the Ray cluster at {given} (2 workers)" in proc.stdout
+        assert_same_rows(rows(work / out), rows(serial))
     args = [sys.executable, "-m", "scenarios", "sweep", "small.toml", "--address", address]
     proc = subprocess.run(
-        [*args, "--out", "cluster"], cwd=work, env=env, capture_output=True, text=True, timeout=300
+        [*args, "--out", "percpu"], cwd=work, env=env, capture_output=True, text=True, timeout=300
     )
     assert proc.returncode == 1, proc.stderr
     assert f"on the Ray cluster at {address} (a worker per CPU)" in proc.stdout
     assert "(2 workers)" in proc.stdout
-    assert_same_rows(rows(work / "cluster"), rows(serial))
     proc = subprocess.run(
         [*args, "--out", "more", "--workers", "3"],
         cwd=work,
@@ -192,6 +207,26 @@ def test_an_address_where_nothing_answers_is_refused_at_once(work):
     assert proc.returncode == 2 and "cannot reach the Ray cluster" in proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1 and time.monotonic() - start < 30
     assert not (work / "none" / "sweep.json").exists()
+
+
+def test_an_address_that_is_not_rays_is_refused_at_once(work):
+    """A port that answers but is not a Ray cluster (here a web server, as the dashboard's
+    port would be): one line at once, not Ray's retries and warnings."""
+    import http.server
+    import threading
+
+    server = http.server.HTTPServer(("127.0.0.1", 0), http.server.SimpleHTTPRequestHandler)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    try:
+        for given in (f"127.0.0.1:{server.server_port}", f"ray://127.0.0.1:{server.server_port}"):
+            start = time.monotonic()
+            proc = sweep_cli("small.toml", "--out", "web", "--address", given, cwd=work, timeout=60)
+            assert proc.returncode == 2 and "answers, but not as a Ray cluster" in proc.stderr
+            assert len(proc.stderr.strip().splitlines()) == 1 and time.monotonic() - start < 30
+            assert not (work / "web" / "sweep.json").exists()
+    finally:
+        server.shutdown()
+        server.server_close()
 
 
 def test_ray_engine_reuses_each_workers_scene(work, serial):
@@ -359,6 +394,7 @@ def test_record_worst(work, serial):
         (SWEEP, ["--workers", "-1"], "--workers must be 0"),
         (SWEEP, ["--workers", "0", "--address", "auto"], "cannot go with --address"),
         (SWEEP, ["--record-worst", "-2"], "--record-worst"),
+        (SWEEP, ["--address", "nonsense"], "--address must be auto, host:port or ray://"),
     ],
 )
 def test_bad_input_exits_2_with_one_line(tmp_path, text, args, message):

@@ -63,6 +63,11 @@ def _validate(args: argparse.Namespace) -> tuple[SweepPlan, Path]:
         raise InputError(f"--workers must be 0 (this process) or more, got {args.workers}")
     if args.workers == 0 and args.address:
         raise InputError("--workers 0 runs in this process; it cannot go with --address")
+    if args.address:
+        try:
+            engines.check_address(args.address)
+        except engines.EngineError as exc:
+            raise InputError(str(exc)) from None
     if args.record_worst < 0:
         raise InputError(f"--record-worst must be 0 or more, got {args.record_worst}")
     try:

@@ -32,6 +32,7 @@ __all__ = [
     "RayEngine",
     "SerialEngine",
     "Task",
+    "check_address",
     "default_workers",
     "ray_missing",
 ]
@@ -191,6 +192,11 @@ class RayEngine:
                 ray.init(address=address, **quiet)
             except ConnectionError as exc:
                 raise EngineError(f"cannot join the Ray cluster at {address}: {exc}") from None
+            except (ImportError, ValueError) as exc:  # Ray Client's packages missing
+                raise EngineError(
+                    f"cannot join the Ray cluster at {address}: {_one_line(exc)} (pip install "
+                    "'vnav-sim[sweep]' installs ray[client])"
+                ) from None
             cpus = int(ray.cluster_resources().get("CPU", 0))
             if workers and workers > cpus:
                 ray.shutdown()
@@ -237,6 +243,11 @@ class RayEngine:
 
 
 PROBE_TIMEOUT_S = 5.0
+# What a client sends first on an HTTP/2 connection (RFC 9113, section 3.4: the preface, then
+# an empty SETTINGS frame). Both of Ray's addresses, the GCS (host:port) and the Ray Client
+# server (ray://host:port), are gRPC servers, which answer with a SETTINGS frame of their own.
+_HTTP2_PREFACE = b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n" + bytes([0, 0, 0, 4, 0, 0, 0, 0, 0])
+_HTTP2_SETTINGS = 0x4  # frame type, the 4th byte of a frame header
 
 
 def _resolve_auto() -> str:
@@ -256,21 +267,47 @@ def _resolve_auto() -> str:
     return found
 
 
-def _probe(address: str, given: str) -> None:
-    """Fail at once, in one line, where nothing answers at ``address`` (``host:port`` or
-    ``ray://host:port``; ``given`` is what the user wrote): Ray itself retries an unreachable
-    cluster for minutes."""
-    host_port = address.removeprefix("ray://")
-    host, sep, port = host_port.rpartition(":")
+def check_address(address: str) -> None:
+    """Raise ``EngineError`` unless ``address`` is ``auto``, ``host:port`` or
+    ``ray://host:port`` (the form only: nothing is contacted)."""
+    if address != "auto":
+        _host_port(address, address)
+
+
+def _host_port(address: str, given: str) -> tuple[str, int]:
+    host, sep, port = address.removeprefix("ray://").rpartition(":")
     if not sep or not port.isdigit() or not host:
         raise EngineError(f"--address must be auto, host:port or ray://host:port, got {given!r}")
+    return host.strip("[]"), int(port)
+
+
+def _probe(address: str, given: str) -> None:
+    """Fail at once, in one line, where no Ray cluster answers at ``address`` (``host:port`` or
+    ``ray://host:port``; ``given`` is what the user wrote): Ray itself retries an unreachable
+    cluster for minutes, and hangs on a port that answers but is not Ray's (the dashboard's).
+    """
+    host, port = _host_port(address, given)
+    where = address if address == given else f"{address} ({given})"
     try:
-        with socket.create_connection((host.strip("[]"), int(port)), timeout=PROBE_TIMEOUT_S):
-            pass
+        with socket.create_connection((host, port), timeout=PROBE_TIMEOUT_S) as sock:
+            sock.settimeout(PROBE_TIMEOUT_S)
+            sock.sendall(_HTTP2_PREFACE)
+            head = b""
+            while len(head) < 9:
+                part = sock.recv(9 - len(head))
+                if not part:
+                    break
+                head += part
+    except TimeoutError:
+        head = b""
     except OSError as exc:
         reason = exc.strerror or type(exc).__name__
-        where = address if address == given else f"{address} ({given})"
         raise EngineError(f"cannot reach the Ray cluster at {where}: {reason}") from None
+    if len(head) < 9 or head[3] != _HTTP2_SETTINGS:
+        raise EngineError(
+            f"{where} answers, but not as a Ray cluster (no gRPC): give the head node's GCS "
+            "port (6379 by default) as host:port, or its client port (10001) as ray://host:port"
+        )
 
 
 def _one_line(exc: BaseException) -> str:
