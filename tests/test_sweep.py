@@ -375,6 +375,8 @@ def test_record_worst(work, serial):
     summary = json.loads((serial / "summary.json").read_text())
     worst = summary["worst"][0]
     assert worst["recording"] == f"worst/frame-problem-p1-s{worst['seed']}.rrd"
+    opened = f"(open one with: rerun serial/{worst['recording']})"
+    assert f"recorded the 1 worst episodes in serial/worst/ {opened}" in proc.stdout
     report = json.loads((serial / worst["recording"]).with_suffix(".json").read_text())
     (row,) = [r for r in rows(serial) if (r["point"], r["seed"]) == (1, worst["seed"])]
     assert (

@@ -122,7 +122,7 @@ def _sweep(plan: SweepPlan, out_dir: Path, args: argparse.Namespace) -> int:
     recordings = _record_worst(store, out_dir, args) if complete and args.record_worst else {}
     _write_summary(store, out_dir, complete, recordings)
     if not args.quiet:
-        say(_final(store, out_dir, outcome, args))
+        say(_final(store, out_dir, outcome, args, recordings))
     if outcome.stopped_by is not None:
         name = signal.Signals(outcome.stopped_by).name
         _error(
@@ -280,8 +280,11 @@ def _estimate_arrays(episodes: list[Episode], np) -> dict:
     }
 
 
-def _final(store: SweepStore, out_dir: Path, run: _Run, args) -> str:
-    """The printed summary: counts, a few lines per grid point, the files, the worst seed."""
+def _final(
+    store: SweepStore, out_dir: Path, run: _Run, args, recordings: dict[tuple[int, int], str]
+) -> str:
+    """The printed summary: counts, a few lines per grid point, the files, the worst seed and
+    the worst episodes' recordings (``--record-worst``)."""
     plan = store.plan
     episodes = store.sorted_episodes()
     statuses = [e.row["status"] for e in episodes]
@@ -315,4 +318,11 @@ def _final(store: SweepStore, out_dir: Path, run: _Run, args) -> str:
         lines.append(
             "worst: " + summary.replay_command(str(out_dir), store.point_file(w.point), w.seed)
         )
+    if recordings:
+        lines.append(
+            f"recorded the {len(recordings)} worst episodes in {out_dir}/worst/ "
+            f"(open one with: rerun {out_dir}/{next(iter(recordings.values()))})"
+        )
+    elif args.record_worst and store.pending():
+        lines.append("--record-worst waits for a complete sweep: finish it with --resume")
     return "\n".join(lines)

@@ -101,7 +101,8 @@ def error_vs_key_png(plan: SweepPlan, episodes: list[Episode], key: str) -> byte
         if np.isfinite(median).any():
             color = np.array(m.color_rgb) / 255.0
             ax.plot(x, median, "-o", color=color, markersize=4, label=f"{m.name} median")
-            ax.plot(x, p90, "--", color=color, linewidth=1.0, label=f"{m.name} p90")
+            # A marker too: a single value draws no dashed line.
+            ax.plot(x, p90, "--_", color=color, linewidth=1.0, markersize=9, label=f"{m.name} p90")
             shown += [*median[np.isfinite(median)], *p90[np.isfinite(p90)]]
     note = (
         f"each episode's median error; at each value of {key}: median (solid) and 90th "
