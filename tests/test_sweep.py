@@ -259,22 +259,29 @@ def test_summary_agrees_with_the_tables(serial):
         mine = [r for r in table if r["point"] == point["index"]]
         assert point["episodes"] == len(mine)
         assert point["pass_rate"] == sum(r["passed"] for r in mine) / len(mine)
+        rates = [r["detection_rate"] for r in mine]
+        assert point["detection_rate"] == {"mean": pytest.approx(np.mean(rates)), "min": min(rates)}
         for m in METHOD_NAMES:
-            medians = np.array([r[f"{m}.median_m"] for r in mine])
-            medians = medians[np.isfinite(medians)]
             got = point["methods"][m]
-            if medians.size:
-                assert got["median_m"]["median"] == pytest.approx(np.median(medians), abs=0)
-                assert got["median_m"]["p90"] == pytest.approx(np.percentile(medians, 90), abs=0)
-            else:
-                assert got["median_m"]["median"] is None
+            for stat in ("median", "rmse"):
+                per_episode = np.array([r[f"{m}.{stat}_m"] for r in mine])
+                per_episode = per_episode[np.isfinite(per_episode)]
+                if per_episode.size:
+                    across = got[f"{stat}_m"]
+                    assert across["median"] == pytest.approx(np.median(per_episode), abs=0)
+                    p90 = np.percentile(per_episode, 90)
+                    assert across["p90"] == pytest.approx(p90, abs=0)
+                    assert across["max"] == pytest.approx(per_episode.max(), abs=0)
+                else:
+                    assert got[f"{stat}_m"]["median"] is None
             errors = [
                 e["error_m"] for e in estimates if e["point"] == point["index"] and e["method"] == m
             ]
             pooled = metrics.error_stats(np.array(errors, dtype=float))
             assert got["pooled"]["count"] == len(errors) == sum(r[f"{m}.count"] for r in mine)
             if errors:
-                assert got["pooled"]["median"] == pytest.approx(pooled["median"], abs=0)
+                for stat in ("median", "rmse", "mean", "max"):
+                    assert got["pooled"][stat] == pytest.approx(pooled[stat], rel=1e-12)
         worst = max(mine, key=lambda r: (not r["passed"], r["depth_image.median_m"]))
         assert point["worst"]["seed"] == worst["seed"]
 
