@@ -171,8 +171,9 @@ def transform_composer() -> Scenario:
 
 
 def gimbal_lock() -> Scenario:
-    # Chapter 4: the body pitches nose-up through -90 deg (a 'straight up' attitude). The
-    # camera, mounted 80 deg down, then looks just above the horizon and still sees the cone.
+    # Chapter 4: the body pitches nose-up through -90 deg (a 'straight up' attitude), back,
+    # and up again to end held at -90 deg, where the viewer opens: locked. The camera, mounted
+    # 80 deg down, then looks just below the horizon and still sees the cone.
     def kf(t: float, pitch_deg: float) -> dict:
         return {"t": t, "position_w": [0.0, 0.0, 2.0], "rpy_deg": [0.0, pitch_deg, 0.0]}
 
@@ -195,6 +196,8 @@ def gimbal_lock() -> Scenario:
                 kf(3.0, -90.0),
                 kf(4.0, -100.0),
                 kf(6.0, -55.0),
+                kf(7.5, -90.0),
+                kf(8.0, -90.0),
             ],
         },
         "checks": [

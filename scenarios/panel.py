@@ -46,6 +46,19 @@ def _vector(p: np.ndarray, decimals: int = 2, width: int = 7) -> str:
     return "[" + " ".join(_number(x, decimals, width) for x in p) + "]"
 
 
+_NO_ROTATION_DEG = 0.05
+"""Below this angle (it prints as 0.0 deg) the axis of the axis-angle is meaningless."""
+
+
+def _axis(axis: np.ndarray, angle_rad: float) -> str:
+    """The rotation axis, or a note where there is no rotation to have an axis (every axis
+    is then as good, and the one computed is rounding noise)."""
+    shown = _vector(axis, 3, 6)
+    if math.degrees(angle_rad) < _NO_ROTATION_DEG:
+        return f"{'any (no rotation)':<{len(shown)}}"
+    return shown
+
+
 def _ms(dt_s: float) -> str:
     return f"{1e3 * dt_s + 0.0:.0f} ms"
 
@@ -127,7 +140,7 @@ def state_text(record: TickRecord, quat_xyzw: np.ndarray, cone0_w: np.ndarray) -
         f"yaw {_number(yaw, 1, 6)} deg    gimbal lock: {lock}",
         f"        quaternion xyzw {_vector(quat_xyzw, 3, 6)}"
         + ("  (w < 0: -q is the same rotation)" if flipped else ""),
-        f"        axis-angle  axis {_vector(axis, 3, 6)}  angle "
+        f"        axis-angle  axis {_axis(axis, angle)}  angle "
         f"{_number(math.degrees(angle), 1, 6)} deg  (R = I + sin(a) K + (1 - cos(a)) K^2)",
     ]
     mount_off = se3.invert(record.T_b_c_est) @ T_b_c

@@ -375,6 +375,7 @@ class Recording:
                 T_w_b=result.ticks[-1].T_w_b if result.ticks else None,
                 close_up_cone_w=close_up_cone_w,
                 error_top_m=_error_tops_m(result, self._latency),
+                cone0_top_m=_cone0_top_m(result, self._cones_w[0]),
                 latency=self._latency,
             )
         )
@@ -470,10 +471,36 @@ def _error_tops_m(result: RunResult, newest_pose: bool = False) -> dict[str, flo
         top = float(errors.max())
         if m.bound is not None:
             top = max(top, float(m.bound.allowed_m(result.ranges_for(m.name)).max()))
-        tops[m.name] = 1.15 * top
+        tops[m.name] = _axis_top(top)
     ranges = [d.range_m for t in result.ticks for d in t.detections if d.range_m is not None]
-    tops[entity.RANGE] = 1.15 * max(ranges) if ranges else None
+    tops[entity.RANGE] = _axis_top(max(ranges)) if ranges else None
     return tops
+
+
+def _cone0_top_m(result: RunResult, cone0_w: np.ndarray) -> float | None:
+    """Top of the cone-0 coordinate plots (their axes run from minus this): one scale for
+    the three frames and the estimate, so that the same point reads the same in each."""
+    extents = [
+        float(np.abs(p).max())
+        for t in result.ticks
+        for p in t.coordinates_of(cone0_w).values()
+        if np.all(np.isfinite(p))
+    ]
+    return _axis_top(max(extents)) if extents else None
+
+
+def _axis_top(x: float) -> float:
+    """Top of a plot's y axis from 0 that shows ``x`` and reads: a little above 1 or 2 times
+    a power of ten at or above ``x``, so that a labelled tick sits inside the plot.
+
+    The viewer labels no tick at the very top, and its ticks are powers of ten, labelled only
+    where they are some 20 pixels apart: a top of 0.0575 m left a 60-pixel plot with only "0",
+    and so would 0.56 (ticks at 0.1 too close to label, 1 beyond the top)."""
+    if x <= 0.0:
+        return 1.0
+    scale = 10.0 ** math.floor(math.log10(x))
+    round_x = next(f * scale for f in (1.0, 2.0, 10.0) if f * scale >= x * (1 - 1e-12))
+    return 1.12 * round_x
 
 
 # ---------------------------------------------------------------------- static content
@@ -656,7 +683,7 @@ def _log_state_lanes(rec: rr.RecordingStream) -> None:
         entity.GIMBAL_LOCK,
         rr.StateConfiguration(
             values=["free", "locked"],
-            labels=["roll, pitch, yaw all defined", "gimbal lock: only yaw - roll defined"],
+            labels=["no lock", "LOCKED: yaw - roll only"],
             colors=[0x3A7D44FF, 0xD04040FF],
         ),
         static=True,

@@ -20,6 +20,7 @@ from types import SimpleNamespace
 from typing import TYPE_CHECKING
 
 import numpy as np
+import rerun as rr
 import rerun.blueprint as rrb
 
 from scenarios.schema import VIEW_NAMES
@@ -149,8 +150,9 @@ pinhole maps the image plane into the camera (docs/CONVENTIONS.md)."""
 
 AXIS_LENGTH_M = {FRAME.WORLD: 2.0, FRAME.BODY: 1.0, FRAME.CAMERA: 0.5}
 """Drawn axis length per frame: the lengths tell the three frames apart where they overlap."""
-IMAGE_PLANE_M = 0.4
-"""Distance of the drawn image plane from the camera centre (the frustum's depth)."""
+IMAGE_PLANE_M = 0.2
+"""Distance of the drawn image plane from the camera centre (the frustum's depth): small
+enough that the frustum does not hide the drone in the close-up."""
 
 CONE0_SERIES: tuple[str, ...] = ("world", "body", "camera", "estimate_world")
 """Cone 0's coordinate series: its truth in three frames and its depth-image estimate."""
@@ -192,6 +194,7 @@ def blueprint(
     T_w_b=None,
     close_up_cone_w=None,
     error_top_m: dict[str, float | None] | None = None,
+    cone0_top_m: float | None = None,
     latency: bool = False,
 ) -> rrb.Blueprint:
     """The default layout: images and plots on the left; the world, a close-up of the drone
@@ -215,6 +218,8 @@ def blueprint(
     error_top_m : dict of str to float or None, optional
         Top of each method's error plot, metres (None: the method gave no estimate), and of
         the range plot under the key ``entity.RANGE``.
+    cone0_top_m : float, optional
+        The cone-0 coordinate plots' y axes run from minus this to this, metres.
     latency : bool
         The run delivered its images late (its ``[timing]`` is not synchronous): the error
         tab also plots the newest-pose estimate's error and the pose stream against the image
@@ -232,14 +237,17 @@ def blueprint(
         # computed by vnav (world/depth_cloud) is the one to look at here.
         contents=["+ $origin/**", f"- /{entity.DEPTH}"],
         eye_controls=eye,
+        # Seen from metres away the camera's label would sit on the body's (they are 15 cm
+        # apart): the close-up names both.
+        overrides={entity.CAMERA: rr.TransformAxes3D.from_fields(show_frame=False)},
     )
     return rrb.Blueprint(
         rrb.Horizontal(
             # With latency the plots and the state panel (its time block) get more room.
             rrb.Vertical(
                 _image_tabs(),
-                _lower_tabs(view, error_top_m or {}, latency),
-                row_shares=[4, 6] if latency else [4, 5],
+                _lower_tabs(view, error_top_m or {}, cone0_top_m, latency),
+                row_shares=[4, 6] if latency else [3, 5],
             ),
             rrb.Vertical(
                 rrb.Horizontal(
@@ -448,7 +456,9 @@ def _nees_tab() -> rrb.Vertical:
     )
 
 
-def _lower_tabs(view: str, error_top_m: dict[str, float | None], latency: bool) -> rrb.Tabs:
+def _lower_tabs(
+    view: str, error_top_m: dict[str, float | None], cone0_top_m: float | None, latency: bool
+) -> rrb.Tabs:
     """The tabs below the images: ``VIEWS`` first (in order), then the other plots.
 
     With ``latency`` the error tab shows the lesson of time: the depth_image error beside the
@@ -471,10 +481,17 @@ def _lower_tabs(view: str, error_top_m: dict[str, float | None], latency: bool) 
     else:
         errors = rrb.Vertical(
             *[_error_plot(name, error_top_m) for name in PREFERENCE],
+            # A method without an estimate keeps only its title ("no estimate in this run"):
+            # the others get the height their axes need to be read.
+            row_shares=[
+                1 if name in error_top_m and error_top_m[name] is None else 4 for name in PREFERENCE
+            ],
             name="position error",
         )
-    coordinates = rrb.Grid(
-        *[_series(_CONE0_TITLES[f], [entity.cone0(f)]) for f in CONE0_SERIES],
+    # One above the other, full width: each title is read whole (it names the colours).
+    cone0_range = None if cone0_top_m is None else (-cone0_top_m, cone0_top_m)
+    coordinates = rrb.Vertical(
+        *[_series(_CONE0_TITLES[f], [entity.cone0(f)], cone0_range) for f in CONE0_SERIES],
         name="cone 0 in each frame",
     )
     attitude = rrb.Vertical(
