@@ -683,7 +683,7 @@ def _log_state_lanes(rec: rr.RecordingStream) -> None:
         entity.GIMBAL_LOCK,
         rr.StateConfiguration(
             values=["free", "locked"],
-            labels=["no lock", "LOCKED: yaw - roll only"],
+            labels=["no lock", "LOCKED"],
             colors=[0x3A7D44FF, 0xD04040FF],
         ),
         static=True,

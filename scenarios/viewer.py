@@ -383,6 +383,12 @@ def _series(name: str, paths: list[str], y_range=None, time_range=None) -> rrb.T
     )
 
 
+def _gave_none(tops_m: dict[str, float | None], name: str) -> bool:
+    """Whether the run is known to have no estimate of method ``name`` (its plots then keep
+    only their titles)."""
+    return name in tops_m and tops_m[name] is None
+
+
 def _error_plot(
     name: str, tops_m: dict[str, float | None], newest_pose: bool = False
 ) -> rrb.TimeSeriesView:
@@ -390,7 +396,7 @@ def _error_plot(
     ``newest_pose``, the newest-pose estimate's error in violet)."""
     top_m = tops_m.get(name)
     paths = [entity.error(name), entity.allowed(name)]
-    if name in tops_m and top_m is None:
+    if _gave_none(tops_m, name):
         title = f"{name} error (m): no estimate in this run"
     else:
         title = f"{name} error (m), grey: the contract's bound"
@@ -436,24 +442,32 @@ def _from_zero(tops: dict[str, float | None], key: str) -> tuple[float, float] |
     return (0.0, top) if top is not None else None
 
 
-def _nees_tab() -> rrb.Vertical:
+NEES_TOP = 11.2
+"""Top of the NEES plots: above 10 (a labelled tick) and between three and six times the
+degrees of freedom; single ticks above it are clipped, the mean is what the ``consistent``
+check judges."""
+
+
+def _nees_tab(error_top_m: dict[str, float | None]) -> rrb.Vertical:
     """Each checked method's NEES per tick (thin), its mean over the run so far (thick) and
     that mean's 95% chi-square band (grey), which narrows around the degrees of freedom (3,
     or 2 for ground_plane, whose estimates lie on z = 0 by construction) as estimates add up.
-    The y axis stops at four times the degrees of freedom: single ticks above it are clipped,
-    the mean is what the ``consistent`` check judges."""
-    return rrb.Vertical(
-        *[
+    A method that gave no estimate keeps only its title."""
+    plots, shares = [], []
+    for name in PREFERENCE:
+        dof = 2 if name == "ground_plane" else 3
+        none = _gave_none(error_top_m, name)
+        title = f"{name} NEES, thick: mean so far, grey: 95% band around {dof}"
+        paths = [entity.nees(name), entity.nees_mean(name), entity.nees_band(name)]
+        plots.append(
             _series(
-                f"{name} NEES, thick: mean so far, grey: 95% band around {dof}",
-                [entity.nees(name), entity.nees_mean(name), entity.nees_band(name)],
-                y_range=(0.0, 4.0 * dof),
+                f"{name} NEES: no estimate in this run" if none else title,
+                paths,
+                y_range=(0.0, NEES_TOP),
             )
-            for name in PREFERENCE
-            for dof in [2 if name == "ground_plane" else 3]
-        ],
-        name="NEES",
-    )
+        )
+        shares.append(1 if none else 4)
+    return rrb.Vertical(*plots, row_shares=shares, name="NEES")
 
 
 def _lower_tabs(
@@ -483,9 +497,7 @@ def _lower_tabs(
             *[_error_plot(name, error_top_m) for name in PREFERENCE],
             # A method without an estimate keeps only its title ("no estimate in this run"):
             # the others get the height their axes need to be read.
-            row_shares=[
-                1 if name in error_top_m and error_top_m[name] is None else 4 for name in PREFERENCE
-            ],
+            row_shares=[1 if _gave_none(error_top_m, name) else 4 for name in PREFERENCE],
             name="position error",
         )
     # One above the other, full width: each title is read whole (it names the colours).
@@ -513,7 +525,12 @@ def _lower_tabs(
         row_shares=[3, 3, 3],
         name="attitude",
     )
-    tabs = {"errors": errors, "coordinates": coordinates, "attitude": attitude, "nees": _nees_tab()}
+    tabs = {
+        "errors": errors,
+        "coordinates": coordinates,
+        "attitude": attitude,
+        "nees": _nees_tab(error_top_m),
+    }
     return rrb.Tabs(
         *[tabs[name] for name in VIEW_NAMES],
         *extra,

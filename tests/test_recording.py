@@ -729,3 +729,17 @@ def test_nees_mean_and_band_at_the_last_tick_are_the_reports(builtin_runs):
         ]
         assert mean_row["Scalars:scalars"][0] == pytest.approx(summary["mean"], rel=1e-9)
         assert band_row["Scalars:scalars"] == pytest.approx(summary["band"], rel=1e-6)
+
+
+@pytest.mark.parametrize("x", [1e-4, 0.0575, 0.0999, 0.1, 0.2006, 0.42, 0.56, 1.0, 3.7, 8.4, 250.0])
+def test_plot_axis_tops_hold_a_labelled_tick(x):
+    """The viewer labels its y ticks at powers of ten some 20 pixels apart, never at the very
+    top: an axis from 0 must hold a power of ten p <= top (inside) with top / p small enough
+    (<= 2.3) that p is labelled in a 60-pixel plot, and must show x."""
+    from scenarios.recording import _axis_top
+
+    top = _axis_top(x)
+    assert top >= x
+    p = 10.0 ** np.floor(np.log10(top))
+    assert p < top and top / p <= 2.3
+    assert top <= 11.2 * x + 1e-12  # and the data is not squashed beyond a tenth of it
