@@ -470,6 +470,40 @@ def _nees_tab(error_top_m: dict[str, float | None]) -> rrb.Vertical:
     return rrb.Vertical(*plots, row_shares=shares, name="NEES")
 
 
+def _coordinates_tab(cone0_top_m: float | None) -> rrb.Vertical:
+    """Cone 0 in world, body and camera frames and its estimate, one above the other at full
+    width (each title is read whole: it names the colours), on one symmetric scale."""
+    cone0_range = None if cone0_top_m is None else (-cone0_top_m, cone0_top_m)
+    return rrb.Vertical(
+        *[_series(_CONE0_TITLES[f], [entity.cone0(f)], cone0_range) for f in CONE0_SERIES],
+        name="cone 0 in each frame",
+    )
+
+
+def _attitude_tab() -> rrb.Vertical:
+    """Roll, pitch and yaw in degrees, the quaternion, and the lanes of the gimbal-lock flag
+    and the quaternion's plotted sign."""
+    return rrb.Vertical(
+        _series(
+            "R_w_b: roll (red), pitch (green), yaw (blue), deg",
+            [entity.RPY],
+            y_range=(-180.0, 180.0),
+        ),
+        _series(
+            "R_w_b as a quaternion: x (red), y (green), z (blue), w (white)",
+            [entity.QUAT],
+            y_range=(-1.05, 1.05),
+        ),
+        rrb.StateTimelineView(
+            name="gimbal lock; quaternion sign",
+            origin="/",
+            contents=[f"+ /{entity.GIMBAL_LOCK}", f"+ /{entity.QUAT_SIGN}"],
+        ),
+        row_shares=[3, 3, 3],
+        name="attitude",
+    )
+
+
 def _lower_tabs(
     view: str, error_top_m: dict[str, float | None], cone0_top_m: float | None, latency: bool
 ) -> rrb.Tabs:
@@ -500,35 +534,10 @@ def _lower_tabs(
             row_shares=[1 if _gave_none(error_top_m, name) else 4 for name in PREFERENCE],
             name="position error",
         )
-    # One above the other, full width: each title is read whole (it names the colours).
-    cone0_range = None if cone0_top_m is None else (-cone0_top_m, cone0_top_m)
-    coordinates = rrb.Vertical(
-        *[_series(_CONE0_TITLES[f], [entity.cone0(f)], cone0_range) for f in CONE0_SERIES],
-        name="cone 0 in each frame",
-    )
-    attitude = rrb.Vertical(
-        _series(
-            "R_w_b: roll (red), pitch (green), yaw (blue), deg",
-            [entity.RPY],
-            y_range=(-180.0, 180.0),
-        ),
-        _series(
-            "R_w_b as a quaternion: x (red), y (green), z (blue), w (white)",
-            [entity.QUAT],
-            y_range=(-1.05, 1.05),
-        ),
-        rrb.StateTimelineView(
-            name="gimbal lock; quaternion sign",
-            origin="/",
-            contents=[f"+ /{entity.GIMBAL_LOCK}", f"+ /{entity.QUAT_SIGN}"],
-        ),
-        row_shares=[3, 3, 3],
-        name="attitude",
-    )
     tabs = {
         "errors": errors,
-        "coordinates": coordinates,
-        "attitude": attitude,
+        "coordinates": _coordinates_tab(cone0_top_m),
+        "attitude": _attitude_tab(),
         "nees": _nees_tab(error_top_m),
     }
     return rrb.Tabs(
