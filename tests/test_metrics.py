@@ -79,12 +79,51 @@ def test_match_nearest_brute_force_is_optimal() -> None:
         assert total == pytest.approx(best)
 
 
-def test_match_nearest_greedy_for_many() -> None:
+def test_match_nearest_for_many() -> None:
     ref = np.column_stack((np.arange(20.0), np.zeros(20)))
     est = ref[::-1] + 0.1
     pairs = match_nearest(ref, est)
     assert len(pairs) == 20
     assert all(abs(ref[i, 0] + 0.1 - est[j, 0]) < 1e-9 for i, j in pairs)
+
+
+def test_match_nearest_is_scipys_optimal_assignment() -> None:
+    """The Hungarian algorithm against SciPy's linear_sum_assignment (test-only oracle) on
+    square and rectangular sets up to 30 points, in both orientations: the same total."""
+    from scipy.optimize import linear_sum_assignment
+
+    rng = np.random.default_rng(3)
+    for n, m in [(1, 1), (3, 8), (8, 3), (8, 8), (12, 30), (30, 12), (25, 25)]:
+        for _ in range(5):
+            ref = rng.uniform(0, 10, size=(n, 2))
+            est = rng.uniform(0, 10, size=(m, 2))
+            pairs = match_nearest(ref, est)
+            assert len(pairs) == min(n, m)
+            assert len({i for i, _ in pairs}) == len({j for _, j in pairs}) == len(pairs)
+            dist = np.linalg.norm(ref[:, None] - est[None], axis=2)
+            rows, cols = linear_sum_assignment(dist)
+            total = sum(dist[i, j] for i, j in pairs)
+            assert total == pytest.approx(dist[rows, cols].sum(), rel=1e-12, abs=1e-12)
+
+
+def test_match_nearest_with_a_gate_is_its_definition() -> None:
+    """Against ``_match_brute_force``, every assignment tried: the most pairs within the gate
+    first, then the least total distance; cones in clusters, so that the gate decides."""
+    from vnav.metrics import _match_brute_force
+
+    rng = np.random.default_rng(4)
+    for n, m in [(2, 5), (5, 2), (4, 4), (6, 6), (3, 7)]:
+        for _ in range(20):
+            ref = rng.uniform(0, 4, size=(n, 2))
+            est = rng.uniform(0, 4, size=(m, 2))
+            gate = rng.uniform(0.3, 2.0)
+            dist = np.linalg.norm(ref[:, None] - est[None], axis=2)
+            expected = _match_brute_force(dist, dist <= gate)
+            pairs = match_nearest(ref, est, max_distance=gate)
+            assert len(pairs) == len(expected)
+            total = sum(dist[i, j] for i, j in pairs)
+            assert total == pytest.approx(sum(dist[i, j] for i, j in expected), abs=1e-12)
+            assert all(dist[i, j] <= gate for i, j in pairs)
 
 
 def test_negative_errors_and_non_finite_points_are_refused() -> None:

@@ -26,9 +26,6 @@ __all__ = [
 STATS = ("rmse", "mean", "median", "std", "min", "max", "count")
 """The keys of ``error_stats``, in display order."""
 
-_BRUTE_FORCE_MAX = 7
-"""Up to this many estimates or truths, matching tries every assignment (7! = 5040)."""
-
 
 def _points(x: np.ndarray, name: str) -> np.ndarray:
     a = np.asarray(x, dtype=np.float64)
@@ -119,11 +116,12 @@ def horizontal_error(p_ref: np.ndarray, p_est: np.ndarray) -> np.ndarray:
 def match_nearest(
     p_ref: np.ndarray, p_est: np.ndarray, max_distance: float = math.inf
 ) -> list[tuple[int, int]]:
-    """Pair estimates with true positions one-to-one, minimising the total distance.
+    """Pair estimates with true positions one-to-one: as many pairs as possible within
+    ``max_distance``, and of those the least total distance.
 
-    Exact (every assignment tried) when either set has at most 7 points, else greedy: the
-    globally closest remaining pair first. Pairs farther apart than ``max_distance`` are left
-    unmatched. 2-D or 3-D points (pass ``[:, :2]`` to match in the ground plane).
+    Exact for any number of points: the Hungarian algorithm (``_assignment``), O(N^2 M) for
+    N <= M points. Pairs farther apart than ``max_distance`` are left unmatched. 2-D or 3-D
+    points (pass ``[:, :2]`` to match in the ground plane).
 
     Parameters
     ----------
@@ -158,26 +156,73 @@ def match_nearest(
         raise ValueError(f"p_ref and p_est must have the same dimension; got {a.shape}, {b.shape}")
     dist = np.linalg.norm(a[:, None, :] - b[None, :, :], axis=2)
     allowed = dist <= max_distance
-    pairs: list[tuple[int, int]]
-    if min(dist.shape) <= _BRUTE_FORCE_MAX and max(dist.shape) <= 10:
-        pairs = _match_brute_force(dist, allowed)
-    else:
-        pairs = []
-        used_a: set[int] = set()
-        used_b: set[int] = set()
-        for flat in np.argsort(dist, axis=None, kind="stable"):
-            i, j = divmod(int(flat), dist.shape[1])
-            if not allowed[i, j]:
+    if not allowed.any():
+        return []
+    # A pair beyond the gate costs more than any set of pairs within it: the cheapest full
+    # assignment then has the most pairs within the gate, and of those the least distance.
+    beyond = 1.0 + min(dist.shape) * (float(dist[allowed].max()) + 1.0)
+    cost = np.where(allowed, dist, beyond)
+    transpose = cost.shape[0] > cost.shape[1]
+    col_of_row = _assignment(cost.T if transpose else cost)
+    pairs = [(j, i) if transpose else (i, j) for i, j in enumerate(col_of_row)]
+    return sorted((i, j) for i, j in pairs if allowed[i, j])
+
+
+def _assignment(cost: np.ndarray) -> list[int]:
+    """The column of each row in the cheapest assignment of every row of ``cost`` (N, M),
+    N <= M, to a distinct column.
+
+    The Hungarian algorithm (Kuhn 1955, Munkres 1957) in its shortest-augmenting-path form
+    with row and column potentials (Jonker and Volgenant 1987): one row added at a time,
+    reached by a Dijkstra search over reduced costs; O(N^2 M). Plain floats: the sets matched
+    here are a handful of cones.
+    """
+    n, m = cost.shape
+    c = cost.tolist()
+    u = [0.0] * (n + 1)  # row potentials (1-based; 0 is the search's virtual start)
+    v = [0.0] * (m + 1)  # column potentials
+    row_of = [0] * (m + 1)  # the row assigned to each column, 0 for none
+    for i in range(1, n + 1):
+        row_of[0] = i
+        j0 = 0
+        min_to = [math.inf] * (m + 1)  # shortest reduced distance to each column so far
+        prev = [0] * (m + 1)  # the column before each one on that shortest path
+        done = [False] * (m + 1)
+        while True:
+            done[j0] = True
+            i0 = row_of[j0]
+            row, u_i0 = c[i0 - 1], u[i0]
+            delta, j1 = math.inf, 0
+            for j in range(1, m + 1):
+                if not done[j]:
+                    reduced = row[j - 1] - u_i0 - v[j]
+                    if reduced < min_to[j]:
+                        min_to[j], prev[j] = reduced, j0
+                    if min_to[j] < delta:
+                        delta, j1 = min_to[j], j
+            for j in range(m + 1):
+                if done[j]:
+                    u[row_of[j]] += delta
+                    v[j] -= delta
+                else:
+                    min_to[j] -= delta
+            j0 = j1
+            if row_of[j0] == 0:  # a free column: augment along the path back to the start
                 break
-            if i not in used_a and j not in used_b:
-                pairs.append((i, j))
-                used_a.add(i)
-                used_b.add(j)
-    return sorted(pairs)
+        while j0:
+            j1 = prev[j0]
+            row_of[j0] = row_of[j1]
+            j0 = j1
+    col_of = [0] * n
+    for j in range(1, m + 1):
+        if row_of[j]:
+            col_of[row_of[j] - 1] = j - 1
+    return col_of
 
 
 def _match_brute_force(dist: np.ndarray, allowed: np.ndarray) -> list[tuple[int, int]]:
-    """Most pairs first, then least total distance, over every partial assignment."""
+    """The definition ``match_nearest`` solves, by trying every assignment (small sets only;
+    kept to test it): most pairs within the gate first, then least total distance."""
     n, m = dist.shape
     transpose = n > m
     if transpose:
