@@ -140,3 +140,22 @@ def test_midpoint_covariance_matches_monte_carlo() -> None:
     err = draws - apex
     nees = np.einsum("ni,ij,nj->n", err, np.linalg.inv(predicted), err).mean()
     assert nees / 3.0 == pytest.approx(1.0, abs=0.10)
+
+
+def test_midpoint_covariance_is_its_view_by_view_form() -> None:
+    """All views at once against ``_midpoint_covariance_reference`` (the derivation, one view
+    at a time), with some views' pose or pixel exact (None) and different covariances."""
+    from vnav.tracking import _midpoint_covariance_reference, midpoint_covariance
+
+    rng = np.random.default_rng(6)
+    apex = APEX_W[0]
+    T = np.array([_pose(-1.0 + 0.15 * i) for i in range(9)])
+    uv = np.array(
+        [CAMERA.project((se3.invert(t)[:3, :3] @ apex + se3.invert(t)[:3, 3])[None])[0] for t in T]
+    )
+    covs_T = [None if i % 4 == 1 else np.diag(rng.uniform(1e-4, 1e-2, 6)) for i in range(9)]
+    covs_uv = [None if i % 3 == 2 else rng.uniform(0.1, 0.5) * np.eye(2) for i in range(9)]
+    for cov_T, cov_uv in [(covs_T, covs_uv), ([None] * 9, covs_uv), (covs_T, [None] * 9)]:
+        got = midpoint_covariance(CAMERA, T, uv, apex, cov_T, cov_uv)
+        ref = _midpoint_covariance_reference(CAMERA, T, uv, apex, cov_T, cov_uv)
+        np.testing.assert_allclose(got, ref, rtol=1e-10, atol=1e-16)

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from vnav import se3
+from vnav import se3, so3
 from vnav.camera import PinholeCamera
 from vnav.cone import TRAFFIC_CONE, ConeModel
 from vnav.multiview import parallax_deg, triangulate
@@ -260,6 +260,45 @@ def midpoint_covariance(
     cov_uv : list of N arrays (2, 2) or None
         None: that view's pose or pixel is exact.
     """
+    # Every view at once (``_midpoint_covariance_reference`` is the same, view by view).
+    rays_c = camera.rays(uv)
+    R = T_w_c[:, :3, :3]
+    d = np.einsum("nij,nj->ni", R, rays_c)
+    c = T_w_c[:, :3, 3]
+    P = np.eye(3) - d[:, :, None] * d[:, None, :]
+    A_inv = np.linalg.inv(P.sum(axis=0))
+    w = c - p_w
+    M = np.einsum("ni,ni->n", d, w)[:, None, None] * np.eye(3) + d[:, :, None] * w[:, None, :]
+    cov = np.zeros((3, 3))
+    posed = [i for i, C in enumerate(cov_T_w_c) if C is not None]
+    if posed:
+        k = np.array(posed)
+        J = np.empty((len(k), 3, 6))
+        J[:, :, :3] = P[k]
+        J[:, :, 3:] = -P[k] @ so3.skew(c[k]) + M[k] @ so3.skew(d[k])
+        J = A_inv @ J
+        cov += np.einsum("nij,njk,nlk->il", J, np.array([cov_T_w_c[i] for i in posed]), J)
+    pixels = [i for i, C in enumerate(cov_uv) if C is not None]
+    if pixels:
+        k = np.array(pixels)
+        x = (uv[k, 0] - camera.cx) / camera.fx
+        y = (uv[k, 1] - camera.cy) / camera.fy
+        D = P[k] @ np.stack([R[k, :, 0] / camera.fx, R[k, :, 1] / camera.fy], axis=2)
+        D /= np.sqrt(x * x + y * y + 1.0)[:, None, None]
+        J = -(A_inv @ M[k] @ D)
+        cov += np.einsum("nij,njk,nlk->il", J, np.array([cov_uv[i] for i in pixels]), J)
+    return 0.5 * (cov + cov.T)
+
+
+def _midpoint_covariance_reference(
+    camera: PinholeCamera,
+    T_w_c: np.ndarray,
+    uv: np.ndarray,
+    p_w: np.ndarray,
+    cov_T_w_c: list,
+    cov_uv: list,
+) -> np.ndarray:
+    """``midpoint_covariance`` view by view, as its docstring derives it (kept to test it)."""
     rays_c = camera.rays(uv)
     d = np.einsum("nij,nj->ni", T_w_c[:, :3, :3], rays_c)
     c = T_w_c[:, :3, 3]
@@ -272,7 +311,7 @@ def midpoint_covariance(
         if cov_T_w_c[i] is not None:
             J = np.empty((3, 6))
             J[:, :3] = P[i]
-            J[:, 3:] = -P[i] @ _skew(c[i]) + M @ _skew(d[i])
+            J[:, 3:] = -P[i] @ so3.skew(c[i]) + M @ so3.skew(d[i])
             J = A_inv @ J
             cov += J @ cov_T_w_c[i] @ J.T
         if cov_uv[i] is not None:
@@ -284,7 +323,3 @@ def midpoint_covariance(
             J = -A_inv @ M @ D
             cov += J @ cov_uv[i] @ J.T
     return 0.5 * (cov + cov.T)
-
-
-def _skew(v: np.ndarray) -> np.ndarray:
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
