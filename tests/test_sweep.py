@@ -319,9 +319,12 @@ def test_plots_are_pngs(serial):
         assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10_000
 
 
-def test_resume_after_an_interruption_runs_only_the_missing_episodes(work, serial):
-    """SIGTERM once the first episode is journalled; --resume finishes without touching it."""
+@pytest.mark.parametrize("workers", ["0", "2"])
+def test_resume_after_an_interruption_runs_only_the_missing_episodes(work, serial, workers):
+    """SIGTERM once the first episode is journalled (in this process, or on 2 Ray workers
+    with episodes in flight); --resume finishes without touching what finished."""
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    cut = f"cut{workers}"
     proc = subprocess.Popen(
         [
             sys.executable,
@@ -330,9 +333,9 @@ def test_resume_after_an_interruption_runs_only_the_missing_episodes(work, seria
             "sweep",
             "small.toml",
             "--out",
-            "cut",
+            cut,
             "--workers",
-            "0",
+            workers,
         ],
         cwd=work,
         env=env,
@@ -340,7 +343,7 @@ def test_resume_after_an_interruption_runs_only_the_missing_episodes(work, seria
         stderr=subprocess.PIPE,
         text=True,
     )
-    journal = work / "cut" / "episodes"
+    journal = work / cut / "episodes"
     deadline = time.monotonic() + 120
     while not (journal.is_dir() and any(journal.glob("*.json"))):
         assert time.monotonic() < deadline and proc.poll() is None
@@ -351,19 +354,19 @@ def test_resume_after_an_interruption_runs_only_the_missing_episodes(work, seria
     assert "--resume" in err and len(err.strip().splitlines()) == 1
     before = {p.name: p.stat().st_mtime_ns for p in journal.glob("*.json")}
     assert 1 <= len(before) < 6
-    partial = json.loads((work / "cut" / "summary.json").read_text())
+    partial = json.loads((work / cut / "summary.json").read_text())
     assert partial["complete"] is False
-    assert partial["episodes"]["done"] == len(before) == len(rows(work / "cut"))
+    assert partial["episodes"]["done"] == len(before) == len(rows(work / cut))
 
-    again = sweep_cli("small.toml", "--out", "cut", "--workers", "0", cwd=work)
+    again = sweep_cli("small.toml", "--out", cut, "--workers", workers, cwd=work)
     assert again.returncode == 2 and "--resume" in again.stderr
-    resumed = sweep_cli("small.toml", "--out", "cut", "--workers", "0", "--resume", cwd=work)
+    resumed = sweep_cli("small.toml", "--out", cut, "--workers", workers, "--resume", cwd=work)
     assert resumed.returncode == 1, resumed.stderr
     assert f"{6 - len(before)} to run" in resumed.stdout
     after = {p.name: p.stat().st_mtime_ns for p in journal.glob("*.json")}
     assert len(after) == 6 and all(after[k] == v for k, v in before.items())
-    assert_same_rows(rows(work / "cut"), rows(serial))
-    assert json.loads((work / "cut" / "summary.json").read_text())["complete"] is True
+    assert_same_rows(rows(work / cut), rows(serial))
+    assert json.loads((work / cut / "summary.json").read_text())["complete"] is True
 
 
 def test_record_worst(work, serial):
