@@ -289,20 +289,21 @@ def _probe(address: str, given: str) -> None:
     host, port = _host_port(address, given)
     where = address if address == given else f"{address} ({given})"
     try:
-        with socket.create_connection((host, port), timeout=PROBE_TIMEOUT_S) as sock:
-            sock.settimeout(PROBE_TIMEOUT_S)
+        sock = socket.create_connection((host, port), timeout=PROBE_TIMEOUT_S)
+    except OSError as exc:  # refused, unreachable, no answer within the timeout
+        reason = exc.strerror or type(exc).__name__
+        raise EngineError(f"cannot reach the Ray cluster at {where}: {reason}") from None
+    head = b""
+    with sock:
+        try:
             sock.sendall(_HTTP2_PREFACE)
-            head = b""
             while len(head) < 9:
                 part = sock.recv(9 - len(head))
                 if not part:
                     break
                 head += part
-    except TimeoutError:
-        head = b""
-    except OSError as exc:
-        reason = exc.strerror or type(exc).__name__
-        raise EngineError(f"cannot reach the Ray cluster at {where}: {reason}") from None
+        except OSError:  # closed on us, or silent past the timeout: not a gRPC server
+            pass
     if len(head) < 9 or head[3] != _HTTP2_SETTINGS:
         raise EngineError(
             f"{where} answers, but not as a Ray cluster (no gRPC): give the head node's GCS "
