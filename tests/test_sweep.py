@@ -229,6 +229,37 @@ def test_an_address_that_is_not_rays_is_refused_at_once(work):
         server.server_close()
 
 
+class _FlakyRay:
+    """A stand-in for ``ray`` whose ``init`` fails with the given errors, then succeeds."""
+
+    def __init__(self, *errors: Exception) -> None:
+        self.errors, self.calls = list(errors), 0
+
+    def init(self, address: str, **options) -> None:
+        self.calls += 1
+        if self.errors:
+            raise self.errors.pop(0)
+
+
+def test_ray_client_server_failing_to_start_is_tried_once_more(monkeypatch):
+    """Ray Client's per-client server can die at start on a busy machine: one more try; any
+    other connection error, or a second failure, is raised at once."""
+    monkeypatch.setattr(engines.time, "sleep", lambda s: None)
+    failed = ConnectionError("Initialization failure: Starting Ray client server failed")
+    ray = _FlakyRay(failed)
+    engines._init_retrying_client(ray, "ray://127.0.0.1:10001", {})
+    assert ray.calls == 2
+    for address, errors in [
+        ("ray://127.0.0.1:10001", (ConnectionError("refused"),)),
+        ("127.0.0.1:6379", (failed,)),
+        ("ray://127.0.0.1:10001", (failed, failed)),
+    ]:
+        ray = _FlakyRay(*errors)
+        with pytest.raises(ConnectionError):
+            engines._init_retrying_client(ray, address, {})
+        assert ray.calls == len(errors)
+
+
 def test_ray_engine_reuses_each_workers_scene(work, serial):
     """One actor runs all 6 episodes and builds the scene once: the two grid points differ in
     noise only, so they share a scene (``SceneConfig``)."""

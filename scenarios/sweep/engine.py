@@ -189,7 +189,7 @@ class RayEngine:
                 ray.init(address="local", num_cpus=workers, include_dashboard=False, **quiet)
                 return workers
             try:
-                ray.init(address=address, **quiet)
+                _init_retrying_client(ray, address, quiet)
             except ConnectionError as exc:
                 raise EngineError(f"cannot join the Ray cluster at {address}: {exc}") from None
             except (ImportError, ValueError) as exc:  # Ray Client's packages missing
@@ -240,6 +240,27 @@ class RayEngine:
                     logger.debug("could not kill a worker", exc_info=True)
         self._actors = []
         self._ray.shutdown()
+
+
+CLIENT_ATTEMPTS = 2
+"""Tries to join through Ray Client (``ray://``): its server forks a process per client, and
+on a busy machine that process can die at start ("Starting Ray client server failed"); a
+second try, a second later, gets a new one."""
+
+
+def _init_retrying_client(ray: Any, address: str, options: dict[str, Any]) -> None:
+    """``ray.init(address)``, tried again once where Ray Client's per-client server failed to
+    start (``CLIENT_ATTEMPTS``); any other failure at once."""
+    for attempt in range(CLIENT_ATTEMPTS):
+        try:
+            ray.init(address=address, **options)
+            return
+        except ConnectionError as exc:
+            transient = address.startswith("ray://") and "client server failed" in str(exc)
+            if not transient or attempt + 1 == CLIENT_ATTEMPTS:
+                raise
+            logger.info("Ray Client's server did not start; trying again: %s", exc)
+            time.sleep(1.0)
 
 
 PROBE_TIMEOUT_S = 5.0
