@@ -5,9 +5,9 @@ Two figures, each the best and the median of ``--repeat`` timed calls, in second
 - ``synthetic``: ``vnav.calibration.calibrate_camera`` on a 30 s flight imaged at 30 Hz (900
   images, 8 cones, apexes projected exactly then given 0.4 px of noise, a 200 Hz pose stream):
   the solver alone, target under 10 s on 2 cores;
-- ``builtin``: ``scenarios.calibrate.calibrate_run`` (two passes, the second re-fitting every
-  apex on its mask) on the built-in ``calibration`` run at its own 20 Hz for 18 s (the
-  simulation itself is not timed).
+- ``builtin``: ``scenarios.judge.calibration.calibrate_run`` (two passes, the second
+  re-fitting every apex on its mask) on the built-in ``calibration`` run at its own 20 Hz for
+  18 s (the simulation itself is not timed).
 """
 
 from __future__ import annotations
@@ -69,8 +69,9 @@ def _time_s(fn, repeat: int) -> tuple[float, float, object]:
 
 
 def run(args: argparse.Namespace) -> dict:
-    from scenarios import builtin, pipeline
-    from scenarios.calibrate import calibrate_run
+    from scenarios import pipeline
+    from scenarios.judge.calibration import calibrate_run
+    from scenarios.scenario import builtin
     from vnav.calibration import calibrate_camera
 
     repeat = getattr(args, "repeat", 3)

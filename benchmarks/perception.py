@@ -67,7 +67,7 @@ def _frame() -> dict:
 
 def _uncertainty_noise(T_w_b: np.ndarray) -> tuple[SensorNoise, np.ndarray]:
     """The built-in ``uncertainty`` scenario's sensor noise and pose covariance at ``T_w_b``."""
-    from scenarios.builtin import load
+    from scenarios.scenario.builtin import load
     from vnav.sensor_noise import body_pose_covariance
 
     spec_noise = load("uncertainty").noise

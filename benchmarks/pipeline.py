@@ -27,8 +27,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from scenarios import builtin, pipeline
-from scenarios.runner import STAGES
+from scenarios import pipeline
+from scenarios.run.runner import STAGES
+from scenarios.scenario import builtin
 
 TARGETS = {
     "overhead_ratio": 0.5,

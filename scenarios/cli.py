@@ -9,10 +9,10 @@
 - ``vnav-demo sweep FILE.toml [--out DIR] [--workers N] [--address ADDR] [--resume]``: a
   scenario over a grid of values and many seeds, on Ray (``scenarios.sweep``).
 - ``vnav-demo calibrate FILE.rrd [--out FILE.yaml]``: the camera mount and clock offset
-  recovered from a recording (``scenarios.calibrate``).
+  recovered from a recording (``scenarios.commands.calibrate``).
 
-Output fits 80 columns (``scenarios.console.WIDTH``). Exit status: 0 when every check passed
-(or was skipped), 1 when a check failed or had no data, 2 for bad usage or bad input
+Output fits 80 columns (``scenarios.commands.console.WIDTH``). Exit status: 0 when every check
+passed (or was skipped), 1 when a check failed or had no data, 2 for bad usage or bad input
 (one line on stderr, no traceback; nothing is written), 3 when a run could not complete (I/O
 error, diverging simulation, out of memory, internal error), 128 + N on signal N.
 """
@@ -20,10 +20,10 @@ error, diverging simulation, out of memory, internal error), 128 + N on signal N
 from __future__ import annotations
 
 import argparse
+import importlib
 import os
 import sys
-import textwrap
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 __all__ = ["main"]
 
@@ -41,72 +41,14 @@ class _Parser(argparse.ArgumentParser):
         raise _UsageError(f"{self.prog}: error: {message} (see {PROG} --help)")
 
 
-def _lecture(args: argparse.Namespace) -> int:
-    from scenarios import lecture
+def _verb(name: str) -> Callable[[argparse.Namespace], int]:
+    """The ``command(args)`` of ``scenarios.commands.<name>``, imported when it runs (so that
+    ``vnav-demo list`` does not load MuJoCo, nor ``vnav-demo run`` Ray)."""
 
-    outcomes = [lecture.evaluate(e) for e in lecture.EXAMPLES]
-    from scenarios.console import WIDTH, say
+    def command(args: argparse.Namespace) -> int:
+        return importlib.import_module(f"scenarios.commands.{name}").command(args)
 
-    say("MIT 16.485 VNAV lecture 1: every worked example and quiz, computed by vnav")
-    say(lecture.table(outcomes, WIDTH))
-    return 0 if all(o.agrees for o in outcomes) else 1
-
-
-def _list(args: argparse.Namespace) -> int:
-    from scenarios import builtin
-    from scenarios.console import WIDTH, say
-
-    # Each name, then its description wrapped beside it (80 columns).
-    width = max(len(n) for n in builtin.names()) + 2
-    lines = []
-    for name in builtin.names():
-        lines += textwrap.wrap(
-            builtin.REGISTRY[name]()["description"],
-            WIDTH,
-            initial_indent=f"{name:<{width}}",
-            subsequent_indent=" " * width,
-        )
-    say("\n".join(lines))
-    return 0
-
-
-def show_name(name: str) -> str:
-    """The name ``vnav-demo show NAME`` gives its copy, so that running the copy writes
-    ``my-NAME.rrd`` and leaves the built-in's files alone."""
-    return f"my-{name}"
-
-
-def _show(args: argparse.Namespace) -> int:
-    from scenarios import builtin, toml_out
-
-    if args.name not in builtin.REGISTRY:
-        print(
-            f"{PROG}: error: unknown scenario {args.name!r}; valid names: "
-            f"{', '.join(builtin.names())}",
-            file=sys.stderr,
-        )
-        return 2
-    from scenarios.console import say
-
-    scenario = {**builtin.REGISTRY[args.name](), "name": show_name(args.name)}
-    header = toml_out.comment_lines(
-        f"{PROG} show {args.name}: the built-in as a scenario file. Save it as FILE.toml, edit "
-        f"it, run it with `{PROG} run FILE.toml`: it writes {scenario['name']}.rrd and .json."
-    )
-    say("\n".join(header) + "\n" + toml_out.dumps(scenario, comments=True).rstrip("\n"))
-    return 0
-
-
-def _calibrate(args: argparse.Namespace) -> int:
-    from scenarios import calibrate
-
-    return calibrate.command(args.recording, args.out)
-
-
-def _run(args: argparse.Namespace) -> int:
-    from scenarios import run_command
-
-    return run_command.run(args)
+    return command
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -121,14 +63,14 @@ def build_parser() -> argparse.ArgumentParser:
         description="Print every worked example and quiz answer of MIT 16.485 VNAV lecture 1, "
         "the lecture's answer next to vnav's. Exit status 1 if any disagrees.",
     )
-    p.set_defaults(func=_lecture)
+    p.set_defaults(func=_verb("lecture"))
 
     p = sub.add_parser(
         "list",
         help="list the built-in scenarios",
         description="List the built-in scenarios with a one-line description.",
     )
-    p.set_defaults(func=_list)
+    p.set_defaults(func=_verb("list"))
 
     p = sub.add_parser(
         "show",
@@ -137,7 +79,7 @@ def build_parser() -> argparse.ArgumentParser:
         "key commented, named my-NAME so that running it leaves the built-in's files alone.",
     )
     p.add_argument("name", metavar="NAME", help="a built-in scenario (see `vnav-demo list`)")
-    p.set_defaults(func=_show)
+    p.set_defaults(func=_verb("show"))
 
     _add_run_parser(sub)
     _add_sweep_parser(sub)
@@ -154,7 +96,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("recording", metavar="FILE.rrd", help="a recording from vnav-demo run")
     p.add_argument("--out", default=None, metavar="FILE.yaml", help="also write the answer as YAML")
-    p.set_defaults(func=_calibrate)
+    p.set_defaults(func=_verb("calibrate"))
     return parser
 
 
@@ -203,7 +145,7 @@ def _add_run_parser(sub) -> None:
         help="also write DIR/<name>.truth.tum and DIR/<name>.pnp.tum (camera trajectories "
         "for evo: true, and from PnP on the cones)",
     )
-    p.set_defaults(func=_run)
+    p.set_defaults(func=_verb("run"))
 
 
 def _add_sweep_parser(sub) -> None:
@@ -255,13 +197,7 @@ def _add_sweep_parser(sub) -> None:
         help="write the K worst episodes' recordings and reports into DIR/worst/",
     )
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
-    p.set_defaults(func=_sweep)
-
-
-def _sweep(args: argparse.Namespace) -> int:
-    from scenarios.sweep import command
-
-    return command.run(args)
+    p.set_defaults(func=_verb("sweep"))
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -3,9 +3,9 @@
 The command line (``vnav-demo run``), the benchmarks and the tests all call ``run``, so a
 scenario is run, judged and written the same way everywhere::
 
-    run     scenarios.runner.run_scenario   (MuJoCo; the recording observes every tick)
-    judge   scenarios.checks.judge          (the spec's checks, else the default ones)
-    report  scenarios.report.build / write  (JSON)
+    run     scenarios.run.runner.run_scenario   (MuJoCo; the recording observes every tick)
+    judge   scenarios.judge.checks.judge          (the spec's checks, else the default ones)
+    report  scenarios.judge.report.build / write  (JSON)
 """
 
 from __future__ import annotations
@@ -16,12 +16,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from scenarios import checks, report
-from scenarios.outputs import OutputPair
-from scenarios.recording import Recording
-from scenarios.records import RunResult
-from scenarios.runner import run_scenario
-from scenarios.spec import ScenarioSpec
+from scenarios.judge import checks, report
+from scenarios.record.outputs import OutputPair
+from scenarios.record.recording import Recording
+from scenarios.run.records import RunResult
+from scenarios.run.runner import run_scenario
+from scenarios.scenario import check_kinds
+from scenarios.scenario.spec import ScenarioSpec
 from sim.scene_cache import SceneCache
 
 __all__ = ["Outcome", "output_paths", "run"]
@@ -38,7 +39,7 @@ class Outcome:
     judged : list of CheckResult
         Every check's outcome.
     report : dict
-        The JSON report (``scenarios.report.build``).
+        The JSON report (``scenarios.judge.report.build``).
     rrd_path, json_path : Path or None
         The files written, or None when nothing was written.
     """
@@ -68,27 +69,27 @@ def run(
     progress: Callable[[int, int], None] | None = None,
     scenes: SceneCache | None = None,
 ) -> Outcome:
-    """Run ``spec``, judge it with its checks (or ``checks.default_checks()``), report it.
+    """Run ``spec``, judge it with its checks (or ``check_kinds.default_checks()``), report it.
 
     Parameters
     ----------
     spec : ScenarioSpec
     seed : int
-        Seeds the run (see ``scenarios.runner.run_scenario``).
+        Seeds the run (see ``scenarios.run.runner.run_scenario``).
     out_dir : Path, optional
         If given, the recording and the report are written there (``output_paths``): both or
-        neither, checked complete (``scenarios.outputs``). The report names the recording's
+        neither, checked complete (``scenarios.record.outputs``). The report names the recording's
         id, unique to this run.
     progress : callable(done, total), optional
         Called after every camera tick.
     scenes : sim.scene_cache.SceneCache, optional
-        Worlds and renderers to reuse across runs (``scenarios.runner.run_scenario``).
+        Worlds and renderers to reuse across runs (``scenarios.run.runner.run_scenario``).
 
     Raises
     ------
     sim.world.SimulationError
         If the flight diverges; nothing is written then.
-    scenarios.outputs.OutputError
+    scenarios.record.outputs.OutputError
         If the files cannot be written whole (a full disk...); the previous pair stays.
     """
     recording_id = f"{spec.name}-seed{seed}-{uuid.uuid4().hex[:12]}"
@@ -116,10 +117,10 @@ def run(
 def _calibrate_if_checked(spec: ScenarioSpec, result: RunResult) -> None:
     """Recover the camera mount and clock offset from the run when a check judges them."""
     if any(c.kind.startswith("calibration_") for c in spec.checks):
-        from scenarios.calibrate import calibrate_run
+        from scenarios.judge.calibration import calibrate_run
 
         result.calibration = calibrate_run(result)
 
 
 def _judge(spec: ScenarioSpec, result: RunResult) -> list[checks.CheckResult]:
-    return [checks.judge(c, result) for c in (spec.checks or checks.default_checks())]
+    return [checks.judge(c, result) for c in (spec.checks or check_kinds.default_checks())]

@@ -219,7 +219,7 @@ class SceneConfig:
         Initial body attitude ``R_w_b`` as a unit quaternion, scalar last.
     timestep_s : float
         Physics time step, seconds, in (0, 0.1]. The default, 5 ms, samples the state at
-        200 Hz: the pose stream's default rate (``scenarios.spec.Timing``).
+        200 Hz: the pose stream's default rate (``scenarios.scenario.spec.Timing``).
     render_quality : str
         ``"fast"`` or ``"high"`` (see ``RENDER_QUALITIES``).
     ground_size_m : float

@@ -7,7 +7,7 @@ with ``SEGMENTS`` facets around their axis. Boxes and meshes are shaded flat (ve
 shared, each triangle with its own normal: crisp edges); round shapes share their vertices
 with averaged normals (smooth, and three times fewer vertices in the recording).
 
-This module only reads the model; the recording (``scenarios.recording``) gets plain arrays
+This module only reads the model; the recording (``scenarios.record.recording``) gets plain arrays
 (``TriangleMesh``) and needs no MuJoCo.
 """
 

@@ -1,8 +1,8 @@
 """Sensor noise: what the simulator adds to its exact images and declared camera mount.
 
-The scenario's ``[noise]`` table (``scenarios.spec.Noise``) sets the figures; every draw comes
-from a generator seeded by the run's seed. The truth is never touched: these functions return
-noisy copies, or, with their noise off, the input itself (not a copy: treat it as
+The scenario's ``[noise]`` table (``scenarios.scenario.spec.Noise``) sets the figures; every
+draw comes from a generator seeded by the run's seed. The truth is never touched: these
+functions return noisy copies, or, with their noise off, the input itself (not a copy: treat it as
 read-only). The estimator is told the same figures (``vnav.sensor_noise.SensorNoise``) and
 propagates them into each estimate's covariance.
 """

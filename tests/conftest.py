@@ -39,7 +39,8 @@ def rng() -> np.random.Generator:
 @pytest.fixture(scope="session")
 def builtin_runs(tmp_path_factory):
     """Every built-in scenario, run once per session with its recording and report written."""
-    from scenarios import builtin, pipeline
+    from scenarios import pipeline
+    from scenarios.scenario import builtin
 
     out = tmp_path_factory.mktemp("builtin-runs")
     runs = {}

@@ -1,4 +1,4 @@
-"""scenarios.builtin: every built-in scenario runs and passes its own checks, with no NaN
+"""scenarios.scenario.builtin: every built-in scenario runs and passes its own checks, with no NaN
 anywhere, and teaches its lesson (the frame problem, the yaw sweep, the gimbal lock).
 
 Scenarios run once per session (the ``builtin_runs`` fixture in conftest.py) at 5 Hz instead
@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from helpers import BUILTIN_TEST_RATE_HZ as TEST_RATE_HZ
 
-from scenarios import builtin
+from scenarios.scenario import builtin
 from vnav import quat, se3, so3
 
 

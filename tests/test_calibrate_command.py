@@ -9,8 +9,9 @@ import re
 import numpy as np
 import pytest
 
-from scenarios import calibrate
 from scenarios.cli import main
+from scenarios.judge.calibration import inputs_from_run
+from scenarios.record.reader import calibration_inputs
 from vnav import so3
 
 
@@ -59,8 +60,8 @@ def test_recording_inputs_are_the_runs(builtin_runs):
     from vnav.camera import PinholeCamera
 
     camera = PinholeCamera.from_fovy(cam.fovy_deg, cam.width, cam.height)
-    mine = calibrate.inputs_from_run(run.result, camera)
-    read = calibrate.inputs_from_recording(run.rrd)
+    mine = inputs_from_run(run.result, camera)
+    read = calibration_inputs(run.rrd)
     np.testing.assert_allclose(read.pose_stamps_s, mine.pose_stamps_s, atol=1e-9)
     np.testing.assert_allclose(read.T_w_b, mine.T_w_b, atol=1e-5)
     np.testing.assert_allclose(read.image_stamps_cam_s, mine.image_stamps_cam_s, atol=1e-12)
@@ -113,7 +114,8 @@ def test_calibration_with_image_noise_stays_within_the_noisy_targets():
     stay within the issue's noisy targets, 0.2 deg, 2 cm and 3 ms."""
     import dataclasses
 
-    from scenarios import builtin, pipeline
+    from scenarios import pipeline
+    from scenarios.scenario import builtin
 
     spec = builtin.load("calibration")
     spec = dataclasses.replace(

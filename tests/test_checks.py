@@ -1,30 +1,30 @@
-"""scenarios.checks: the registered check kinds, their figures and verdicts."""
+"""scenarios.judge.checks: the registered check kinds, their figures and verdicts."""
 
 from __future__ import annotations
 
 import dataclasses
 import math
-import operator
 import re
 from statistics import NormalDist
 
 import numpy as np
 import pytest
 
-from scenarios import builtin, checks
-from scenarios.records import CalibrationRecord, DetectionRecord, RunResult, TickRecord
-from scenarios.spec import from_dict
+from scenarios.judge import checks
+from scenarios.run.records import CalibrationRecord, DetectionRecord, RunResult, TickRecord
+from scenarios.scenario import builtin, check_kinds
+from scenarios.scenario.spec import from_dict
 from vnav.detect import ConeDetection
 from vnav.estimators import NoEstimate, known_height_max_elevation_rad
 from vnav.methods import METHODS
 
 
-@pytest.mark.parametrize("kind", sorted(checks.KINDS))
+@pytest.mark.parametrize("kind", sorted(check_kinds.KINDS))
 def test_every_registered_check_kind_is_accepted_by_the_parser_and_documented(kind):
     scenario = builtin.REGISTRY["frame-problem"]()
     scenario["checks"] = [{"kind": kind, "limit": 1.0}]
     (check,) = from_dict(scenario).checks
-    assert check.kind == kind and checks.KINDS[kind].doc
+    assert check.kind == kind and check_kinds.KINDS[kind].doc
 
 
 # ------------------------------------------------------------- each kind on a run by hand
@@ -178,30 +178,30 @@ FIGURES = {
 
 
 def test_every_kind_has_a_figure_by_hand() -> None:
-    assert set(FIGURES) == set(checks.KINDS)
+    assert set(FIGURES) == set(check_kinds.KINDS)
 
 
 @pytest.mark.parametrize("kind", sorted(FIGURES))
 def test_figure_and_verdict(run: RunResult, kind: str) -> None:
     figure = FIGURES[kind]
-    result = checks.judge(checks.Check(kind, figure), run)
+    result = checks.judge(check_kinds.Check(kind, figure), run)
     assert result.value == pytest.approx(figure, rel=1e-12)
-    assert checks.judge(checks.Check(kind, result.value), run).passed  # at the limit: passes
-    le = checks.KINDS[kind].passes is operator.le
+    assert checks.judge(check_kinds.Check(kind, result.value), run).passed  # at the limit: passes
+    le = check_kinds.KINDS[kind].at_most
     stricter = figure * (0.99 if le else 1.01)
-    assert not checks.judge(checks.Check(kind, stricter), run).passed
+    assert not checks.judge(check_kinds.Check(kind, stricter), run).passed
     looser = figure * (1.01 if le else 0.99)
-    assert checks.judge(checks.Check(kind, looser), run).passed
+    assert checks.judge(check_kinds.Check(kind, looser), run).passed
 
 
 def test_a_check_with_nothing_to_judge_has_no_data_and_fails(run: RunResult) -> None:
     # The naive method has no accuracy bound; no tick of an empty run has errors.
-    result = checks.judge(checks.Check("error_bound", 1e9, "naive"), run)
+    result = checks.judge(check_kinds.Check("error_bound", 1e9, "naive"), run)
     assert result.value is None and result.outcome is checks.Outcome.NO_DATA
     assert not result.passed and result.outcome.fails_run
     empty = RunResult(spec=None, seed=0, ticks=[_tick(0, [], [])])
     for kind in ("max_error", "median_error", "detection_rate", "tracking_error"):
-        result = checks.judge(checks.Check(kind, 1e9), empty)
+        result = checks.judge(check_kinds.Check(kind, 1e9), empty)
         assert result.value is None and result.outcome is checks.Outcome.NO_DATA, kind
         assert result.reason and result.shown == result.reason
     assert result.as_dict() == {
@@ -215,11 +215,12 @@ def test_a_check_with_nothing_to_judge_has_no_data_and_fails(run: RunResult) -> 
         "shown": "the flight has no reference to track (kinematic keyframes are exact)",
         "reason": "the flight has no reference to track (kinematic keyframes are exact)",
     }
-    assert checks.judge(checks.Check("max_error", 1.0), empty).reason == (
+    assert checks.judge(check_kinds.Check("max_error", 1.0), empty).reason == (
         "no cone was detected in any camera image"
     )
     assert (
-        "no cone was fully in view" in checks.judge(checks.Check("detection_rate", 1), empty).shown
+        "no cone was fully in view"
+        in checks.judge(check_kinds.Check("detection_rate", 1), empty).shown
     )
 
 
@@ -251,7 +252,7 @@ def test_default_check_skips_a_method_the_geometry_rules_out() -> None:
     """known_height refused every view as too steep: the default bound is skipped (the run is
     not failed for it) and says why; the same check written by a user has no data and fails."""
     run = _steep_run(NoEstimate.STEEP)
-    defaults = {c.method: c for c in checks.default_checks() if c.kind == "error_bound"}
+    defaults = {c.method: c for c in check_kinds.default_checks() if c.kind == "error_bound"}
     skipped = checks.judge(defaults["known_height"], run)
     assert skipped.outcome is checks.Outcome.SKIPPED and not skipped.outcome.fails_run
     limit_deg = math.degrees(known_height_max_elevation_rad())
@@ -267,7 +268,7 @@ def test_default_check_skips_a_method_the_geometry_rules_out() -> None:
 
 def test_default_check_fails_when_no_data_is_not_the_geometry() -> None:
     run = _steep_run(NoEstimate.NO_APEX)
-    (kh,) = [c for c in checks.default_checks() if c.method == "known_height"]
+    (kh,) = [c for c in check_kinds.default_checks() if c.method == "known_height"]
     result = checks.judge(kh, run)
     assert result.outcome is checks.Outcome.NO_DATA and "no apex found" in result.reason
     # Outside the contract's domain nothing is promised: the default bound is skipped.
@@ -279,7 +280,7 @@ def test_world_spread_without_motion_in_the_camera_has_no_data() -> None:
     """The cone's camera coordinates never moved: a constant world estimate shows nothing
     (the naive estimate would be constant too)."""
     run = _steep_run(NoEstimate.STEEP)
-    result = checks.judge(checks.Check("world_estimate_spread", 0.1), run)
+    result = checks.judge(check_kinds.Check("world_estimate_spread", 0.1), run)
     assert result.outcome is checks.Outcome.NO_DATA
     assert "camera coordinates moved 0 m" in result.reason
 
@@ -299,13 +300,13 @@ def _numbers(text: str) -> list[float]:
     ],
 )
 def test_shown_values_carry_units_next_to_the_limit(run: RunResult, kind: str, unit_text: str):
-    result = checks.judge(checks.Check(kind, 0.5), run)
+    result = checks.judge(check_kinds.Check(kind, 0.5), run)
     assert unit_text in result.shown
     value, limit = _numbers(result.shown)
-    scale = 100.0 if checks.KINDS[kind].unit is checks.Unit.FRACTION else 1.0
+    scale = 100.0 if check_kinds.KINDS[kind].unit is check_kinds.Unit.FRACTION else 1.0
     assert value == pytest.approx(scale * FIGURES[kind], rel=5e-3)
     assert limit == pytest.approx(scale * 0.5)
-    if checks.KINDS[kind].unit is checks.Unit.COUNT:
+    if check_kinds.KINDS[kind].unit is check_kinds.Unit.COUNT:
         assert isinstance(result.value, int) and str(result.value) == result.shown.split()[0]
 
 
@@ -321,7 +322,7 @@ def _bound_run(errors_m: list[float], ranges_m: list[float]) -> RunResult:
 
 def test_error_bound_shown_in_percent_of_range_or_metres() -> None:
     """depth_image: every error <= max(5 cm, 1% of range), 5 m the crossover."""
-    check = checks.Check("error_bound", 1.0, "depth_image")
+    check = check_kinds.Check("error_bound", 1.0, "depth_image")
     far = checks.judge(check, _bound_run([0.02, 0.1], [10.0, 20.0]))
     # Beyond 5 m the bound is 1% of range: the figure is the worst error in % of range.
     assert (
@@ -335,17 +336,17 @@ def test_error_bound_shown_in_percent_of_range_or_metres() -> None:
 
 
 def test_check_labels_and_bad_checks() -> None:
-    assert checks.Check("max_error", 0.1, "ground_plane").label == "ground_plane max_error"
-    assert checks.Check("detection_rate", 0.9).label == "detection_rate"
-    assert checks.Check("max_error", 0.1, name="mine").label == "mine"
+    assert check_kinds.Check("max_error", 0.1, "ground_plane").label == "ground_plane max_error"
+    assert check_kinds.Check("detection_rate", 0.9).label == "detection_rate"
+    assert check_kinds.Check("max_error", 0.1, name="mine").label == "mine"
     with pytest.raises(ValueError, match=r"unknown check 'min_error'; valid: \["):
-        checks.Check("min_error", 0.1)
+        check_kinds.Check("min_error", 0.1)
     with pytest.raises(ValueError, match=r"unknown method 'lidar'"):
-        checks.Check("max_error", 0.1, "lidar")
+        check_kinds.Check("max_error", 0.1, "lidar")
 
 
 def test_default_checks_are_every_bound_and_the_detection_rate() -> None:
-    defaults = checks.default_checks()
+    defaults = check_kinds.default_checks()
     bounds = [c for c in defaults if c.kind == "error_bound"]
     assert [c.method for c in bounds] == [m.name for m in METHODS if m.bound is not None]
     assert all(c.limit == 1.0 for c in bounds)
@@ -357,7 +358,7 @@ def test_default_checks_are_every_bound_and_the_detection_rate() -> None:
 def test_calibration_checks_without_a_calibration_have_no_data() -> None:
     """A run not calibrated, and one whose flight was refused: no data, with the reason."""
     plain = RunResult(spec=None, seed=0, ticks=[_tick(0, [], [])])
-    result = checks.judge(checks.Check("calibration_rotation", 0.05), plain)
+    result = checks.judge(check_kinds.Check("calibration_rotation", 0.05), plain)
     assert result.outcome is checks.Outcome.NO_DATA and "not calibrated" in result.reason
     refused = RunResult(
         spec=None,
@@ -365,10 +366,10 @@ def test_calibration_checks_without_a_calibration_have_no_data() -> None:
         ticks=[_tick(0, [], [])],
         calibration=CalibrationRecord(None, None, None, 0, {}, refused="too few cones seen"),
     )
-    result = checks.judge(checks.Check("calibration_time_offset", 0.001), refused)
+    result = checks.judge(check_kinds.Check("calibration_time_offset", 0.001), refused)
     assert result.outcome is checks.Outcome.NO_DATA and "too few cones seen" in result.reason
     shown = checks.judge(
-        checks.Check("calibration_time_offset", 0.001),
+        check_kinds.Check("calibration_time_offset", 0.001),
         RunResult(
             spec=None,
             seed=0,

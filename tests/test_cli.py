@@ -15,9 +15,11 @@ import pytest
 from helpers import read_rows
 from rerun.chunk import RrdReader
 
-import scenarios.runner
-from scenarios import builtin, checks, pipeline
+import scenarios.run.runner
+from scenarios import pipeline
 from scenarios.cli import main
+from scenarios.judge import checks
+from scenarios.scenario import builtin, check_kinds
 
 PITCH_90_TOML = textwrap.dedent("""\
     name = "pitch-ninety"
@@ -185,7 +187,7 @@ def test_copy_of_a_builtin_without_checks_passes_and_says_what_it_skipped(
     assert status == 0, out
     rep = json.loads((tmp_path / "out" / "my-frame-problem.json").read_text())
     outcomes = {c["name"]: c for c in rep["checks"]}
-    assert {c.label for c in checks.default_checks()} == set(outcomes)
+    assert {c.label for c in check_kinds.default_checks()} == set(outcomes)
     skipped = outcomes["known_height median <= 5% of range"]
     assert skipped["outcome"] == "skipped" and "seen steeper than 69 deg" in skipped["reason"]
     assert rep["passed"] and rep["methods"]["known_height"]["no_estimate"] == {"steep": 51}
@@ -309,7 +311,7 @@ def test_interrupted_run_leaves_no_partial_file_and_keeps_the_old_one(tmp_path, 
     rrd = tmp_path / "frame-problem.rrd"
     rrd.write_bytes(b"an earlier recording")
     calls = {"n": 0}
-    real_detect = scenarios.runner.detect_cones
+    real_detect = scenarios.run.runner.detect_cones
 
     def detect_then_fail(rgb):
         calls["n"] += 1
@@ -317,7 +319,7 @@ def test_interrupted_run_leaves_no_partial_file_and_keeps_the_old_one(tmp_path, 
             raise KeyboardInterrupt
         return real_detect(rgb)
 
-    monkeypatch.setattr(scenarios.runner, "detect_cones", detect_then_fail)
+    monkeypatch.setattr(scenarios.run.runner, "detect_cones", detect_then_fail)
     with pytest.raises(KeyboardInterrupt):
         pipeline.run(spec, out_dir=tmp_path)
     assert rrd.read_bytes() == b"an earlier recording"
@@ -325,7 +327,7 @@ def test_interrupted_run_leaves_no_partial_file_and_keeps_the_old_one(tmp_path, 
 
 
 def test_lecture_command_prints_every_example_agreeing(capsys):
-    from scenarios import lecture
+    from scenarios.commands import lecture
 
     assert main(["lecture"]) == 0
     out = capsys.readouterr().out
@@ -446,7 +448,7 @@ def test_injected_short_recording_exits_3_and_keeps_the_previous_pair(
 ):
     """What the Rerun file sink leaves on a full disk (it only logs the error): a file that
     stops short. Injected by cutting the finished file in half."""
-    from scenarios.recording import Recording
+    from scenarios.record.recording import Recording
 
     before = _first_pair(tmp_path)
     real_finish = Recording.finish
@@ -466,7 +468,6 @@ def test_injected_short_recording_exits_3_and_keeps_the_previous_pair(
 @pytest.mark.parametrize("fail", [KeyboardInterrupt, RuntimeError])
 def test_failure_while_judging_keeps_the_previous_pair(tmp_path, capsys, monkeypatch, fail):
     """No new .rrd beside the previous run's .json: a pair is never from two runs."""
-    from scenarios import checks
 
     before = _first_pair(tmp_path)
 
@@ -495,7 +496,7 @@ def test_diverging_simulation_exits_3(tmp_path, capsys, monkeypatch):
     def diverge(*args, **kwargs):
         raise SimulationError("t = 0.0100 s: qpos is not finite (injected)")
 
-    monkeypatch.setattr(scenarios.runner, "evaluate_tick", diverge)
+    monkeypatch.setattr(scenarios.run.runner, "evaluate_tick", diverge)
     assert main(["run", "frame-problem", "--out", str(tmp_path), "--quiet"]) == 3
     assert "diverged" in capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.iterdir()) == [".vnav-demo.lock"]
@@ -506,10 +507,11 @@ def test_a_signal_turned_into_another_error_still_ends_as_the_signal(tmp_path, c
     and then fails) must not turn SIGHUP into "internal error", exit 3."""
     import signal
 
-    from scenarios import run_command
-
     def caught_then_failed(*args, **kwargs):
-        run_command._caught.append(signal.SIGHUP)  # what the handler records
+        try:  # the handler records the signal and raises; a library swallows that
+            os.kill(os.getpid(), signal.SIGHUP)
+        except BaseException:
+            pass
         raise RuntimeError("a library's own error after the signal")
 
     monkeypatch.setattr(scenarios.pipeline, "run", caught_then_failed)
@@ -700,8 +702,8 @@ def test_a_bare_name_is_the_builtin_even_beside_a_file_of_that_name(tmp_path, ca
 
 
 def test_a_second_run_into_the_same_directory_is_refused(tmp_path, capsys):
-    from scenarios import outputs
+    from scenarios.record import outputs
 
     with outputs.directory_lock(tmp_path):  # another run holds it (flock is per open file)
         assert main(["run", "frame-problem", "--out", str(tmp_path), "--duration", "0.5"]) == 2
-    assert "another vnav-demo run is writing into" in capsys.readouterr().err
+    assert "another vnav-demo command is writing into" in capsys.readouterr().err

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from scenarios import schema
+from scenarios.scenario import toml_out
 from vnav.methods import CONTRACT_DOMAIN, METHODS
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -50,13 +50,13 @@ def _readme_scenario_block() -> str:
 
 
 def test_readme_example_is_the_schemas():
-    assert _readme_scenario_block() == schema.example_toml()
+    assert _readme_scenario_block() == toml_out.example_toml()
 
 
 def test_readme_example_is_a_valid_scenario():
     import tomllib
 
-    from scenarios.spec import from_dict
+    from scenarios.scenario.spec import from_dict
 
     spec = from_dict(tomllib.loads(_readme_scenario_block()), where="README.md")
     assert spec.name == "my-scene" and spec.flight.mode == "kinematic"

@@ -1,7 +1,7 @@
 """Every worked example and quiz answer of MIT 16.485 VNAV lecture 1 (../shared/seed/).
 
 The expected values are the lecture's own printed numbers, typed in here (not read from
-``scenarios.lecture``), compared at the precision the lecture prints them.
+``scenarios.commands.lecture``), compared at the precision the lecture prints them.
 """
 
 from __future__ import annotations

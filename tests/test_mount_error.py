@@ -1,5 +1,6 @@
 """``[camera.mount_error]``: the simulator renders through the true mount, the estimator is told
-the declared one (``sim.config.MountError``, ``scenarios.spec``, ``scenarios.runner``)."""
+the declared one (``sim.config.MountError``, ``scenarios.scenario.spec``,
+``scenarios.run.runner``)."""
 
 from __future__ import annotations
 
@@ -9,8 +10,9 @@ import numpy as np
 import pytest
 from helpers import mujoco_T_w_c
 
-from scenarios import builtin, pipeline
-from scenarios.spec import ScenarioError, from_dict
+from scenarios import pipeline
+from scenarios.scenario import builtin
+from scenarios.scenario.spec import ScenarioError, from_dict
 from sim.config import CameraConfig, MountError, SceneConfig
 from sim.world import World
 from vnav import se3, so3

@@ -1,4 +1,4 @@
-"""scenarios.outputs: a run's recording and report are put in place together, complete, or
+"""scenarios.record.outputs: a run's recording and report are put in place together, complete, or
 not at all, and the previous pair survives every failure."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from scenarios import outputs
+from scenarios.record import outputs
 
 
 @pytest.fixture(scope="module")
@@ -18,7 +18,8 @@ def good_rrd(tmp_path_factory) -> bytes:
     """The bytes of a complete recording (a short built-in run)."""
     import dataclasses
 
-    from scenarios import builtin, pipeline
+    from scenarios import pipeline
+    from scenarios.scenario import builtin
 
     out = tmp_path_factory.mktemp("good")
     spec = dataclasses.replace(builtin.load("frame-problem"), duration_s=0.5)

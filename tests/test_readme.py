@@ -26,9 +26,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from scenarios import builtin, pipeline
+from scenarios import pipeline
 from scenarios.cli import main
-from scenarios.spec import from_dict
+from scenarios.scenario import builtin
+from scenarios.scenario.spec import from_dict
 
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text()

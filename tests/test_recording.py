@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from helpers import R_GLC_TO_OPTICAL, mat3x3, mujoco_T_w_c, read_rows
 
-from scenarios import builtin
+from scenarios.scenario import builtin
 from sim.render import Renderer
 from sim.world import World
 from vnav import quat, se3
@@ -471,7 +471,7 @@ def test_quaternion_plotted_with_a_continuous_sign(recorded):
 
 
 def test_depth_for_display_keeps_depth_to_a_64th_and_draws_no_return_as_far():
-    from scenarios.recording import DEPTH_METER, depth_for_display_mm
+    from scenarios.record.recording import DEPTH_METER, depth_for_display_mm
 
     depth_m = np.geomspace(0.05, 65.0, 2000)
     shown_m = depth_for_display_mm(depth_m).astype(np.float64) / DEPTH_METER
@@ -736,7 +736,7 @@ def test_plot_axis_tops_hold_a_labelled_tick(x):
     """The viewer labels its y ticks at powers of ten some 20 pixels apart, never at the very
     top: an axis from 0 must hold a power of ten p <= top (inside) with top / p small enough
     (<= 2.3) that p is labelled in a 60-pixel plot, and must show x."""
-    from scenarios.recording import _axis_top
+    from scenarios.record.recording import _axis_top
 
     top = _axis_top(x)
     assert top >= x

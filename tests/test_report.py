@@ -1,4 +1,4 @@
-"""scenarios.report: a built-in run's report against its records and the scene's truth (the
+"""scenarios.judge.report: a built-in run's report against its records and the scene's truth (the
 errors recomputed from the estimates and the true cones, per method and per range bin)."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from scenarios import builtin
+from scenarios.scenario import builtin
 from vnav.methods import METHOD_NAMES
 
 
@@ -77,7 +77,7 @@ def test_every_matched_detection_has_an_estimate_or_a_reason(runs, name):
 def test_check_outcomes_decide_whether_the_report_passed(runs):
     """``passed`` is false exactly when a check failed or had no data; a skipped check does
     not fail the run."""
-    from scenarios import checks, report
+    from scenarios.judge import checks, report
 
     _, result, judged, _ = runs["frame-problem"]
     skipped = dataclasses.replace(judged[0], outcome=checks.Outcome.SKIPPED)

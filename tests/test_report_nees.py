@@ -1,10 +1,10 @@
-"""The report's NEES section (``scenarios.report.nees_summary``) and the ``consistent`` check
+"""The report's NEES section (``scenarios.judge.report.nees_summary``) and the ``consistent`` check
 on runs built by hand from Gaussian errors of known covariance.
 
 Each matched estimate is the true cone plus an error drawn from a covariance ``C``; the
 record declares ``C``, ``C / 4`` (overconfident) or ``4 C`` (underconfident) and carries the
 NEES ``e^T C_declared^+ e`` computed here with numpy, with the covariance's rank as its
-degrees of freedom, as ``scenarios.evaluate`` records them. When the declared covariance is
+degrees of freedom, as ``scenarios.run.evaluate`` records them. When the declared covariance is
 the true one, the sum of ``n`` NEES values is chi-square with the sum of their degrees of
 freedom (Bar-Shalom, Li & Kirubarajan 2001, sec. 5.4.2): the reference figures are numpy's
 and SciPy's.
@@ -22,9 +22,10 @@ import pytest
 from helpers import REFERENCE_SEED
 from scipy.stats import chi2
 
-from scenarios import builtin, checks, report
-from scenarios.records import DetectionRecord, RunResult, TickRecord
-from scenarios.spec import from_dict
+from scenarios.judge import checks, report
+from scenarios.run.records import DetectionRecord, RunResult, TickRecord
+from scenarios.scenario import builtin, check_kinds
+from scenarios.scenario.spec import from_dict
 from vnav.detect import ConeDetection
 from vnav.methods import METHOD_NAMES
 from vnav.uncertainty import nees
@@ -165,7 +166,7 @@ def honest():
 
 def test_hand_made_nees_is_what_the_pipeline_computes(honest) -> None:
     """The records' NEES (numpy's pseudo-inverse and rank) equal ``vnav.uncertainty.nees`` of
-    the estimate's error against its covariance, which is what ``scenarios.evaluate``
+    the estimate's error against its covariance, which is what ``scenarios.run.evaluate``
     records: the hand-made runs are built like real ones."""
     run, _ = honest
     for d in (d for t in run.ticks for d in t.detections):
@@ -238,7 +239,7 @@ def test_consistent_only_when_the_declared_covariance_is_right(
     summary = report.nees_summary(run, method)
     in_band, p_exact = _scipy_verdict(values[method])
     assert summary["consistent"] is expected is in_band
-    result = checks.judge(checks.Check("consistent", 0.05, method), run)
+    result = checks.judge(check_kinds.Check("consistent", 0.05, method), run)
     assert result.value == pytest.approx(p_exact, abs=1e-3)
     assert result.passed is expected
     assert result.outcome is (checks.Outcome.PASSED if expected else checks.Outcome.FAILED)
@@ -256,7 +257,7 @@ def test_band_holds_95_percent_of_honest_runs() -> None:
         run = _run([_matched("depth_image", e, COV_3) for e in _draw(rng, COV_3, n)])
         consistent = report.nees_summary(run, "depth_image")["consistent"]
         inside += consistent
-        assert checks.judge(checks.Check("consistent", 0.05), run).passed is consistent
+        assert checks.judge(check_kinds.Check("consistent", 0.05), run).passed is consistent
     sigma = math.sqrt(0.95 * 0.05 / runs)
     assert inside / runs == pytest.approx(0.95, abs=5 * sigma)
 
@@ -272,7 +273,7 @@ def test_a_method_without_nees_has_count_zero_and_nulls(honest) -> None:
     run, _ = honest
     empty = {"count": 0, "mean": None, "dof": None, "band": None, "consistent": None}
     assert report.nees_summary(run, "naive") == empty
-    result = checks.judge(checks.Check("consistent", 0.05, "naive"), run)
+    result = checks.judge(check_kinds.Check("consistent", 0.05, "naive"), run)
     assert result.value is None and result.outcome is checks.Outcome.NO_DATA
     assert result.outcome.fails_run
     rep = json.loads(report.dumps(report.build(run, [result])))
@@ -306,6 +307,6 @@ def test_an_error_outside_a_ground_plane_covariance_is_inconsistent() -> None:
     summary = report.nees_summary(run, "ground_plane")
     assert summary["count"] == 51 and summary["consistent"] is False
     assert summary["mean"] is None
-    result = checks.judge(checks.Check("consistent", 0.05, "ground_plane"), run)
+    result = checks.judge(check_kinds.Check("consistent", 0.05, "ground_plane"), run)
     assert result.value == 0.0 and not result.passed
     json.loads(report.dumps(report.build(run, [result])))

@@ -6,7 +6,8 @@ import dataclasses
 
 import pytest
 
-from scenarios import builtin, pipeline
+from scenarios import pipeline
+from scenarios.scenario import builtin
 from sim.scene_cache import SceneCache
 
 

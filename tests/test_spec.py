@@ -9,9 +9,9 @@ import tomllib
 import numpy as np
 import pytest
 
-from scenarios import builtin
 from scenarios.cli import main
-from scenarios.spec import OrbitFlight, ScenarioError, from_dict, load_toml
+from scenarios.scenario import builtin
+from scenarios.scenario.spec import OrbitFlight, ScenarioError, from_dict, load_toml
 from vnav import quat, so3
 
 

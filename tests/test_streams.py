@@ -1,4 +1,4 @@
-"""scenarios.streams: sensor links with latency and jitter, and the estimator's receiver,
+"""scenarios.run.streams: sensor links with latency and jitter, and the estimator's receiver,
 checked against the arrival times and poses computed here by hand."""
 
 from __future__ import annotations
@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from scenarios.streams import Link, Receiver, Streams
+from scenarios.run.streams import Link, Receiver, Streams
 from vnav import se3, so3
 
 

@@ -8,7 +8,7 @@ import tomllib
 
 import pytest
 
-from scenarios import builtin, spec, toml_out
+from scenarios.scenario import builtin, spec, toml_out
 from scenarios.sweep.plan import SweepError, load, plan
 
 

@@ -1,4 +1,5 @@
-"""Time in the chain: stamped poses and late images (scenarios.runner with scenarios.streams).
+"""Time in the chain: stamped poses and late images (scenarios.run.runner with
+scenarios.run.streams).
 
 The oracles: the scenario's own keyframes interpolated by SciPy (the true pose at any time),
 the pose samples the run sent (``RunResult.poses``) interpolated by SciPy's ``Slerp``, the
@@ -15,9 +16,11 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation, Slerp
 
-from scenarios import builtin, checks, pipeline
+from scenarios import pipeline
 from scenarios.cli import main
-from scenarios.spec import Noise, ScenarioSpec, Timing
+from scenarios.judge import checks
+from scenarios.scenario import builtin, check_kinds
+from scenarios.scenario.spec import Noise, ScenarioSpec, Timing
 from vnav.methods import method
 
 
@@ -149,7 +152,7 @@ def test_report_compares_the_two_lookups(latency_runs):
 
 def test_latency_prediction_check_has_no_data_without_motion(latency_runs):
     _, _, sync = latency_runs
-    judged = checks.judge(checks.Check("latency_prediction", 0.25), sync.result)
+    judged = checks.judge(check_kinds.Check("latency_prediction", 0.25), sync.result)
     assert judged.outcome is checks.Outcome.NO_DATA
     assert "did not move" in judged.shown
 
@@ -163,7 +166,7 @@ def test_latency_prediction_ignores_a_body_holding_still(latency_runs):
     still = predicted <= checks.MOTION_FLOOR_M
     assert still.any()
     assert np.all(predicted[~still] > 1e-3)
-    judged = checks.judge(checks.Check("latency_prediction", 0.25), late.result)
+    judged = checks.judge(check_kinds.Check("latency_prediction", 0.25), late.result)
     moving = predicted > 1e-3
     assert judged.value == pytest.approx(np.median(np.abs(latest[moving] / predicted[moving] - 1)))
     assert judged.outcome is checks.Outcome.PASSED

@@ -195,7 +195,7 @@ def localize(
         "depth_image": NoEstimate.NO_DEPTH if z_c is None else _from_depth(view, z_c, cone, far_m),
         "ground_plane": _ground_plane(view, cone),
         "known_height": _known_height(view, cone),
-        # Several images' work (vnav.tracking): scenarios.evaluate fills it in.
+        # Several images' work (vnav.tracking): scenarios.run.evaluate fills it in.
         "triangulated": NoEstimate.ONE_IMAGE,
     }
     no_estimate = {m: r for m, r in found.items() if isinstance(r, NoEstimate)}

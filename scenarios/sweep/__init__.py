@@ -1,6 +1,6 @@
 """Sweeps: one scenario run over a grid of parameter values and many seeds.
 
-``vnav-demo sweep FILE.toml`` (``scenarios.sweep.command``)::
+``vnav-demo sweep FILE.toml`` (``scenarios.commands.sweep``)::
 
     plan      scenarios.sweep.plan      the sweep file; every grid point parsed as a scenario
     rows      scenarios.sweep.rows      an episode's row and estimates: the columns

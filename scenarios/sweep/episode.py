@@ -3,7 +3,7 @@
 An episode is a pure function of the point's scenario and the seed: every column of its row
 but ``wall_s`` is the same wherever and however it runs (in the command's process, on a Ray
 worker, replayed by ``vnav-demo run``); the tests compare them. The statistics are the JSON
-report's (``scenarios.report``), so a row and ``vnav-demo run``'s report agree to the digit.
+report's (``scenarios.judge.report``), so a row and ``vnav-demo run``'s report agree to the digit.
 
 ``EpisodeRunner`` is what a worker holds: the scenes it has built (``sim.scene_cache``), so
 that the next episode of the same grid point reuses the world and its OpenGL context.
@@ -16,9 +16,10 @@ import time
 import tomllib
 from typing import Any
 
-from scenarios import checks, pipeline
-from scenarios.records import RunResult
-from scenarios.spec import ScenarioSpec, from_dict
+from scenarios import pipeline
+from scenarios.judge import checks
+from scenarios.run.records import RunResult
+from scenarios.scenario.spec import ScenarioSpec, from_dict
 from scenarios.sweep.rows import ESTIMATE_COLUMNS, STATS, Episode, method_column, row_columns
 from sim.scene_cache import SceneCache
 from sim.world import SimulationError

@@ -33,15 +33,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from scenarios import builtin, schema, toml_out
-from scenarios.spec import ScenarioError, ScenarioSpec, from_dict, read_toml
+from scenarios.scenario import builtin, schema, toml_out
+from scenarios.scenario.spec import MAX_SEED, ScenarioError, ScenarioSpec, from_dict, read_toml
 from vnav.methods import METHOD_NAMES
 
 __all__ = ["MAX_EPISODES", "GridPoint", "SweepError", "SweepPlan", "label", "load", "plan"]
 
 MAX_EPISODES = 1_000_000
 """Most episodes one sweep may hold (grid points x seeds)."""
-MAX_SEED = 2**63 - 1
 _TOP_KEYS = ("scenario", "seeds", "grid", "rank_by")
 
 

@@ -14,7 +14,7 @@ from vnav.methods import METHOD_NAMES
 __all__ = ["ESTIMATE_COLUMNS", "STATS", "Episode", "method_column", "row_columns"]
 
 STATS = ("count", "mean", "median", "rmse", "max")
-"""Per-method error statistics in each row (``scenarios.report``'s, metres but ``count``)."""
+"""Per-method error statistics in each row (``scenarios.judge.report``'s, metres but ``count``)."""
 
 ESTIMATE_COLUMNS = ("tick", "t_s", "cone", "method", "range_m", "error_m")
 """Columns of an episode's estimates: one row per matched detection and method."""

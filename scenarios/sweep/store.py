@@ -8,7 +8,7 @@
     DIR/results.parquet      one row per finished episode (point, seed, grid values, numbers)
     DIR/estimates.parquet    one row per estimate (episode, tick, cone, method, range, error)
 
-Every file is written whole or not at all (``scenarios.outputs.write_atomic``). The journal
+Every file is written whole or not at all (``scenarios.record.outputs.write_atomic``). The journal
 is the record: an episode is finished once its file is there, so an interrupted sweep loses
 at most the episodes that were running, and ``--resume`` runs only the missing ones. The two
 tables are rebuilt from the journal as the sweep goes (every few seconds) and at its end; rows
@@ -25,7 +25,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from scenarios.outputs import OutputError, write_atomic
+from scenarios.record.outputs import OutputError, write_atomic
 from scenarios.sweep.plan import SweepError, SweepPlan
 from scenarios.sweep.rows import ESTIMATE_COLUMNS, Episode, row_columns
 

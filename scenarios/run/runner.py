@@ -7,7 +7,7 @@ One camera tick of ``run_scenario``::
     render   rgb, depth, one pass, plus the scenario's image and depth noise
                                                      <- sim.render.Renderer, sim.noise
     detect   detections                                                 <- vnav.detect
-    evaluate estimates per method, matched and compared with the truth  <- scenarios.evaluate
+    evaluate estimates per method, matched and compared with the truth  <- scenarios.run.evaluate
     observe  the tick's record and images go to the observer (the recording, if any)
 
 The estimator is given ``T_w_b_est``: the true pose, plus the scenario's pose noise if any,
@@ -30,10 +30,10 @@ from typing import Protocol
 
 import numpy as np
 
-from scenarios.evaluate import TickTruth, evaluate_tick
-from scenarios.records import ImageTiming, PoseStream, RunResult, TickRecord
-from scenarios.spec import ControlledFlight, KinematicFlight, OrbitFlight, ScenarioSpec
-from scenarios.streams import BODY, WORLD, Delivered, Receiver, Streams
+from scenarios.run.evaluate import TickTruth, evaluate_tick
+from scenarios.run.records import ImageTiming, PoseStream, RunResult, TickRecord
+from scenarios.run.streams import BODY, WORLD, Delivered, Receiver, Streams
+from scenarios.scenario.spec import ControlledFlight, KinematicFlight, OrbitFlight, ScenarioSpec
 from sim.flight import (
     Autopilot,
     KeyframePlayer,
@@ -63,7 +63,7 @@ is the sensor streams' and the pose buffers' share (sampling, sending, deliverin
 
 
 class TickObserver(Protocol):
-    """Receives a run as it happens (``scenarios.recording.Recording`` is one).
+    """Receives a run as it happens (``scenarios.record.recording.Recording`` is one).
 
     ``start`` before the first tick (with the camera and the drone and cones as meshes built
     from the MuJoCo model, ``sim.mesh``), ``on_tick`` after each, then ``finish`` with the
@@ -163,7 +163,7 @@ def _run_ticks(
 
     The physics advances one pose sample at a time; each sample goes out on the pose stream,
     each image on the camera's link, and every image is evaluated once it has arrived and its
-    exposure pose can be looked up (``scenarios.streams``). After the last exposure the
+    exposure pose can be looked up (``scenarios.run.streams``). After the last exposure the
     simulation runs on until every image has been evaluated.
     """
     timing = result.timing_s

@@ -12,7 +12,7 @@ import io
 
 import numpy as np
 
-from scenarios.records import RunResult
+from scenarios.run.records import RunResult
 from vnav.methods import CONTRACT_DOMAIN, METHODS
 
 __all__ = ["depth_scale_png", "error_against_range_png"]

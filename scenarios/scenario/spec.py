@@ -1,7 +1,7 @@
 """What a scenario is: a typed specification, read from TOML or built in Python.
 
 A scenario file (TOML) holds, in user units (metres, degrees, seconds), the keys that
-``scenarios.schema`` declares (each with its type, unit, default and meaning; the README's
+``scenarios.scenario.schema`` declares (each with its type, unit, default and meaning; the README's
 example is generated from it). ``from_dict`` reads a parsed file table by table through the
 schema and builds the typed ``ScenarioSpec`` below.
 
@@ -22,13 +22,16 @@ from typing import Any
 
 import numpy as np
 
-from scenarios import schema
-from scenarios.checks import KINDS, Check, Unit
+from scenarios.scenario import schema
+from scenarios.scenario.check_kinds import KINDS, Check, Unit
 from sim.config import CameraConfig, SceneConfig
 from vnav import quat, so3
 from vnav.methods import METHOD_NAMES, METHODS, method
 
 MAX_FILE_BYTES = 1_000_000
+MAX_SEED = 2**63 - 1
+"""The largest seed a run takes (``--seed``, a sweep's seeds): numpy's generators take any
+non-negative int, the reports write it as a 64-bit integer."""
 """Largest scenario file read, bytes."""
 
 
@@ -169,7 +172,7 @@ class Noise:
 
 @dataclass(frozen=True)
 class Timing:
-    """The sensors' clocks and links (``scenarios.streams``; docs/CONVENTIONS.md, "Time").
+    """The sensors' clocks and links (``scenarios.run.streams``; docs/CONVENTIONS.md, "Time").
 
     Attributes
     ----------
@@ -241,7 +244,8 @@ class ScenarioSpec:
 
 
 # --------------------------------------------------------------------------------------------
-# Parsing: ``scenarios.schema`` reads and checks each table; here values become typed specs.
+# Parsing: ``scenarios.scenario.schema`` reads and checks each table; here values become typed
+# specs.
 
 
 def _read(table: Any, keys: tuple[schema.Key, ...], where: str, path: str) -> dict[str, Any]:
@@ -413,7 +417,8 @@ def _at_most_physics_rate(
 
 
 def from_dict(data: dict[str, Any], where: str = "<scenario>") -> ScenarioSpec:
-    """Build a ``ScenarioSpec`` from parsed TOML (user units), as ``scenarios.schema`` declares.
+    """Build a ``ScenarioSpec`` from parsed TOML (user units), as ``scenarios.scenario.schema``
+    declares.
 
     Parameters
     ----------

@@ -2,10 +2,10 @@
 
 A scenario's run is a list of ``TickRecord``, one per camera tick, each holding what the
 camera saw (the detections), what each method estimated and the ground truth it is compared
-with. The runner (``scenarios.runner``) makes them, the checks (``scenarios.checks``) and the
-report (``scenarios.report``) read them, and the recording (``scenarios.recording``) draws
-them. This module imports neither MuJoCo nor Rerun, so judging or reporting a run needs
-neither.
+with. The runner (``scenarios.run.runner``) makes them, the checks
+(``scenarios.judge.checks``) and the report (``scenarios.judge.report``) read them, and the
+recording (``scenarios.record.recording``) draws them. This module imports neither MuJoCo
+nor Rerun, so judging or reporting a run needs neither.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from vnav import se3
 from vnav.detect import ConeDetection
 
 if TYPE_CHECKING:
-    from scenarios.spec import ScenarioSpec
+    from scenarios.scenario.spec import ScenarioSpec
     from vnav.estimators import NoEstimate
 
 __all__ = ["DetectionRecord", "ImageTiming", "PoseStream", "RunResult", "TickRecord"]

@@ -22,8 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from scenarios.checks import CheckResult
-from scenarios.records import RunResult
+from scenarios.judge.checks import CheckResult
+from scenarios.run.records import RunResult
 from vnav import metrics
 from vnav.methods import METHOD_NAMES
 from vnav.uncertainty import nees_band
@@ -33,7 +33,7 @@ REPORT_VERSION = 6
 ``recording`` names the ``.rrd`` file and its Rerun recording id.
 3: each check has an ``outcome`` (passed, failed, no data, skipped), a ``unit``, the figure
 ``shown`` in words next to its limit, and the ``reason`` it has no data; ``passed`` is
-whether no check failed or lacked data (``scenarios.checks.Outcome``).
+whether no check failed or lacked data (``scenarios.judge.checks.Outcome``).
 4: ``timing`` (the scenario's sensor clocks) and ``pose_lookup``: the ``depth_image`` errors with
 the pose looked up at the exposure stamp and with the newest pose received when the image
 arrived, the latter's first-order prediction, image latencies and the newest pose's lead.
@@ -156,7 +156,7 @@ def pose_lookup(run: RunResult) -> dict[str, Any]:
     ``at_exposure``: the pose looked up at the image's exposure stamp (what the methods use);
     ``latest_at_arrival``: the newest pose received when the image arrived, over the matched
     detections it gave an estimate for, with the first-order prediction of its error
-    (``scenarios.evaluate``); ``image_latency_s`` (exposure to arrival) and
+    (``scenarios.run.evaluate``); ``image_latency_s`` (exposure to arrival) and
     ``latest_minus_exposure_s`` (the newest pose's stamp minus the exposure stamp: the ``dt`` of
     the prediction) over the camera ticks.
     """

@@ -1,7 +1,7 @@
 """Evaluate one camera tick: localise every detection and compare it with the truth.
 
 This is where a tick's estimates meet the ground truth; it needs the truth as numbers, not
-the simulator that produced them (``scenarios.runner`` reads them out of MuJoCo)::
+the simulator that produced them (``scenarios.run.runner`` reads them out of MuJoCo)::
 
     estimate p_w per method   <- vnav.localize.localize(det, camera, T_w_b_est, T_b_c_est, depth)
              and its covariance  (with the noise and pose covariances the estimator is told)
@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from scenarios.records import DetectionRecord, ImageTiming, TickRecord
+from scenarios.run.records import DetectionRecord, ImageTiming, TickRecord
 from vnav import metrics, se3, so3
 from vnav.camera import PinholeCamera
 from vnav.cone import cones_fully_in_view

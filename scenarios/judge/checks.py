@@ -1,10 +1,10 @@
 """Pass/fail checks of a finished run against ground truth.
 
-Each check kind computes one figure from the run's records (``scenarios.records``) and
-compares it with the scenario's limit. Kinds are registered where they are defined, with
-``@check_kind`` (as dm_control registers its tasks): the registry ``KINDS`` is what the
-scenario parser accepts, what ``Check.label`` reads and what the README points to. The accuracy
-bounds are those of the perception contract (docs/ACCURACY.md, declared in ``vnav.methods``).
+The check kinds are declared as data in ``scenarios.scenario.check_kinds`` (``KINDS``: what each
+asserts, its unit, its direction). Here each kind's figure is computed from the run's records
+(``scenarios.run.records``), registered under the kind's name with ``@figure`` (``FIGURES``),
+and compared with the scenario's limit. The accuracy bounds are those of the perception
+contract (docs/ACCURACY.md, declared in ``vnav.methods``).
 
 A check has one of four outcomes (``Outcome``):
 
@@ -22,29 +22,25 @@ from __future__ import annotations
 
 import enum
 import math
-import operator
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
-from scenarios.records import DetectionRecord, RunResult
-from vnav.methods import CONTRACT_DOMAIN, METHODS, method
+from scenarios.run.records import DetectionRecord, RunResult
+from scenarios.scenario.check_kinds import KINDS, Check, CheckKind, Unit
+from vnav.methods import CONTRACT_DOMAIN, method
 from vnav.uncertainty import nees_band, nees_p_value
 
 __all__ = [
-    "KINDS",
+    "FIGURES",
     "MOTION_FLOOR_M",
-    "Check",
-    "CheckKind",
     "CheckResult",
     "NoData",
     "Outcome",
-    "Unit",
-    "check_kind",
-    "default_checks",
     "detection_counts",
+    "figure",
     "judge",
 ]
 
@@ -67,32 +63,6 @@ class Outcome(enum.Enum):
         return self in (Outcome.FAILED, Outcome.NO_DATA)
 
 
-class Unit(enum.Enum):
-    """What a check's figure and its limit are measured in (the report's ``unit``)."""
-
-    METRES = "m"
-    FRACTION = "fraction"
-    """A share, 0 to 1 (shown in percent)."""
-    COUNT = "count"
-    RATIO = "ratio"
-    """One figure over another (shown as ``12x``)."""
-    BOUND = "fraction of bound"
-    """An error over the method's accuracy bound at its range (1: at the bound)."""
-    DEGREES = "deg"
-    SECONDS = "s"
-
-
-_LIMIT_UNIT_DOC = {
-    Unit.METRES: "metres",
-    Unit.FRACTION: "a fraction (0.95: 95%)",
-    Unit.COUNT: "a count",
-    Unit.RATIO: "a ratio (10: ten times)",
-    Unit.BOUND: "times the method's accuracy bound (1: the bound)",
-    Unit.DEGREES: "degrees",
-    Unit.SECONDS: "seconds",
-}
-
-
 @dataclass(frozen=True)
 class NoData:
     """A figure that could not be computed: why, in words.
@@ -105,94 +75,22 @@ class NoData:
     geometric: bool = False
 
 
-Figure = Callable[[RunResult, "Check"], "float | NoData"]
+Figure = Callable[[RunResult, Check], "float | NoData"]
+
+FIGURES: dict[str, Figure] = {}
+"""Each check kind's figure, by the kind's name (``scenarios.scenario.check_kinds.KINDS``)."""
 
 
-@dataclass(frozen=True)
-class CheckKind:
-    """One kind of check: the figure it computes and how that figure meets the limit.
+def figure(kind: str) -> Callable[[Figure], Figure]:
+    """Register the decorated function as the figure of the declared check kind ``kind``."""
+    if kind not in KINDS:
+        raise ValueError(f"no check kind {kind!r} is declared; declared: {sorted(KINDS)}")
 
-    Attributes
-    ----------
-    name : str
-        The ``kind`` a scenario file gives.
-    figure : callable(run, check) -> float or NoData
-        The figure, or why the run holds nothing to judge.
-    passes : callable(figure, limit) -> bool
-        ``operator.le`` (at most the limit) or ``operator.ge`` (at least).
-    unit : Unit
-        What the figure and the limit are measured in.
-    uses_method : bool
-        Whether the figure depends on the check's ``method``.
-    doc : str
-        What the check asserts, one line.
-    """
-
-    name: str
-    figure: Figure
-    passes: Callable[[float, float], bool]
-    unit: Unit
-    uses_method: bool
-    doc: str
-
-    @property
-    def at_most(self) -> bool:
-        """True if the figure must be at most the limit, False if at least."""
-        return self.passes is operator.le
-
-    @property
-    def limit_doc(self) -> str:
-        """What the limit is, in words: its direction and unit (``at most, metres``)."""
-        return f"{'at most' if self.at_most else 'at least'}, {_LIMIT_UNIT_DOC[self.unit]}"
-
-    @property
-    def limit_key(self) -> str:
-        """The key a scenario file writes the limit under: ``limit_m`` in metres, else
-        ``limit``."""
-        return "limit_m" if self.unit is Unit.METRES else "limit"
-
-
-KINDS: dict[str, CheckKind] = {}
-"""Every check kind, by name, in the order they are defined."""
-
-
-def check_kind(name: str, passes: Callable, unit: Unit, *, uses_method: bool = True) -> Callable:
-    """Register the decorated figure as the check kind ``name``; its docstring's first line
-    is what the check asserts."""
-
-    def register(figure: Figure) -> Figure:
-        doc = (figure.__doc__ or "").strip().splitlines()[0]
-        KINDS[name] = CheckKind(name, figure, passes, unit, uses_method, doc)
-        return figure
+    def register(compute: Figure) -> Figure:
+        FIGURES[kind] = compute
+        return compute
 
     return register
-
-
-@dataclass(frozen=True)
-class Check:
-    """One pass/fail criterion evaluated on a finished run (a kind from ``KINDS``).
-
-    ``default`` marks the checks of ``default_checks``: skipped, not failed, when their method
-    cannot apply to the scenario's geometry.
-    """
-
-    kind: str
-    limit: float
-    method: str = "depth_image"
-    name: str = ""
-    default: bool = False
-
-    def __post_init__(self) -> None:
-        if self.kind not in KINDS:
-            raise ValueError(f"unknown check {self.kind!r}; valid: {sorted(KINDS)}")
-        method(self.method)  # raises ValueError naming the valid methods
-
-    @property
-    def label(self) -> str:
-        """The check's name, or one made of its method and kind."""
-        if self.name:
-            return self.name
-        return f"{self.method} {self.kind}" if KINDS[self.kind].uses_method else self.kind
 
 
 @dataclass(frozen=True)
@@ -251,33 +149,17 @@ def judge(check: Check, run: RunResult) -> CheckResult:
     method cannot apply to the geometry: ``skipped``.
     """
     kind = KINDS[check.kind]
-    figure = kind.figure(run, check)
-    if isinstance(figure, NoData):
-        skipped = check.default and figure.geometric
+    computed = FIGURES[check.kind](run, check)
+    if isinstance(computed, NoData):
+        skipped = check.default and computed.geometric
         outcome = Outcome.SKIPPED if skipped else Outcome.NO_DATA
         return CheckResult(
-            check.label, check.kind, None, check.limit, outcome, kind.unit, figure.reason
+            check.label, check.kind, None, check.limit, outcome, kind.unit, computed.reason
         )
-    value: float = round(figure) if kind.unit is Unit.COUNT else float(figure)
+    value: float = round(computed) if kind.unit is Unit.COUNT else float(computed)
     outcome = Outcome.PASSED if kind.passes(value, check.limit) else Outcome.FAILED
     shown = _shown(kind, check, value, run)
     return CheckResult(check.label, check.kind, value, check.limit, outcome, kind.unit, shown)
-
-
-def default_checks() -> tuple[Check, ...]:
-    """Checks for a scenario that declares none: every method's bound and the detection rate.
-
-    Each is a ``default`` check: a bound whose method cannot apply to the scenario's geometry
-    is skipped with the reason.
-    """
-    return (
-        *(
-            Check("error_bound", 1.0, m.name, f"{m.name} {m.promise}", default=True)
-            for m in METHODS
-            if m.bound
-        ),
-        Check("detection_rate", 0.95, name="cones in view detected", default=True),
-    )
 
 
 # ------------------------------------------------------------------- figures shown in words
@@ -418,14 +300,14 @@ def _median(x: np.ndarray) -> float:
     return float(np.median(x))
 
 
-@check_kind("max_error", operator.le, Unit.METRES)
+@figure("max_error")
 def _max_error(run: RunResult, check: Check) -> float | NoData:
     """largest position error of ``method`` over all matched detections <= limit_m"""
     errors = run.errors(check.method)
     return _max(errors) if errors.size else _no_estimates(run, check.method, contract_only=False)
 
 
-@check_kind("median_error", operator.le, Unit.METRES)
+@figure("median_error")
 def _median_error(run: RunResult, check: Check) -> float | NoData:
     """median position error of ``method`` <= limit_m"""
     errors = run.errors(check.method)
@@ -434,7 +316,7 @@ def _median_error(run: RunResult, check: Check) -> float | NoData:
     return _median(errors)
 
 
-@check_kind("error_bound", operator.le, Unit.BOUND)
+@figure("error_bound")
 def _error_bound(run: RunResult, check: Check) -> float | NoData:
     """error / accuracy bound of ``method`` (worst or median, as the bound says) <= limit
 
@@ -449,7 +331,7 @@ def _error_bound(run: RunResult, check: Check) -> float | NoData:
     return _max(ratio) if bound.statistic == "max" else _median(ratio)
 
 
-@check_kind("consistent", operator.ge, Unit.FRACTION)
+@figure("consistent")
 def _consistent(run: RunResult, check: Check) -> float | NoData:
     """chi-square probability of ``method``'s mean NEES, two-sided, >= limit (0.05: in the 95% band)
 
@@ -472,7 +354,7 @@ def _calibration_error(run: RunResult, key: str) -> float | NoData:
     return c.errors[key]
 
 
-@check_kind("calibration_rotation", operator.le, Unit.DEGREES, uses_method=False)
+@figure("calibration_rotation")
 def _calibration_rotation(run: RunResult, check: Check) -> float | NoData:
     """rotation between the recovered camera mount and the true one <= limit (degrees)
 
@@ -480,13 +362,13 @@ def _calibration_rotation(run: RunResult, check: Check) -> float | NoData:
     return _calibration_error(run, "rotation_deg")
 
 
-@check_kind("calibration_translation", operator.le, Unit.METRES, uses_method=False)
+@figure("calibration_translation")
 def _calibration_translation(run: RunResult, check: Check) -> float | NoData:
     """distance between the recovered camera mount's origin and the true one <= limit_m"""
     return _calibration_error(run, "translation_m")
 
 
-@check_kind("calibration_time_offset", operator.le, Unit.SECONDS, uses_method=False)
+@figure("calibration_time_offset")
 def _calibration_time_offset(run: RunResult, check: Check) -> float | NoData:
     """error of the recovered camera clock offset <= limit (seconds)"""
     return _calibration_error(run, "time_offset_s")
@@ -503,7 +385,7 @@ def detection_counts(run: RunResult) -> tuple[int, int]:
     return detected, seen
 
 
-@check_kind("detection_rate", operator.ge, Unit.FRACTION, uses_method=False)
+@figure("detection_rate")
 def _detection_rate(run: RunResult, check: Check) -> float | NoData:
     """detections / cones fully in view (summed over camera ticks) >= limit"""
     detected, seen = detection_counts(run)
@@ -531,7 +413,7 @@ def _span_m(points: np.ndarray) -> float:
     return float(np.linalg.norm(np.ptp(points, axis=0)))
 
 
-@check_kind("world_estimate_spread", operator.le, Unit.METRES)
+@figure("world_estimate_spread")
 def _world_spread(run: RunResult, check: Check) -> float | NoData:
     """largest distance of ``method``'s estimates of a cone from their mean <= limit_m
 
@@ -556,7 +438,7 @@ def _world_spread(run: RunResult, check: Check) -> float | NoData:
     )
 
 
-@check_kind("camera_coords_span", operator.ge, Unit.METRES, uses_method=False)
+@figure("camera_coords_span")
 def _camera_span(run: RunResult, check: Check) -> float | NoData:
     """the cone's camera-frame coordinates move by >= limit_m"""
     per_cone = _per_cone(run, None)
@@ -567,7 +449,7 @@ def _camera_span(run: RunResult, check: Check) -> float | NoData:
     return max(_span_m(np.array([d.p_c_true for d in r])) for r in per_cone.values())
 
 
-@check_kind("naive_worse", operator.ge, Unit.RATIO)
+@figure("naive_worse")
 def _naive_worse(run: RunResult, check: Check) -> float | NoData:
     """median naive error >= limit x the median error of ``method``"""
     naive, ref = run.errors("naive"), run.errors(check.method)
@@ -578,13 +460,13 @@ def _naive_worse(run: RunResult, check: Check) -> float | NoData:
     return _median(naive) / max(_median(ref), 1e-6)
 
 
-@check_kind("gimbal_lock_seen", operator.ge, Unit.COUNT, uses_method=False)
+@figure("gimbal_lock_seen")
 def _gimbal_lock(run: RunResult, check: Check) -> float | NoData:
     """camera ticks whose roll/pitch/yaw flag gimbal lock >= limit"""
     return float(sum(t.gimbal_locked for t in run.ticks))
 
 
-@check_kind("tracking_error", operator.le, Unit.METRES, uses_method=False)
+@figure("tracking_error")
 def _tracking(run: RunResult, check: Check) -> float | NoData:
     """largest distance of the body from its reference (controlled flights) <= limit_m"""
     errors = [t.reference_error_m for t in run.ticks if t.reference_error_m is not None]
@@ -593,19 +475,19 @@ def _tracking(run: RunResult, check: Check) -> float | NoData:
     return NoData("the flight has no reference to track (kinematic keyframes are exact)")
 
 
-@check_kind("matched_cones", operator.ge, Unit.COUNT, uses_method=False)
+@figure("matched_cones")
 def _matched_cones(run: RunResult, check: Check) -> float | NoData:
     """number of distinct true cones matched at least once >= limit"""
     return float(len(_per_cone(run, None)))
 
 
-@check_kind("latency_prediction", operator.le, Unit.FRACTION, uses_method=False)
+@figure("latency_prediction")
 def _latency_prediction(run: RunResult, check: Check) -> float | NoData:
     """median |latest-pose error / predicted - 1| <= limit (depth_image with the newest pose)
 
     The ``depth_image`` estimate made with the newest pose received when the image arrived,
     against the first-order prediction of its error from the body's true motion between the
-    exposure and that pose's stamp, ``|dp| + range |dtheta|`` (``scenarios.evaluate``); over
+    exposure and that pose's stamp, ``|dp| + range |dtheta|`` (``scenarios.run.evaluate``); over
     the matched detections whose newest pose was not the exposure pose and whose predicted
     error exceeds ``MOTION_FLOOR_M`` (a body holding still predicts rounding noise, ~1e-15 m,
     and any error over it is an absurd ratio)."""

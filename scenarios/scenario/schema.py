@@ -1,10 +1,11 @@
 """The scenario file's schema, declared once: every key, its type, unit, default and meaning.
 
-The parser (``scenarios.spec``) reads a file through ``read``, table by table; ``vnav-demo
-show`` annotates a built-in with each key's unit and meaning (``comment``); the README's
-example is ``example_toml`` (a test keeps the two identical). Units are in the key's name
+The parser (``scenarios.scenario.spec``) reads a file through ``read``, table by table;
+``vnav-demo show`` annotates a built-in with each key's unit and meaning (``comment``); the
+README's example is ``scenarios.scenario.toml_out.example_toml`` (a test keeps the two
+identical). Units are in the key's name
 where it could be misread (``_m``, ``_deg``, ``_s``, ``_hz``); degrees become radians in
-``scenarios.spec``, once.
+``scenarios.scenario.spec``, once.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ import math
 from dataclasses import dataclass, fields
 from typing import Any
 
+from scenarios.scenario.check_kinds import KINDS
 from sim.config import CameraConfig
 
 __all__ = [
@@ -28,7 +30,6 @@ __all__ = [
     "Key",
     "SchemaError",
     "comment",
-    "example_toml",
     "read",
 ]
 
@@ -330,7 +331,7 @@ TIMING: tuple[Key, ...] = (
     Key("jitter_s", "number", "standard deviation of each arrival's extra delay, s", 0.0, 0.0, 1.0),
 )
 CHECK: tuple[Key, ...] = (
-    Key("kind", "any", "a check kind (scenarios.checks.KINDS)"),
+    Key("kind", "any", "a check kind (scenarios.scenario.check_kinds.KINDS)"),
     Key("method", "any", "a localisation method (vnav.methods)", "depth_image"),
     Key("limit", "any", "the limit (give limit or limit_m)", None),
     Key("limit_m", "any", "the limit in metres", None),
@@ -342,14 +343,12 @@ def comment(path: str, table: dict[str, Any] | None = None) -> str | None:
     """The schema's one-line doc of the key at ``path`` (``camera.fovy_deg``), or None.
 
     ``table``, the table holding the key, lets a check's ``kind`` and limit say what that kind
-    asserts and in which unit its limit is (``scenarios.checks.KINDS``).
+    asserts and in which unit its limit is (``scenarios.scenario.check_kinds.KINDS``).
     """
     if path == "flight.mode":
         return " | ".join(FLIGHT_MODES) + " (each mode has its own keys)"
     parent, _, name = path.rpartition(".")
     if parent == "checks" and table is not None and name in ("kind", "limit", "limit_m"):
-        from scenarios.checks import KINDS  # the kinds register themselves there
-
         kind = KINDS.get(table.get("kind"))  # type: ignore[arg-type]
         if kind is not None:
             return kind.doc.replace("``", "") if name == "kind" else kind.limit_doc
@@ -365,33 +364,3 @@ def comment(path: str, table: dict[str, Any] | None = None) -> str | None:
         "checks": CHECK,
     }.get(parent, ())
     return next((k.doc for k in keys if k.name == name), None)
-
-
-def example_toml() -> str:
-    """The README's example scenario file, its comments from this schema.
-
-    A cone 6 m ahead and 1 m left of a drone 4 m up, its camera pitched 30 deg down: the line
-    of sight falls 33 deg below the horizontal, near the image's centre, and stays well inside
-    the image while the drone yaws 20 deg towards the cone.
-    """
-    from scenarios import toml_out
-
-    example = {
-        "name": "my-scene",
-        "description": "one line",
-        "camera_rate_hz": 10.0,
-        "camera": {k.name: k.default for k in CAMERA if k.name != "mount_error"}
-        | {"mount_error": {k.name: list(k.default) for k in MOUNT_ERROR}},
-        "cones": [{"position_w": [6.0, 1.0, 0.0]}],
-        "flight": {
-            "mode": "kinematic",
-            "keyframes": [
-                {"t": 0.0, "position_w": [0.0, 0.0, 4.0], "rpy_deg": [0.0, 0.0, 0.0]},
-                {"t": 5.0, "position_w": [0.0, 0.0, 4.0], "rpy_deg": [0.0, 0.0, 20.0]},
-            ],
-        },
-        "noise": {k.name: k.default for k in NOISE},
-        "timing": {k.name: k.default for k in TIMING},
-        "checks": [{"kind": "max_error", "method": "depth_image", "limit_m": 0.1}],
-    }
-    return toml_out.dumps(example, comments=True)

@@ -1,7 +1,8 @@
 """The built-in scenarios, each a lesson of the lecture, with its own checks.
 
 Each entry is a function returning the scenario in the TOML schema (user units, degrees), so
-built-ins pass through exactly the validation a user's file does (``scenarios.spec.from_dict``).
+built-ins pass through exactly the validation a user's file does
+(``scenarios.scenario.spec.from_dict``).
 ``load(name)`` with a name not registered raises a ScenarioError listing the valid names.
 """
 
@@ -11,8 +12,8 @@ import math
 from collections.abc import Callable
 from typing import Any
 
-from scenarios.checks import KINDS, default_checks
-from scenarios.spec import ScenarioError, ScenarioSpec, from_dict
+from scenarios.scenario.check_kinds import KINDS, default_checks
+from scenarios.scenario.spec import ScenarioError, ScenarioSpec, from_dict
 
 Scenario = dict[str, Any]
 

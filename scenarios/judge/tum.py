@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from scenarios.records import RunResult
+from scenarios.run.records import RunResult
 from vnav import quat
 from vnav.camera import PinholeCamera
 from vnav.multiview import camera_pose_from_cones

@@ -22,7 +22,7 @@ import math
 
 import numpy as np
 
-from scenarios.records import ImageTiming, TickRecord
+from scenarios.run.records import ImageTiming, TickRecord
 from vnav import quat, se3, so3
 from vnav.estimators import naive
 

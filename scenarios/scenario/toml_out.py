@@ -20,9 +20,7 @@ import textwrap
 from contextvars import ContextVar
 from typing import Any
 
-from scenarios import schema
-
-_SCALARS = (str, int, float, bool)
+from scenarios.scenario import schema
 
 WIDTH = 80
 """Columns the text fits in, where a value allows (a single word longer cannot be split)."""
@@ -145,7 +143,7 @@ def _section(header: str, table: dict[str, Any], path: str, comments: bool) -> l
 def dumps(data: dict[str, Any], *, comments: bool = False, exact: bool = False) -> str:
     """TOML text for a scenario dict (top-level keys, then tables, then arrays of tables).
 
-    With ``comments``, each key the schema documents (``scenarios.schema.comment``) is
+    With ``comments``, each key the schema documents (``scenarios.scenario.schema.comment``) is
     followed by its meaning and unit (on the line above where it does not fit ``WIDTH``).
     With ``exact``, floats are written in full: the text parses back to ``data`` exactly (a
     sweep's grid points, replayed by ``vnav-demo run``), at the cost of longer lines.
@@ -171,3 +169,32 @@ def _dumps(data: dict[str, Any], comments: bool) -> str:
         for entry in entries:
             lines += _section(f"[[{key}]]", entry, key, comments)
     return "\n".join(lines) + "\n"
+
+
+def example_toml() -> str:
+    """The README's example scenario file, its comments from the schema
+    (``scenarios.scenario.schema``).
+
+    A cone 6 m ahead and 1 m left of a drone 4 m up, its camera pitched 30 deg down: the line
+    of sight falls 33 deg below the horizontal, near the image's centre, and stays well inside
+    the image while the drone yaws 20 deg towards the cone.
+    """
+    example = {
+        "name": "my-scene",
+        "description": "one line",
+        "camera_rate_hz": 10.0,
+        "camera": {k.name: k.default for k in schema.CAMERA if k.name != "mount_error"}
+        | {"mount_error": {k.name: list(k.default) for k in schema.MOUNT_ERROR}},
+        "cones": [{"position_w": [6.0, 1.0, 0.0]}],
+        "flight": {
+            "mode": "kinematic",
+            "keyframes": [
+                {"t": 0.0, "position_w": [0.0, 0.0, 4.0], "rpy_deg": [0.0, 0.0, 0.0]},
+                {"t": 5.0, "position_w": [0.0, 0.0, 4.0], "rpy_deg": [0.0, 0.0, 20.0]},
+            ],
+        },
+        "noise": {k.name: k.default for k in schema.NOISE},
+        "timing": {k.name: k.default for k in schema.TIMING},
+        "checks": [{"kind": "max_error", "method": "depth_image", "limit_m": 0.1}],
+    }
+    return dumps(example, comments=True)

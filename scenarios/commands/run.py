@@ -6,77 +6,44 @@ with status 2 and writes nothing. Exit statuses (``EXIT_*``): 0 every check pass
 failed, 2 bad input, 3 a run could not complete (I/O error such as a full disk, a diverging
 simulation, out of memory, an internal error), 128 + N on signal N (SIGINT, SIGTERM, SIGHUP).
 Each scenario's ``.rrd`` and ``.json`` are written together or not at all
-(``scenarios.outputs``); whatever ends a run, the previous pair stays as it was.
+(``scenarios.record.outputs``); whatever ends a run, the previous pair stays as it was.
 """
 
 from __future__ import annotations
 
 import argparse
-import contextlib
 import dataclasses
 import logging
 import math
 import os
 import re
 import shutil
-import signal
 import sys
-import tempfile
 import textwrap
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
-from scenarios import builtin, outputs, pipeline
-from scenarios.console import WIDTH, say
-from scenarios.console import error as _error
-from scenarios.evaluate import MATCH_GATE_M
-from scenarios.spec import ScenarioError, ScenarioSpec, load_toml
+from scenarios import pipeline
+from scenarios.commands.common import (
+    EXIT_CHECK_FAILED,
+    EXIT_INCOMPLETE,
+    EXIT_PASSED,
+    InputError,
+    Signalled,
+    guarded,
+    prepare_out_dir,
+    signal_caught,
+)
+from scenarios.commands.console import WIDTH, say
+from scenarios.commands.console import error as _error
+from scenarios.run.evaluate import MATCH_GATE_M
+from scenarios.scenario import builtin
+from scenarios.scenario.spec import MAX_SEED, ScenarioError, ScenarioSpec, load_toml
 from sim.world import SimulationError
 from vnav.estimators import NoEstimate
 from vnav.methods import METHOD_NAMES
 
 logger = logging.getLogger(__name__)
-
-EXIT_PASSED, EXIT_CHECK_FAILED, EXIT_BAD_INPUT, EXIT_INCOMPLETE = 0, 1, 2, 3
-MAX_SEED = 2**63 - 1
-
-
-class InputError(Exception):
-    """Bad usage or bad input: one line for the user, exit status 2."""
-
-
-class Signalled(BaseException):
-    """SIGTERM or SIGHUP, raised in the main thread so that a run ends as on Ctrl-C."""
-
-    def __init__(self, signum: int) -> None:
-        super().__init__(signum)
-        self.signum = signum
-
-
-_caught: list[int] = []
-"""Signals received during the run. The handler raises at once; if that exception lands where
-Python swallows it (a ``__del__``, a weakref callback: "Exception ignored in ..."), the next
-camera tick raises it again (``Progress``)."""
-
-
-def _raise_signalled(signum: int, frame: object) -> None:
-    _caught.append(signum)
-    raise Signalled(signum)
-
-
-@contextlib.contextmanager
-def stop_on_signals() -> Iterator[None]:
-    """SIGTERM and SIGHUP raise ``Signalled`` in the main thread while inside, so that a run
-    ends as on Ctrl-C (``KeyboardInterrupt``): cleaning up, keeping what is finished."""
-    _caught.clear()
-    previous = {s: signal.signal(s, _raise_signalled) for s in (signal.SIGTERM, signal.SIGHUP)}
-    try:
-        yield
-    finally:
-        for signum, handler in previous.items():
-            signal.signal(signum, handler)
-        _caught.clear()
 
 
 def resolve(targets: list[str], run_all: bool) -> list[ScenarioSpec]:
@@ -126,19 +93,6 @@ def check_lengths(specs: list[ScenarioSpec], max_ticks: int) -> None:
             )
 
 
-def prepare_out_dir(out: str) -> Path:
-    """Create ``out`` if needed and prove it can be written."""
-    path = Path(out)
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-        with tempfile.NamedTemporaryFile(dir=path, prefix=".vnav-write-test-"):
-            pass
-    except OSError as exc:
-        reason = exc.strerror or type(exc).__name__
-        raise InputError(f"output directory {out!r} cannot be written: {reason}") from None
-    return path
-
-
 class Progress:
     """A one-line progress bar on stderr, only when stderr is a terminal."""
 
@@ -146,8 +100,8 @@ class Progress:
         self.label, self.enabled = label, enabled and sys.stderr.isatty()
 
     def __call__(self, done: int, total: int) -> None:
-        if _caught:  # a signal whose exception was swallowed: stop now
-            raise Signalled(_caught[0])
+        if (signum := signal_caught()) is not None:  # its exception was swallowed: stop now
+            raise Signalled(signum)
         if not self.enabled:
             return
         width = 30
@@ -161,7 +115,7 @@ class Progress:
 
 
 _MARK = {"passed": "ok", "failed": "FAILED", "no data": "NO DATA", "skipped": "skipped"}
-"""How the table marks each check outcome (``scenarios.checks.Outcome``)."""
+"""How the table marks each check outcome (``scenarios.judge.checks.Outcome``)."""
 
 
 def _fmt(value: float | None, digits: int = 3) -> str:
@@ -323,8 +277,8 @@ def run_one(spec: ScenarioSpec, args: argparse.Namespace, out_dir: Path) -> tupl
         except Exception as exc:
             # A signal whose exception landed inside a library that turned it into another
             # error (or swallowed it, and something then failed): the signal is the cause.
-            if _caught:
-                raise Signalled(_caught[0]) from exc
+            if (signum := signal_caught()) is not None:
+                raise Signalled(signum) from exc
             raise
     except SimulationError as exc:
         _error(f"{spec.name}: could not complete: the simulation diverged: {exc}")
@@ -357,8 +311,8 @@ def run_one(spec: ScenarioSpec, args: argparse.Namespace, out_dir: Path) -> tupl
 
 
 def _export_tum(spec: ScenarioSpec, outcome: pipeline.Outcome, out_dir: Path) -> list[Path]:
-    """``NAME.truth.tum`` and ``NAME.pnp.tum`` (``scenarios.tum``)."""
-    from scenarios import tum
+    """``NAME.truth.tum`` and ``NAME.pnp.tum`` (``scenarios.judge.tum``)."""
+    from scenarios.judge import tum
     from vnav.camera import PinholeCamera
 
     cam = spec.scene.camera
@@ -385,25 +339,16 @@ def _validate(args: argparse.Namespace) -> tuple[list[ScenarioSpec], Path]:
     return specs, out_dir
 
 
-def run(args: argparse.Namespace) -> int:
+def command(args: argparse.Namespace) -> int:
     """Entry point of ``vnav-demo run``; returns the exit status."""
-    try:
-        specs, out_dir = _validate(args)
-    except InputError as exc:
-        _error(str(exc))
-        return EXIT_BAD_INPUT
-    try:
-        with stop_on_signals(), outputs.directory_lock(out_dir):
-            results = [(spec, *run_one(spec, args, out_dir)) for spec in specs]
-    except BlockingIOError:
-        _error(f"another vnav-demo run is writing into {out_dir}; wait for it to finish")
-        return EXIT_BAD_INPUT
-    except KeyboardInterrupt:
-        _error("interrupted; no partial file was kept")
-        return 128 + signal.SIGINT
-    except Signalled as exc:
-        _error(f"stopped by {signal.Signals(exc.signum).name}; no partial file was kept")
-        return 128 + exc.signum
-    if not args.quiet:
-        say(final_summary(results, out_dir))
-    return max((status for _, status, _ in results), default=EXIT_PASSED)
+    return guarded(lambda: _validate(args), _body(args), kept="no partial file was kept")
+
+
+def _body(args: argparse.Namespace):
+    def run_all(specs: list[ScenarioSpec], out_dir: Path) -> int:
+        results = [(spec, *run_one(spec, args, out_dir)) for spec in specs]
+        if not args.quiet:
+            say(final_summary(results, out_dir))
+        return max((status for _, status, _ in results), default=EXIT_PASSED)
+
+    return run_all

@@ -8,15 +8,17 @@ rather than reading them from here.
 
 from __future__ import annotations
 
+import argparse
 import textwrap
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
+from scenarios.commands.console import WIDTH, say
 from vnav import frames, quat, se3, so3
 
-__all__ = ["EXAMPLES", "Example", "Outcome", "evaluate", "table"]
+__all__ = ["EXAMPLES", "Example", "Outcome", "command", "evaluate", "table"]
 
 
 @dataclass(frozen=True)
@@ -306,3 +308,12 @@ def table(outcomes: list[Outcome], width: int = 80) -> str:
     n_ok = sum(o.agrees for o in outcomes)
     lines.append(f"{n_ok} of {len(outcomes)} worked examples agree with the lecture")
     return "\n".join(lines)
+
+
+def command(args: argparse.Namespace) -> int:
+    """``vnav-demo lecture``: print every example beside vnav's answer; exit status 1 if any
+    disagrees."""
+    outcomes = [evaluate(e) for e in EXAMPLES]
+    say("MIT 16.485 VNAV lecture 1: every worked example and quiz, computed by vnav")
+    say(table(outcomes, WIDTH))
+    return 0 if all(o.agrees for o in outcomes) else 1

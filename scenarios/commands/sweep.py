@@ -19,26 +19,27 @@ import sys
 import time
 from pathlib import Path
 
-from scenarios import outputs, pipeline
-from scenarios.console import WIDTH, say
-from scenarios.console import error as _error
-from scenarios.run_command import (
+from scenarios import pipeline
+from scenarios.commands.common import (
     EXIT_BAD_INPUT,
     EXIT_CHECK_FAILED,
     EXIT_INCOMPLETE,
     EXIT_PASSED,
     InputError,
     Signalled,
+    guarded,
     prepare_out_dir,
-    stop_on_signals,
 )
+from scenarios.commands.console import WIDTH, say
+from scenarios.commands.console import error as _error
+from scenarios.record import outputs
 from scenarios.sweep import engine as engines
 from scenarios.sweep import plots, summary
 from scenarios.sweep.plan import SweepError, SweepPlan, load
 from scenarios.sweep.rows import Episode, method_column
 from scenarios.sweep.store import SweepStore, pyarrow_missing
 
-__all__ = ["run"]
+__all__ = ["command"]
 
 SHOWN_POINTS = 20
 """Grid points listed in the printed summary (all are in summary.json)."""
@@ -78,29 +79,23 @@ def _validate(args: argparse.Namespace) -> tuple[SweepPlan, Path]:
     return plan, prepare_out_dir(out)
 
 
-def run(args: argparse.Namespace) -> int:
+def command(args: argparse.Namespace) -> int:
     """Entry point of ``vnav-demo sweep``; returns the exit status."""
+    return guarded(
+        lambda: _validate(args),
+        lambda plan, out_dir: _sweep_or_say(plan, out_dir, args),
+        kept="finished episodes are kept",
+    )
+
+
+def _sweep_or_say(plan: SweepPlan, out_dir: Path, args: argparse.Namespace) -> int:
     try:
-        plan, out_dir = _validate(args)
-    except InputError as exc:
-        _error(str(exc))
-        return EXIT_BAD_INPUT
-    try:
-        with stop_on_signals(), outputs.directory_lock(out_dir):
-            return _sweep(plan, out_dir, args)
-    except BlockingIOError:
-        _error(f"another vnav-demo command is writing into {out_dir}; wait for it to finish")
-        return EXIT_BAD_INPUT
+        return _sweep(plan, out_dir, args)
     except SweepError as exc:
-        _error(str(exc))
-        return EXIT_BAD_INPUT
+        raise InputError(str(exc)) from None
     except OSError as exc:
         _error(f"cannot write the sweep's files: {exc}; finished episodes are kept in {out_dir}")
         return EXIT_INCOMPLETE
-    except (KeyboardInterrupt, Signalled) as exc:  # while writing the tables or recordings
-        signum = exc.signum if isinstance(exc, Signalled) else signal.SIGINT
-        _error(f"stopped by {signal.Signals(signum).name}; finished episodes are kept")
-        return 128 + signum
 
 
 def _sweep(plan: SweepPlan, out_dir: Path, args: argparse.Namespace) -> int:

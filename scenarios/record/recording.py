@@ -1,7 +1,7 @@
 """Rerun recording of a scenario: the frames, the drone, what the camera saw and why each
 estimate lands where it does.
 
-Entity tree (paths declared in ``scenarios.viewer.entity``, frames in ``viewer.FRAME`` and
+Entity tree (paths declared in ``scenarios.record.viewer.entity``, frames in ``viewer.FRAME`` and
 docs/CONVENTIONS.md; "in F" is the named transform frame an entity is drawn in)::
 
     world                          in world; ViewCoordinates Z up; world axes (static)
@@ -59,9 +59,9 @@ logged parent-from-child (Rerun's default relation), which is exactly vnav's
 ``world``, ``world/body/camera`` ``T_b_c`` from ``camera`` to ``body`` (the same graph as
 ``vnav.frames.FrameTree``).
 
-``Recording`` is a ``scenarios.runner.TickObserver``: it is fed the run's records
-(``scenarios.records``) and images, as evo's Rerun bridge is fed its trajectory objects. It
-writes to a temporary name; ``scenarios.outputs`` checks the finished file and puts it in
+``Recording`` is a ``scenarios.run.runner.TickObserver``: it is fed the run's records
+(``scenarios.run.records``) and images, as evo's Rerun bridge is fed its trajectory objects. It
+writes to a temporary name; ``scenarios.record.outputs`` checks the finished file and puts it in
 place together with the report.
 """
 
@@ -77,11 +77,9 @@ import cv2
 import numpy as np
 import rerun as rr
 
-from scenarios.panel import state_text
-from scenarios.plots import depth_scale_png, error_against_range_png
-from scenarios.records import CalibrationRecord, PoseStream, RunResult, TickRecord
-from scenarios.spec import ScenarioSpec
-from scenarios.viewer import (
+from scenarios.record.panel import state_text
+from scenarios.record.plots import depth_scale_png, error_against_range_png
+from scenarios.record.viewer import (
     AXIS_COLORS,
     AXIS_LENGTH_M,
     CONE0_SERIES,
@@ -99,6 +97,8 @@ from scenarios.viewer import (
     entity,
     eye_for,
 )
+from scenarios.run.records import CalibrationRecord, PoseStream, RunResult, TickRecord
+from scenarios.scenario.spec import ScenarioSpec
 from vnav import quat, so3
 from vnav.camera import PinholeCamera, depth_to_world_points
 from vnav.methods import METHOD_NAMES, METHODS, PREFERENCE, method
@@ -266,7 +266,7 @@ class Recording:
     Parameters
     ----------
     path : Path
-        Where the file is written (a temporary name: ``scenarios.outputs`` puts it in place).
+        Where the file is written (a temporary name: ``scenarios.record.outputs`` puts it in place).
     recording_id : str
         Rerun's recording id, unique per run; the JSON report names it.
     """

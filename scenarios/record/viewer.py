@@ -1,7 +1,7 @@
 """What the viewer shows and how: entity paths, frames, sizes, colours, the layout and the eye.
 
 Everything here is a viewer concern, declared once and shared by the recording
-(``scenarios.recording``) and the tests that read a recording back:
+(``scenarios.record.recording``) and the tests that read a recording back:
 
 - ``entity``: every Rerun entity path;
 - ``FRAME``: the named transform frames (the same names as ``vnav.frames`` and
@@ -23,14 +23,14 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from scenarios.schema import VIEW_NAMES
-from scenarios.spec import ScenarioSpec
+from scenarios.scenario.schema import VIEW_NAMES
+from scenarios.scenario.spec import ScenarioSpec
 from vnav import so3
 from vnav.cone import TRAFFIC_CONE
 from vnav.methods import METHODS, PREFERENCE, method
 
 if TYPE_CHECKING:
-    from scenarios.records import RunResult
+    from scenarios.run.records import RunResult
 
 __all__ = [
     "AXIS_COLORS",

@@ -1,0 +1,144 @@
+"""Reading a recording written by ``vnav-demo run`` back: its rows by entity, and the inputs
+a camera calibration needs (``scenarios.judge.calibration.CalibrationInputs``).
+
+The entity paths are the recording's (``scenarios.record.viewer.entity``): the pose stream as
+it was sent (``estimator/*``), the detections' keypoints, ``world/cones/truth``, the camera's
+pinhole and, beside them, the truth: the true mount (``world/body/camera``) and the true clock
+offset (``truth``).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from scenarios.judge.calibration import CalibrationInputs, Truth
+from scenarios.record.viewer import entity
+from vnav import quat
+from vnav.camera import PinholeCamera
+from vnav.cone import TRAFFIC_CONE
+
+__all__ = ["RecordingError", "calibration_inputs", "read_rows"]
+
+
+class RecordingError(ValueError):
+    """A file is not a recording ``calibrate`` can read; the message says what is missing."""
+
+
+_CALIBRATION_ENTITIES = (
+    entity.POSE_STREAM,
+    entity.MOUNT_DECLARED,
+    entity.STAMP_CAM,
+    entity.KEYPOINTS,
+    entity.CAMERA,
+    entity.TRUTH,
+    entity.TRUTH_VALUES,
+)
+
+
+def read_rows(path: Path, entities: tuple[str, ...]) -> dict[str, list[dict]]:
+    """Every row of ``entities`` (entity paths without the leading ``/``), by entity path.
+
+    Raises
+    ------
+    RecordingError
+        If the file is not a readable Rerun recording.
+    """
+    import pyarrow as pa
+    from rerun.chunk import RrdReader
+
+    wanted: dict[str, list[dict]] = {"/" + p: [] for p in entities}
+    try:
+        chunks = list(RrdReader(str(path)).stream().to_chunks())
+    except Exception as exc:  # Rerun reports an unreadable file as RuntimeError
+        raise RecordingError(f"{path}: not a readable Rerun recording ({exc})") from None
+    for chunk in chunks:
+        path_of = str(chunk.entity_path)
+        if path_of not in wanted:
+            continue
+        table = pa.Table.from_batches([chunk.to_record_batch()])
+        columns = {}
+        for name in table.column_names:
+            column = table.column(name)
+            if pa.types.is_duration(column.type) or pa.types.is_timestamp(column.type):
+                column = column.cast(pa.int64())
+            columns[name] = column.to_pylist()
+        wanted[path_of].extend({k: v[i] for k, v in columns.items()} for i in range(table.num_rows))
+    return {k.lstrip("/"): v for k, v in wanted.items()}
+
+
+def _transforms(rows: list[dict], key: str) -> tuple[np.ndarray, np.ndarray]:
+    """``(index values, (N, 4, 4) transforms)`` of the rows with a translation and a timeline
+    ``key`` (``"tick"`` or ``"sim_time"``), in index order."""
+    rows = [r for r in rows if r.get("Transform3D:translation") and key in r]
+    rows.sort(key=lambda r: r[key])
+    T = np.tile(np.eye(4), (len(rows), 1, 1))
+    for i, r in enumerate(rows):
+        T[i, :3, 3] = r["Transform3D:translation"][0]
+        T[i, :3, :3] = quat.to_matrix(np.asarray(r["Transform3D:quaternion"][0]), normalize=True)
+    return np.array([r[key] for r in rows]), T
+
+
+def calibration_inputs(path: str | Path) -> CalibrationInputs:
+    """The inputs a recording written by ``vnav-demo run`` carries.
+
+    Raises
+    ------
+    RecordingError
+        If the file is not a recording or lacks what calibration needs (say which).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise RecordingError(f"{path}: no such file")
+    rows = read_rows(path, _CALIBRATION_ENTITIES)
+
+    missing = [p for p in (entity.POSE_STREAM, entity.STAMP_CAM, entity.CAMERA) if not rows[p]]
+    if missing:
+        raise RecordingError(
+            f"{path}: the recording lacks {', '.join(missing)} (written by vnav-demo run of "
+            "this version)"
+        )
+    stamps_ns, T_w_b = _transforms(rows[entity.POSE_STREAM], "sim_time")
+    stamp_rows = sorted((r for r in rows[entity.STAMP_CAM] if "tick" in r), key=lambda r: r["tick"])
+    ticks = [r["tick"] for r in stamp_rows]
+    keypoints = {r["tick"]: r for r in rows[entity.KEYPOINTS] if "tick" in r}
+    apex_uv = []
+    for tick in ticks:
+        positions = np.asarray(
+            keypoints.get(tick, {}).get("Points2D:positions") or [], dtype=np.float64
+        ).reshape(-1, 2)
+        apex_uv.append(positions[0::2] - 0.5)  # apex, base, apex, ...; Rerun's +0.5 undone
+    pinhole = next(r for r in rows[entity.CAMERA] if r.get("Pinhole:image_from_camera"))
+    K = np.asarray(pinhole["Pinhole:image_from_camera"][0], dtype=np.float64).reshape(3, 3).T
+    width, height = (int(v) for v in pinhole["Pinhole:resolution"][0])
+    camera = PinholeCamera(K[0, 0], K[1, 1], K[0, 2] - 0.5, K[1, 2] - 0.5, width, height)
+    cones = [r for r in rows[entity.TRUTH] if r.get("Points3D:positions")]
+    if not cones:
+        raise RecordingError(f"{path}: the recording has no cone map (world/cones/truth)")
+    cones_w = np.asarray(cones[0]["Points3D:positions"], dtype=np.float64).reshape(-1, 3)
+    _, mounts = _transforms(rows[entity.MOUNT_DECLARED], "tick")
+    truth = None
+    true_mount = [r for r in rows[entity.CAMERA] if r.get("Transform3D:translation")]
+    offsets = [r for r in rows[entity.TRUTH_VALUES] if "camera_clock_offset_s" in r]
+    if true_mount and offsets:
+        key = "tick" if "tick" in true_mount[0] else None
+        if key is None:
+            T_true = np.eye(4)
+            T_true[:3, 3] = true_mount[0]["Transform3D:translation"][0]
+            T_true[:3, :3] = quat.to_matrix(
+                np.asarray(true_mount[0]["Transform3D:quaternion"][0]), normalize=True
+            )
+        else:
+            T_true = _transforms(true_mount, "tick")[1][0]
+        truth = Truth(T_true, float(offsets[0]["camera_clock_offset_s"][0]))
+    return CalibrationInputs(
+        camera=camera,
+        pose_stamps_s=stamps_ns * 1e-9,
+        T_w_b=T_w_b,
+        image_stamps_cam_s=np.array([r["Scalars:scalars"][0] for r in stamp_rows]),
+        apex_uv=apex_uv,
+        apex_w=cones_w + np.array([0.0, 0.0, TRAFFIC_CONE.height_m]),
+        T_b_c_declared=mounts[0] if len(mounts) else np.eye(4),
+        truth=truth,
+    )

@@ -1,0 +1,3 @@
+"""Running a scenario: the simulator loop (``runner``), the sensor streams and their timing
+(``streams``), feeding each tick to the estimator and comparing with the truth (``evaluate``)
+and the per-tick records a run leaves (``records``)."""
