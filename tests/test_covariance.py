@@ -22,7 +22,7 @@ from vnav.covariance import (
     ground_plane_cov,
     naive_cov,
 )
-from vnav.estimators import _known_height, _solve_known_height
+from vnav.estimators import _solve_known_height, known_height_on_view
 from vnav.localize import localize
 from vnav.sensor_noise import NOISELESS, SensorNoise, body_pose_covariance, keypoint_cov
 from vnav.silhouette import SilhouetteView, triangle_fraction
@@ -60,7 +60,7 @@ def test_known_height_jacobian_matches_central_differences(view) -> None:
     world, det = view["world"], view["detection"]
     cam, T_w_c = world.camera, world.T_w_c
     sv = SilhouetteView(det, cam, T_w_c)
-    assert not isinstance(_known_height(sv, TRAFFIC_CONE), type(None))
+    assert not isinstance(known_height_on_view(sv, TRAFFIC_CONE), type(None))
     d, elevation = sv.vertical_at_blob()
     apex = sv.apex(d, triangle_fraction(elevation, TRAFFIC_CONE))
     bottom = sv.axis_exit(d, apex)

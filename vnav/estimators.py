@@ -51,11 +51,14 @@ __all__ = [
     "MAX_RANGE_ERROR_PER_PX",
     "MIN_TRIANGLE_FRACTION",
     "NoEstimate",
+    "depth_image_on_view",
     "depth_under_mask",
     "estimate_from_depth",
     "estimate_from_ground_plane",
     "estimate_from_known_height",
+    "ground_plane_on_view",
     "known_height_max_elevation_rad",
+    "known_height_on_view",
     "naive",
     "naive_estimate",
 ]
@@ -207,7 +210,7 @@ def estimate_from_depth(
     view = _view_clear_of_border(detection, camera, T_w_c)
     check_depth_image(depth, camera)
     z_c = depth_under_mask(detection, depth)  # checked finite even when not used
-    return None if view is None else _or_none(_from_depth(view, z_c, cone, far_m))
+    return None if view is None else _or_none(depth_image_on_view(view, z_c, cone, far_m))
 
 
 def _or_none(p_w: np.ndarray | NoEstimate) -> np.ndarray | None:
@@ -241,11 +244,13 @@ def _percentile(a: np.ndarray, q: float) -> float:
     return above - diff * (1.0 - gamma) if gamma >= 0.5 else below + diff * gamma
 
 
-def _from_depth(
+def depth_image_on_view(
     view: SilhouetteView, z_c: np.ndarray, cone: ConeModel, far_m: float
 ) -> np.ndarray | NoEstimate:
-    """``estimate_from_depth`` after validation, for a detection clear of the border; ``z_c``
-    the depth under the mask (``depth_under_mask``). Why not, instead of None."""
+    """``estimate_from_depth`` after validation, on the view of a detection clear of the
+    border; ``z_c`` the depth under the mask (``depth_under_mask``). The reason there is no
+    estimate, instead of None. The ``depth_image`` method's estimate (``vnav.single_image``).
+    """
     uv = view.uv()
     u, v = uv[:, 0], uv[:, 1]
     valid = (z_c > 0.0) & (z_c < far_m)
@@ -385,12 +390,13 @@ def estimate_from_ground_plane(
         is parallel to the ground or points away from it (``d_z >= -1e-9``).
     """
     view = _view_clear_of_border(detection, camera, T_w_c)
-    return None if view is None else _or_none(_ground_plane(view, cone))
+    return None if view is None else _or_none(ground_plane_on_view(view, cone))
 
 
-def _ground_plane(view: SilhouetteView, cone: ConeModel) -> np.ndarray | NoEstimate:
-    """``estimate_from_ground_plane`` after validation, for a detection clear of the border;
-    why not, instead of None."""
+def ground_plane_on_view(view: SilhouetteView, cone: ConeModel) -> np.ndarray | NoEstimate:
+    """``estimate_from_ground_plane`` after validation, on the view of a detection clear of the
+    border; the reason there is no estimate, instead of None. The ``ground_plane`` method's
+    estimate (``vnav.single_image``)."""
     bottom = view.bottom(cone)
     tx, ty, tz = view.t
     dx, dy, dz = view.ray(float(bottom[0]), float(bottom[1]))
@@ -518,12 +524,13 @@ def estimate_from_known_height(
         comes out non-positive or the equations are inconsistent (residual above 25% of H).
     """
     view = _view_clear_of_border(detection, camera, T_w_c)
-    return None if view is None else _or_none(_known_height(view, cone))
+    return None if view is None else _or_none(known_height_on_view(view, cone))
 
 
-def _known_height(view: SilhouetteView, cone: ConeModel) -> np.ndarray | NoEstimate:
-    """``estimate_from_known_height`` after validation, for a detection clear of the border;
-    why not, instead of None."""
+def known_height_on_view(view: SilhouetteView, cone: ConeModel) -> np.ndarray | NoEstimate:
+    """``estimate_from_known_height`` after validation, on the view of a detection clear of the
+    border; the reason there is no estimate, instead of None. The ``known_height`` method's
+    estimate (``vnav.single_image``)."""
     vertical = view.vertical_at_blob()
     if vertical is None:
         logger.debug("known height: camera looks straight down at the cone")

@@ -1,38 +1,36 @@
-"""From a cone detection to the cone's base-centre position in the world, by every method.
+"""From cone detections to the cones' base-centre positions in the world, by every method.
 
-``localize`` validates its inputs once, builds one ``vnav.silhouette.SilhouetteView``
-of the detection and runs each estimator of ``vnav.estimators`` on it; the methods and
-their accuracy contract are declared in ``vnav.methods``.
+``localize`` validates its inputs once, builds one ``vnav.observation.Observation`` of the
+detection and runs each single-image method's estimator on it, then the methods built from
+the best of those (``vnav.methods``: the methods, their estimators and their accuracy
+contract are declared there; nothing here names one). ``Localizer`` does the same image
+after image and adds the methods that need several images, with the state they keep over a
+run; it also re-estimates a detection with another pose (the newest one received when the
+image arrived, as a pipeline ignoring stamps would).
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from vnav import covariance, se3
+from vnav import se3
 from vnav.camera import PinholeCamera, check_depth_image
 from vnav.cone import TRAFFIC_CONE, ConeModel
 from vnav.detect import ConeDetection, check_detection
-from vnav.estimators import (
-    NoEstimate,
-    _from_depth,
-    _ground_plane,
-    _known_height,
-    depth_under_mask,
-    naive,
-)
-from vnav.methods import METHOD_NAMES, PREFERENCE
+from vnav.estimators import NoEstimate, depth_under_mask
+from vnav.methods import METHOD_NAMES, METHODS, PREFERENCE, method
+from vnav.observation import Exposure, Observation
 from vnav.sensor_noise import NOISELESS, SensorNoise
 from vnav.silhouette import SilhouetteView
-from vnav.uncertainty import _compose_cov2, check_covariance
+from vnav.uncertainty import check_covariance
 
 _ZERO_6 = np.zeros((6, 6))
 _ZERO_6.flags.writeable = False
 
-__all__ = ["ConeEstimates", "localize"]
+__all__ = ["ConeEstimates", "Localizer", "localize"]
 
 
 @dataclass(frozen=True)
@@ -109,6 +107,22 @@ class ConeEstimates(Mapping[str, "np.ndarray | None"]):
             raise ValueError(f"unknown method {name!r}; valid: {list(METHOD_NAMES)}")
         return self.cov_w_by_method.get(name)
 
+    def with_result(
+        self, name: str, result: tuple[np.ndarray, np.ndarray] | NoEstimate
+    ) -> ConeEstimates:
+        """A copy with method ``name``'s estimate replaced: ``(p_w, cov_w)`` or the reason
+        there is none (a several-image method's result, ``Localizer``)."""
+        points, reasons = dict(self.p_w_by_method), dict(self.no_estimate)
+        covs = dict(self.cov_w_by_method)
+        reasons.pop(name, None)
+        points.pop(name, None)
+        covs.pop(name, None)
+        if isinstance(result, NoEstimate):
+            reasons[name] = result
+        else:
+            points[name], covs[name] = result
+        return ConeEstimates(points, reasons, covs, self.apex_uv)
+
     @property
     def best(self) -> np.ndarray | None:
         """The first available estimate in ``vnav.methods.PREFERENCE`` order, or None."""
@@ -177,81 +191,208 @@ def localize(
         On malformed transforms, a depth image of the wrong dtype or size, or non-finite depth
         under the detection's mask.
     """
-    # Validate once, in the order the estimators would (detection, depth, T_w_c), then run
-    # their unvalidated cores on one shared view.
+    exposure = _exposure(
+        camera, T_w_b, T_b_c, cone, far_m, noise=noise, cov_T_w_b=cov_T_w_b, cov_T_b_c=cov_T_b_c
+    )
+    return _localize(_observation(exposure, detection, depth), detection, with_covariance)
+
+
+def _exposure(
+    camera: PinholeCamera,
+    T_w_b: np.ndarray,
+    T_b_c: np.ndarray,
+    cone: ConeModel,
+    far_m: float,
+    *,
+    noise: SensorNoise,
+    cov_T_w_b: np.ndarray | None,
+    cov_T_b_c: np.ndarray | None,
+) -> Exposure:
+    """One image's poses and noise, validated."""
     T_w_b = se3.check_pose(T_w_b, "T_w_b")
     T_b_c = se3.check_pose(T_b_c, "T_b_c")
-    check_detection(detection, camera)
+    return Exposure(
+        T_w_b=T_w_b,
+        T_b_c=T_b_c,
+        T_w_c=se3.check_pose(T_w_b @ T_b_c, "T_w_c"),
+        cov_T_w_b=_ZERO_6
+        if cov_T_w_b is None
+        else check_covariance(cov_T_w_b, (6, 6), "cov_T_w_b"),
+        cov_T_b_c=_ZERO_6
+        if cov_T_b_c is None
+        else check_covariance(cov_T_b_c, (6, 6), "cov_T_b_c"),
+        noise=noise,
+        camera=camera,
+        cone=cone,
+        far_m=far_m,
+    )
+
+
+def _observation(
+    exposure: Exposure, detection: ConeDetection, depth: np.ndarray | None
+) -> Observation | None:
+    """One detection in ``exposure``'s image, validated; None for a detection that touches the
+    image border (after validating it all the same)."""
+    check_detection(detection, exposure.camera)
     if depth is not None:
-        check_depth_image(depth, camera)
-    T_w_c = se3.check_pose(T_w_b @ T_b_c, "T_w_c")
-    cov_T_w_b = _ZERO_6 if cov_T_w_b is None else check_covariance(cov_T_w_b, (6, 6), "cov_T_w_b")
-    cov_T_b_c = _ZERO_6 if cov_T_b_c is None else check_covariance(cov_T_b_c, (6, 6), "cov_T_b_c")
+        check_depth_image(depth, exposure.camera)
     z_c = None if depth is None else depth_under_mask(detection, depth)
     if detection.touches_border:
+        return None
+    return Observation(exposure, SilhouetteView(detection, exposure.camera, exposure.T_w_c), z_c)
+
+
+def _localize(
+    obs: Observation | None, detection: ConeDetection, with_covariance: bool
+) -> ConeEstimates:
+    """Every single-image method on ``obs``, then those built from the best estimate."""
+    if obs is None:
         return ConeEstimates({}, dict.fromkeys(METHOD_NAMES, NoEstimate.BORDER))
-    view = SilhouetteView(detection, camera, T_w_c)
-    found = {
-        "depth_image": NoEstimate.NO_DEPTH if z_c is None else _from_depth(view, z_c, cone, far_m),
-        "ground_plane": _ground_plane(view, cone),
-        "known_height": _known_height(view, cone),
-        # Several images' work (vnav.tracking): scenarios.run.evaluate fills it in.
-        "triangulated": NoEstimate.ONE_IMAGE,
-    }
+    found: dict[str, np.ndarray | NoEstimate] = {}
+    for m in METHODS:
+        if m.images == "one":
+            found[m.name] = m.estimator.estimate(obs)
+        elif m.images == "several":
+            found[m.name] = NoEstimate.ONE_IMAGE  # Localizer's work, image after image
     no_estimate = {m: r for m, r in found.items() if isinstance(r, NoEstimate)}
     p_w_by_method = {m: p for m, p in found.items() if m not in no_estimate}
-    apex_uv = view.apex_keypoint(cone)  # memoised: ground_plane's bottom pixel fitted it
+    apex_uv = obs.view.apex_keypoint(obs.exposure.cone)  # memoised: fitted by the estimators
+    derived = [m for m in METHODS if m.images == "from_best"]
     if not p_w_by_method:
-        no_estimate["naive"] = NoEstimate.NO_OTHER_ESTIMATE
+        no_estimate.update(dict.fromkeys((m.name for m in derived), NoEstimate.NO_OTHER_ESTIMATE))
         return ConeEstimates({}, no_estimate, apex_uv=apex_uv)
-    best_method = next(m for m in PREFERENCE if m in p_w_by_method)
-    p_c = np.array(view.camera_coordinates(p_w_by_method[best_method]))
-    p_w_by_method["naive"] = naive(p_c, T_w_b[:3, 3])
+    best = next(m for m in PREFERENCE if m in p_w_by_method)
+    for m in derived:
+        p_w_by_method[m.name] = m.estimator.estimate(obs, p_w_by_method[best])
     if not with_covariance:
         return ConeEstimates(p_w_by_method, no_estimate, apex_uv=apex_uv)
-    cov_w = _covariances(
-        p_w_by_method,
-        view,
-        camera,
-        T_w_b=T_w_b,
-        cov_T_w_b=cov_T_w_b,
-        T_w_c=T_w_c,
-        cov_T_w_c=_compose_cov2(T_w_b, cov_T_w_b, cov_T_b_c) if cov_T_b_c.any() else cov_T_w_b,
-        n_depth_points=detection.area_px // 2,
-        noise=noise,
-        cone=cone,
-    )
+    cov_w = {
+        name: method(name).estimator.covariance(obs, p_w)
+        for name, p_w in p_w_by_method.items()
+        if method(name).images == "one"
+    }
+    for m in derived:
+        cov_w[m.name] = m.estimator.covariance(obs, cov_w[best])
     return ConeEstimates(p_w_by_method, no_estimate, cov_w, apex_uv)
 
 
-def _covariances(
-    p_w_by_method: dict[str, np.ndarray],
-    view: SilhouetteView,
-    camera: PinholeCamera,
-    *,
-    T_w_b: np.ndarray,
-    cov_T_w_b: np.ndarray,
-    T_w_c: np.ndarray,
-    cov_T_w_c: np.ndarray,
-    n_depth_points: int,
-    noise: SensorNoise,
-    cone: ConeModel,
-) -> dict[str, np.ndarray]:
-    """Each estimate's world covariance (``vnav.covariance``); the naive one's from the best
-    estimate's (``PREFERENCE``), as its point is."""
-    cov_w: dict[str, np.ndarray] = {}
-    if "depth_image" in p_w_by_method:
-        cov_w["depth_image"] = covariance.depth_image_cov(
-            T_w_c, cov_T_w_c, p_w_by_method["depth_image"], n_depth_points, noise
+class Localizer:
+    """Every method's estimates of the cones one camera sees, image after image.
+
+    The single-image methods and those built from their best estimate run on each detection
+    as ``localize`` runs them; the methods that need several images (``vnav.methods``,
+    ``images == "several"``) keep their state over the run here and add their estimates.
+
+    Parameters
+    ----------
+    camera : PinholeCamera
+    cone : ConeModel
+    far_m : float
+        Depth at or beyond which a pixel has no return.
+    noise : SensorNoise
+        The image and depth noise the estimators are told (``vnav.sensor_noise``).
+    """
+
+    def __init__(
+        self,
+        camera: PinholeCamera,
+        cone: ConeModel = TRAFFIC_CONE,
+        far_m: float = np.inf,
+        *,
+        noise: SensorNoise = NOISELESS,
+    ) -> None:
+        self.camera, self.cone, self.far_m, self.noise = camera, cone, far_m, noise
+        self._tracks = {
+            m.name: m.estimator.start(camera, cone) for m in METHODS if m.images == "several"
+        }
+
+    def update(
+        self,
+        t_s: float,
+        detections: Sequence[ConeDetection],
+        depth: np.ndarray | None,
+        T_w_b: np.ndarray,
+        T_b_c: np.ndarray,
+        *,
+        cov_T_w_b: np.ndarray | None = None,
+        cov_T_b_c: np.ndarray | None = None,
+    ) -> list[ConeEstimates]:
+        """Every estimate of each detection in one image, with its covariance.
+
+        Parameters
+        ----------
+        t_s : float
+            The image's exposure time on the estimator's clock, seconds; never earlier than
+            the previous image's.
+        detections : sequence of ConeDetection
+            From ``vnav.detect.detect_cones`` on this image.
+        depth : ndarray, shape (H, W), or None
+            Planar z-depth, metres.
+        T_w_b, T_b_c : ndarray, shape (4, 4)
+            The body pose at the exposure and the camera mount, as the estimator knows them.
+        cov_T_w_b, cov_T_b_c : ndarray, shape (6, 6), optional
+            Their left-perturbation covariances; default zero.
+
+        Returns
+        -------
+        list of ConeEstimates
+            One per detection, in order (as ``localize`` gives, with the several-image
+            methods' estimates or reasons).
+
+        Raises
+        ------
+        ValueError
+            As ``localize``, or for a time earlier than the previous image's.
+        """
+        exposure = _exposure(
+            self.camera,
+            T_w_b,
+            T_b_c,
+            self.cone,
+            self.far_m,
+            noise=self.noise,
+            cov_T_w_b=cov_T_w_b,
+            cov_T_b_c=cov_T_b_c,
         )
-    if "ground_plane" in p_w_by_method:
-        cov_w["ground_plane"] = covariance.ground_plane_cov(
-            view, camera, T_w_c, cov_T_w_c, p_w_by_method["ground_plane"], noise, cone
+        observations = [_observation(exposure, d, depth) for d in detections]
+        estimates = [
+            _localize(o, d, with_covariance=True)
+            for o, d in zip(observations, detections, strict=True)
+        ]
+        for name, track in self._tracks.items():
+            for i, result in track.update(t_s, exposure, observations).items():
+                estimates[i] = estimates[i].with_result(name, result)
+        return estimates
+
+    def estimate_with_pose(
+        self,
+        method_name: str,
+        detection: ConeDetection,
+        depth: np.ndarray | None,
+        T_w_b: np.ndarray,
+        T_b_c: np.ndarray,
+    ) -> np.ndarray | None:
+        """One single-image method's estimate of ``detection`` made with another body pose
+        (e.g. the newest one received when the image arrived), (3,), or None without one.
+
+        Raises
+        ------
+        ValueError
+            For a method that does not estimate from one image, or as ``localize``.
+        """
+        m = method(method_name)
+        if m.images != "one":
+            raise ValueError(f"{method_name} does not estimate from one image ({m.images!r})")
+        exposure = _exposure(
+            self.camera,
+            T_w_b,
+            T_b_c,
+            self.cone,
+            self.far_m,
+            noise=self.noise,
+            cov_T_w_b=None,
+            cov_T_b_c=None,
         )
-    if "known_height" in p_w_by_method:
-        cov_w["known_height"] = covariance.known_height_cov(
-            view, camera, T_w_c, cov_T_w_c, p_w_by_method["known_height"], noise, cone
-        )
-    best_method = next(m for m in PREFERENCE if m in cov_w)
-    cov_w["naive"] = covariance.naive_cov(T_w_b, cov_T_w_b, T_w_c[:3, :3].T, cov_w[best_method])
-    return cov_w
+        obs = _observation(exposure, detection, depth)
+        p_w = None if obs is None else m.estimator.estimate(obs)
+        return None if p_w is None or isinstance(p_w, NoEstimate) else p_w

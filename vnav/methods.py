@@ -1,10 +1,22 @@
 """The localisation methods and their accuracy contract, declared once.
 
 Every estimate of a cone's base centre goes through the same chain,
-``p_w = T_w_b @ T_b_c @ p_c`` (VNAV lecture 1, chapter 0); the methods differ only in where
-the depth along the viewing ray comes from. Everything that lists methods (the estimates of
-``vnav.localize``, the checks and the report of a scenario, the recording's colours and
-plots, the README's table) derives from ``METHODS``, in this order.
+``p_w = T_w_b @ T_b_c @ p_c`` (MIT 16.485 VNAV, lecture 1, chapter 0); the methods differ only
+in where the depth along the viewing ray comes from. Everything that lists methods (the
+estimates of ``vnav.localize``, the checks and the report of a scenario, the recording's
+colours and plots, the README's table) derives from ``METHODS``, in this order.
+
+A method carries its behaviour: its estimator (named here as ``module:attribute`` and imported
+when first used, so that this module stays data), the degrees of freedom of its estimates, how
+many images it needs, and its accuracy contract. ``vnav.localize`` loops over the methods and
+nothing else branches on a method's name. An estimator is one of three kinds:
+
+- ``"one"`` image: ``estimate(obs) -> p_w | NoEstimate`` and ``covariance(obs, p_w)``, on one
+  ``vnav.observation.Observation`` (``SingleImageEstimator``);
+- ``"several"`` images: ``start(camera, cone)`` gives a per-run track whose ``update`` takes
+  each image's exposure and observations (``SeveralImageEstimator``);
+- ``"from_best"``: built from the best single-image estimate (``FromBestEstimator``), as the
+  lecture's naive mistake is.
 
 The accuracy contract (``docs/ACCURACY.md``) is stated here as data: each checked method has
 an ``AccuracyBound``, promised over the ``CONTRACT_DOMAIN`` (a cone fully in view, at
@@ -13,19 +25,34 @@ least 12 px tall, 2 to 25 m away).
 
 from __future__ import annotations
 
+import functools
+import importlib
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Literal
+from typing import TYPE_CHECKING, Any, Literal, Protocol
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from vnav.camera import PinholeCamera
+    from vnav.cone import ConeModel
+    from vnav.estimators import NoEstimate
+    from vnav.observation import Exposure, Observation
 
 __all__ = [
     "CONTRACT_DOMAIN",
     "METHODS",
     "METHOD_NAMES",
+    "NAIVE",
+    "NEWEST_POSE_METHOD",
     "PREFERENCE",
     "AccuracyBound",
     "ContractDomain",
+    "FromBestEstimator",
     "Method",
+    "SeveralImageEstimator",
+    "SeveralImageTrack",
+    "SingleImageEstimator",
     "method",
 ]
 
@@ -94,6 +121,51 @@ CONTRACT_DOMAIN = ContractDomain(min_range_m=2.0, max_range_m=25.0, min_height_p
 """The domain of the accuracy contract."""
 
 
+class SingleImageEstimator(Protocol):
+    """A method that estimates from one image (``Method.images == "one"``)."""
+
+    def estimate(self, obs: Observation) -> np.ndarray | NoEstimate:
+        """The cone's base centre in the world, (3,), metres, or why there is none."""
+        ...
+
+    def covariance(self, obs: Observation, p_w: np.ndarray) -> np.ndarray:
+        """The world covariance of ``estimate(obs)``, (3, 3), m^2, first order."""
+        ...
+
+
+class SeveralImageTrack(Protocol):
+    """A several-image method's state over one run (``SeveralImageEstimator.start``)."""
+
+    def update(
+        self, t_s: float, exposure: Exposure, observations: Sequence[Observation | None]
+    ) -> dict[int, tuple[np.ndarray, np.ndarray] | NoEstimate]:
+        """Take one image, exposed at ``t_s`` (seconds, the estimator's clock), and its
+        detections' observations (None for a detection with no usable view, one touching the
+        border); return, by detection index, ``(p_w, cov_w)`` or why there is none.
+        Detections left out keep the reason ``vnav.localize.localize`` gave."""
+        ...
+
+
+class SeveralImageEstimator(Protocol):
+    """A method that estimates from several images (``Method.images == "several"``)."""
+
+    def start(self, camera: PinholeCamera, cone: ConeModel) -> SeveralImageTrack:
+        """A new run's state."""
+        ...
+
+
+class FromBestEstimator(Protocol):
+    """A method built from the best single-image estimate (``Method.images == "from_best"``)."""
+
+    def estimate(self, obs: Observation, p_w_best: np.ndarray) -> np.ndarray:
+        """The estimate, (3,), metres, from the best one ``p_w_best``."""
+        ...
+
+    def covariance(self, obs: Observation, cov_w_best: np.ndarray) -> np.ndarray:
+        """Its world covariance, (3, 3), m^2, from the best estimate's ``cov_w_best``."""
+        ...
+
+
 @dataclass(frozen=True)
 class Method:
     """One way of finding the depth along the viewing ray.
@@ -110,6 +182,13 @@ class Method:
         That colour in words, for text that refers to it.
     bound : AccuracyBound or None
         The accuracy promised; None for a method that is reported but never checked.
+    implementation : str
+        Where its estimator is, ``"module:attribute"`` (``estimator`` imports it).
+    images : {"one", "several", "from_best"}
+        What it estimates from (see the module's docstring).
+    dof : int
+        Degrees of freedom of its estimates: the rank of their covariance, the chi-square
+        degrees of freedom of their NEES (2 for a point confined to a plane by construction).
     """
 
     name: str
@@ -117,11 +196,27 @@ class Method:
     color_rgb: tuple[int, int, int]
     color_name: str
     bound: AccuracyBound | None
+    implementation: str
+    images: Literal["one", "several", "from_best"] = "one"
+    dof: int = 3
 
     @property
     def promise(self) -> str:
         """The accuracy promised, in words (``reported, never checked`` without a bound)."""
         return self.bound.text if self.bound is not None else "reported, never checked"
+
+    @property
+    def needs_several_images(self) -> bool:
+        """Whether its estimates come from several images (no estimate from one alone)."""
+        return self.images == "several"
+
+    @functools.cached_property
+    def estimator(self) -> Any:
+        """The estimator ``implementation`` names, imported on first use: a
+        ``SingleImageEstimator``, ``SeveralImageEstimator`` or ``FromBestEstimator`` as
+        ``images`` says."""
+        module, _, attribute = self.implementation.partition(":")
+        return getattr(importlib.import_module(module), attribute)
 
 
 METHODS: tuple[Method, ...] = (
@@ -131,6 +226,7 @@ METHODS: tuple[Method, ...] = (
         (40, 200, 255),
         "blue",
         AccuracyBound(0.05, 0.01, "max"),
+        "vnav.single_image:DEPTH_IMAGE",
     ),
     Method(
         "ground_plane",
@@ -138,6 +234,8 @@ METHODS: tuple[Method, ...] = (
         (80, 230, 80),
         "green",
         AccuracyBound(0.10, 0.02, "median"),
+        "vnav.single_image:GROUND_PLANE",
+        dof=2,  # on z = 0 by construction
     ),
     Method(
         "known_height",
@@ -145,6 +243,7 @@ METHODS: tuple[Method, ...] = (
         (230, 80, 230),
         "magenta",
         AccuracyBound(0.0, 0.05, "median"),
+        "vnav.single_image:KNOWN_HEIGHT",
     ),
     Method(
         "triangulated",
@@ -152,6 +251,8 @@ METHODS: tuple[Method, ...] = (
         (255, 165, 0),
         "orange",
         AccuracyBound(0.05, 0.01, "median"),
+        "vnav.tracking:TRIANGULATED",
+        images="several",
     ),
     Method(
         "naive",
@@ -159,6 +260,8 @@ METHODS: tuple[Method, ...] = (
         (255, 40, 40),
         "red",
         None,
+        "vnav.single_image:NAIVE",
+        images="from_best",
     ),
 )
 """Every method, in report order."""
@@ -169,6 +272,14 @@ METHOD_NAMES: tuple[str, ...] = tuple(m.name for m in METHODS)
 PREFERENCE: tuple[str, ...] = tuple(m.name for m in METHODS if m.bound is not None)
 """The checked methods, best first: the "best estimate" of a cone is the first of these that
 gives one (the naive estimate is built from it, detections are matched to cones by it)."""
+
+NAIVE = "naive"
+"""The lecture's mistake, reported beside the others and never checked: the ``naive_worse``
+check and the recording's naive rays compare with it."""
+
+NEWEST_POSE_METHOD = PREFERENCE[0]
+"""The method whose estimate is made a second time with the newest pose received when an
+image arrived (what a pipeline ignoring stamps does): the first-preferred one."""
 
 _BY_NAME = {m.name: m for m in METHODS}
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -24,9 +25,12 @@ import numpy as np
 from vnav import se3, so3
 from vnav.camera import PinholeCamera
 from vnav.cone import TRAFFIC_CONE, ConeModel
+from vnav.estimators import NoEstimate
 from vnav.multiview import parallax_deg, triangulate
+from vnav.observation import Exposure, Observation
+from vnav.sensor_noise import keypoint_std_px
 
-__all__ = ["MIN_RANGE_M", "ApexTracker", "TrackedApex", "midpoint_covariance"]
+__all__ = ["MIN_RANGE_M", "TRIANGULATED", "ApexTracker", "TrackedApex", "midpoint_covariance"]
 
 MIN_RANGE_M = 2.0
 """The nearest a tracked cone is assumed to be (the accuracy contract's nearest range): it
@@ -323,3 +327,46 @@ def _midpoint_covariance_reference(
             J = -A_inv @ M @ D
             cov += J @ cov_uv[i] @ J.T
     return 0.5 * (cov + cov.T)
+
+
+class _TriangulatedTrack:
+    """The ``triangulated`` method over one run: an ``ApexTracker`` fed each image's apexes."""
+
+    def __init__(self, camera: PinholeCamera, cone: ConeModel) -> None:
+        self.tracker = ApexTracker(camera, cone)
+
+    def update(
+        self, t_s: float, exposure: Exposure, observations: Sequence[Observation | None]
+    ) -> dict[int, tuple[np.ndarray, np.ndarray] | NoEstimate]:
+        """Each observation's apex, fitted along the image vertical the pose gives
+        (``SilhouetteView.apex_keypoint``, memoised: the single-image methods fitted it), joins
+        its track; its noise is the keypoint table's along-figure figure in every direction
+        (``vnav.sensor_noise``), the camera pose's covariance the exposure's."""
+        apexes = {
+            i: uv
+            for i, obs in enumerate(observations)
+            if obs is not None and (uv := obs.view.apex_keypoint(exposure.cone)) is not None
+        }
+        std_px = keypoint_std_px("apex", exposure.noise.pixel_std)[0]
+        tracked = self.tracker.update(
+            t_s,
+            exposure.T_w_c,
+            np.array(list(apexes.values())).reshape(-1, 2),
+            cov_T_w_c=exposure.cov_T_w_c,
+            cov_uv=std_px**2 * np.eye(2),
+        )
+        return {
+            i: NoEstimate.PARALLAX if t.p_w is None else (t.p_w, t.cov_w)
+            for i, t in zip(apexes, tracked, strict=True)
+        }
+
+
+class _Triangulated:
+    """``triangulated`` (``vnav.methods``): the apex's rays over the last images."""
+
+    def start(self, camera: PinholeCamera, cone: ConeModel) -> _TriangulatedTrack:
+        return _TriangulatedTrack(camera, cone)
+
+
+TRIANGULATED = _Triangulated()
+"""The ``triangulated`` method's estimator (``vnav.methods.SeveralImageEstimator``)."""

@@ -32,6 +32,7 @@ __all__ = [
     "adjoint",
     "check_covariance",
     "compose",
+    "compose_covariance",
     "curly_hat",
     "invert",
     "nees",
@@ -211,7 +212,7 @@ def compose(
     S1 = check_covariance(cov_a_b, (6, 6), "cov_a_b")
     S2 = check_covariance(cov_b_c, (6, 6), "cov_b_c")
     if order == 2:
-        return T1 @ T2, _compose_cov2(T1, S1, S2)
+        return T1 @ T2, compose_covariance(T1, S1, S2)
     Ad = adjoint(T1)
     S2p = Ad @ S2 @ Ad.T
     cov = S1 + S2p
@@ -232,8 +233,9 @@ def compose(
     return T1 @ T2, 0.5 * (cov + cov.T)
 
 
-def _compose_cov2(T1: np.ndarray, S1: np.ndarray, S2: np.ndarray) -> np.ndarray:
-    """``compose``'s second-order covariance ``S1 + Ad(T1) S2 Ad(T1)^T`` on validated inputs."""
+def compose_covariance(T1: np.ndarray, S1: np.ndarray, S2: np.ndarray) -> np.ndarray:
+    """``compose``'s second-order covariance ``S1 + Ad(T1) S2 Ad(T1)^T`` (B&F eq. 38), (6, 6),
+    without validating: ``T1`` (4, 4) and ``S1``, ``S2`` (6, 6) as ``compose`` checks them."""
     Ad = adjoint(T1)
     cov = S1 + Ad @ S2 @ Ad.T
     return 0.5 * (cov + cov.T)

@@ -30,7 +30,7 @@ import numpy as np
 
 from scenarios.run.records import DetectionRecord, RunResult
 from scenarios.scenario.check_kinds import KINDS, Check, CheckKind, Unit
-from vnav.methods import CONTRACT_DOMAIN, method
+from vnav.methods import CONTRACT_DOMAIN, NAIVE, method
 from vnav.uncertainty import nees_band, nees_p_value
 
 __all__ = [
@@ -452,11 +452,11 @@ def _camera_span(run: RunResult, check: Check) -> float | NoData:
 @figure("naive_worse")
 def _naive_worse(run: RunResult, check: Check) -> float | NoData:
     """median naive error >= limit x the median error of ``method``"""
-    naive, ref = run.errors("naive"), run.errors(check.method)
+    naive, ref = run.errors(NAIVE), run.errors(check.method)
     if not ref.size:
         return _no_estimates(run, check.method, contract_only=False)
     if not naive.size:
-        return _no_estimates(run, "naive", contract_only=False)
+        return _no_estimates(run, NAIVE, contract_only=False)
     return _median(naive) / max(_median(ref), 1e-6)
 
 

@@ -25,7 +25,7 @@ import numpy as np
 from scenarios.judge.checks import CheckResult
 from scenarios.run.records import RunResult
 from vnav import metrics
-from vnav.methods import METHOD_NAMES
+from vnav.methods import METHOD_NAMES, NEWEST_POSE_METHOD
 from vnav.uncertainty import nees_band
 
 REPORT_VERSION = 6
@@ -163,8 +163,8 @@ def pose_lookup(run: RunResult) -> dict[str, Any]:
     latest, predicted = run.latest_pose_errors()
     timed = [t.timing for t in run.ticks if t.timing is not None]
     return {
-        "method": "depth_image",
-        "at_exposure": {"position_error_m": _stats(run.errors("depth_image"))},
+        "method": NEWEST_POSE_METHOD,
+        "at_exposure": {"position_error_m": _stats(run.errors(NEWEST_POSE_METHOD))},
         "latest_at_arrival": {
             "position_error_m": _stats(latest),
             "predicted_error_m": _stats(predicted),

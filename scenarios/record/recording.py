@@ -101,7 +101,7 @@ from scenarios.run.records import CalibrationRecord, PoseStream, RunResult, Tick
 from scenarios.scenario.spec import ScenarioSpec
 from vnav import quat, so3
 from vnav.camera import PinholeCamera, depth_to_world_points
-from vnav.methods import METHOD_NAMES, METHODS, PREFERENCE, method
+from vnav.methods import METHOD_NAMES, METHODS, NAIVE, PREFERENCE, method
 from vnav.uncertainty import nees_band
 
 if TYPE_CHECKING:
@@ -718,7 +718,7 @@ def _log_3d_styles(rec: rr.RecordingStream) -> None:
     )
     rec.log(
         entity.NAIVE_OFFSET,
-        rr.LineStrips3D.from_fields(colors=[method("naive").color_rgb], radii=LINE_UI_POINTS),
+        rr.LineStrips3D.from_fields(colors=[method(NAIVE).color_rgb], radii=LINE_UI_POINTS),
         static=True,
     )
     rec.log(entity.DETECTIONS, rr.Boxes2D.from_fields(colors=[(255, 220, 0)]), static=True)
@@ -1049,7 +1049,7 @@ def _send_rays(send: _Sender, rows: list[_Buffered], camera: PinholeCamera, far_
     )
     # naive = t_w_b + p_c: the segment from the drone to it is p_c, taken as a world offset.
     offsets = [
-        [np.array([r.record.T_w_b_est[:3, 3], p]) for p in r.record.estimates_w("naive")]
+        [np.array([r.record.T_w_b_est[:3, 3], p]) for p in r.record.estimates_w(NAIVE)]
         for r in rows
     ]
     send(entity.NAIVE_OFFSET, rows, _strips(offsets))
@@ -1074,12 +1074,13 @@ def _send_attitude(send: _Sender, rows: list[_Buffered], quats: np.ndarray) -> N
 
 
 def _send_cone0(send: _Sender, rows: list[_Buffered], cone0_w: np.ndarray) -> None:
-    """Cone 0's true base centre in world, body and camera frames, and its depth estimate."""
+    """Cone 0's true base centre in world, body and camera frames, and the first-preferred
+    method's estimate of it (``vnav.methods.PREFERENCE``)."""
     series: dict[str, list[tuple[_Buffered, np.ndarray]]] = {name: [] for name in CONE0_SERIES}
     for r in rows:
         for name, p in r.record.coordinates_of(cone0_w).items():
             series[name].append((r, p))
-        estimate = r.record.estimate_of_cone(0, "depth_image")
+        estimate = r.record.estimate_of_cone(0, PREFERENCE[0])
         if estimate is not None:
             series["estimate_world"].append((r, estimate))
     for name, pairs in series.items():

@@ -27,7 +27,7 @@ from scenarios.scenario.schema import VIEW_NAMES
 from scenarios.scenario.spec import ScenarioSpec
 from vnav import so3
 from vnav.cone import TRAFFIC_CONE
-from vnav.methods import METHODS, PREFERENCE, method
+from vnav.methods import METHODS, NAIVE, NEWEST_POSE_METHOD, PREFERENCE, method
 
 if TYPE_CHECKING:
     from scenarios.run.records import RunResult
@@ -164,12 +164,10 @@ AXIS_COLORS = [(230, 80, 80), (80, 200, 80), (80, 120, 240)]
 NEWEST_POSE_COLOR = (150, 90, 255)
 """Violet: what the newest pose at an image's arrival gives, in 3D and in the plots (no
 method uses it; a pipeline ignoring stamps would)."""
-EXPOSURE_POSE_COLOR = method("depth_image").color_rgb
+EXPOSURE_POSE_COLOR = method(NEWEST_POSE_METHOD).color_rgb
 """The pose looked up at the exposure stamp: the colour of the estimate it makes."""
 POSE_SAMPLE_COLOR = (190, 190, 190)
 
-NEWEST_POSE_METHOD = "depth_image"
-"""The method whose estimate is also made with the newest pose (``DetectionRecord.latest_w``)."""
 
 STREAM_QUANTITIES: tuple[str, ...] = ("yaw_deg", "position_m")
 """The pose stream is plotted as the body's yaw (degrees) and its position x, y, z (metres)."""
@@ -432,7 +430,7 @@ _CONE0_TITLES = {
     "world": f"cone 0 in world, p_w (m): {_XYZ}",
     "body": f"cone 0 in body, p_b (m): {_XYZ}",
     "camera": f"cone 0 in camera, p_c (m): {_XYZ}",
-    "estimate_world": f"depth_image estimate of p_w (m): {_XYZ}",
+    "estimate_world": f"{PREFERENCE[0]} estimate of p_w (m): {_XYZ}",
 }
 
 
@@ -450,12 +448,12 @@ check judges."""
 
 def _nees_tab(error_top_m: dict[str, float | None]) -> rrb.Vertical:
     """Each checked method's NEES per tick (thin), its mean over the run so far (thick) and
-    that mean's 95% chi-square band (grey), which narrows around the degrees of freedom (3,
-    or 2 for ground_plane, whose estimates lie on z = 0 by construction) as estimates add up.
+    that mean's 95% chi-square band (grey), which narrows around the method's degrees of
+    freedom (``vnav.methods.Method.dof``) as estimates add up.
     A method that gave no estimate keeps only its title."""
     plots, shares = [], []
     for name in PREFERENCE:
-        dof = 2 if name == "ground_plane" else 3
+        dof = method(name).dof
         none = _gave_none(error_top_m, name)
         title = f"{name} NEES, thick: mean so far, grey: 95% band around {dof}"
         paths = [entity.nees(name), entity.nees_mean(name), entity.nees_band(name)]
@@ -545,7 +543,7 @@ def _lower_tabs(
         *extra,
         rrb.Spatial2DView(name="error against range", origin=entity.ERROR_VS_RANGE),
         rrb.Vertical(
-            _series("naive error (m)", [entity.error("naive")], _from_zero(error_top_m, "naive")),
+            _series(f"{NAIVE} error (m)", [entity.error(NAIVE)], _from_zero(error_top_m, NAIVE)),
             _series(
                 "range to the matched cones (m)",
                 [entity.RANGE],

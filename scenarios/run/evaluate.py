@@ -1,17 +1,20 @@
 """Evaluate one camera tick: localise every detection and compare it with the truth.
 
 This is where a tick's estimates meet the ground truth; it needs the truth as numbers, not
-the simulator that produced them (``scenarios.run.runner`` reads them out of MuJoCo)::
+the simulator that produced them (``scenarios.run.runner`` reads them out of MuJoCo). The
+estimating is all ``vnav``'s (``vnav.localize.Localizer``); here it is fed what the estimator
+was told and its output is compared::
 
-    estimate p_w per method   <- vnav.localize.localize(det, camera, T_w_b_est, T_b_c_est, depth)
+    estimate p_w per method   <- Localizer.update(t, detections, depth, T_w_b_est, T_b_c_est)
              and its covariance  (with the noise and pose covariances the estimator is told)
     match                     <- each detection's best estimate to the nearest true cone,
                                  on the ground plane (vnav.metrics.match_nearest)
     compare  error = |p_w - truth|, its NEES against the covariance, range, contract domain
              (vnav.methods.CONTRACT_DOMAIN)
-    latest   the depth_image estimate again with the newest pose received when the image
-             arrived (what a pipeline ignoring stamps does), its error and the first-order
-             prediction of that error from the body's true motion, |dp| + range |dtheta|
+    latest   the NEWEST_POSE_METHOD estimate again with the newest pose received when the
+             image arrived (what a pipeline ignoring stamps does; Localizer.estimate_with_pose),
+             its error and the first-order prediction of that error from the body's true
+             motion, |dp| + range |dtheta|
 """
 
 from __future__ import annotations
@@ -23,15 +26,11 @@ import numpy as np
 
 from scenarios.run.records import DetectionRecord, ImageTiming, TickRecord
 from vnav import metrics, se3, so3
-from vnav.camera import PinholeCamera
 from vnav.cone import cones_fully_in_view
 from vnav.detect import ConeDetection
-from vnav.estimators import NoEstimate, estimate_from_depth
-from vnav.localize import ConeEstimates, localize
-from vnav.methods import CONTRACT_DOMAIN
-from vnav.sensor_noise import NOISELESS, SensorNoise, keypoint_std_px
-from vnav.tracking import ApexTracker
-from vnav.uncertainty import compose, nees
+from vnav.localize import ConeEstimates, Localizer
+from vnav.methods import CONTRACT_DOMAIN, NEWEST_POSE_METHOD
+from vnav.uncertainty import nees
 
 __all__ = ["MATCH_GATE_M", "TickTruth", "evaluate_tick"]
 
@@ -73,18 +72,15 @@ def evaluate_tick(
     truth: TickTruth,
     detections: list[ConeDetection],
     depth_m: np.ndarray | None,
-    camera: PinholeCamera,
+    localizer: Localizer,
     T_w_b_est: np.ndarray,
-    far_m: float,
     timing: ImageTiming | None = None,
     *,
     T_b_c_est: np.ndarray | None = None,
-    noise: SensorNoise = NOISELESS,
     cov_T_w_b: np.ndarray | None = None,
     cov_T_b_c: np.ndarray | None = None,
-    tracker: ApexTracker | None = None,
 ) -> TickRecord:
-    """Localise every detection with the estimator's pose and compare with the truth.
+    """Localise every detection with what the estimator was told and compare with the truth.
 
     Parameters
     ----------
@@ -93,31 +89,27 @@ def evaluate_tick(
         From ``vnav.detect.detect_cones`` on this tick's image.
     depth_m : ndarray, shape (H, W), or None
         This tick's planar depth image, metres.
-    camera : PinholeCamera
+    localizer : vnav.localize.Localizer
+        The run's estimator (its camera, far plane, the sensor noise it is told, and the
+        several-image methods' state).
     T_w_b_est : ndarray, shape (4, 4)
         The body pose the estimator looked up at the exposure stamp (the truth plus any pose
         noise, interpolated in the pose stream).
-    far_m : float
-        Depth at or beyond which a pixel has no return.
     timing : ImageTiming, optional
         The image's stamps and the newest pose received when it arrived: with it, every
-        matched detection also gets the ``depth_image`` estimate made with that pose
-        (``DetectionRecord.latest_w``), its error and its predicted error.
+        matched detection also gets the ``NEWEST_POSE_METHOD`` estimate made with that pose
+        (``DetectionRecord.latest_w``), its error and its predicted error; and the estimator's
+        clock stamps the image (else the simulator's time does).
     T_b_c_est : ndarray, shape (4, 4), optional
         The camera mount the estimator is told (the truth's, ``truth.T_b_c``, by default).
-    noise : SensorNoise
-        The image and depth noise the estimator is told.
     cov_T_w_b, cov_T_b_c : ndarray, shape (6, 6), optional
-        The covariances the estimator is told for ``T_w_b_est`` and ``T_b_c_est``
-        (``vnav.localize``).
-    tracker : ApexTracker, optional
-        The run's apex tracks (``vnav.tracking``): with it, each detection's apex joins its
-        track and the ``triangulated`` estimate comes from the track's rays.
+        The covariances the estimator is told for ``T_w_b_est`` and ``T_b_c_est``.
 
     Returns
     -------
     TickRecord
     """
+    camera = localizer.camera
     T_w_c = truth.T_w_b @ truth.T_b_c
     R_w_b = truth.T_w_b[:3, :3]
     # One tolerance for the flag and for the angles (so3's default): a tick flagged locked is
@@ -126,14 +118,11 @@ def evaluate_tick(
     rpy_rad = so3.to_rpy(R_w_b, warn=False)
     in_view = cones_fully_in_view(truth.cones_w, camera, T_w_c, CONTRACT_DOMAIN.min_height_px)
     T_b_c_est = truth.T_b_c if T_b_c_est is None else T_b_c_est
-    told = {"noise": noise, "cov_T_w_b": cov_T_w_b, "cov_T_b_c": cov_T_b_c}
-    estimates = [
-        localize(d, camera, T_w_b_est, T_b_c_est, depth_m, far_m=far_m, **told) for d in detections
-    ]
-    if tracker is not None:
-        # The tracker stamps each ray with the estimator's exposure time, not the simulator's.
-        t_s = truth.t_s if timing is None else timing.exposure_pose_s
-        estimates = _triangulated(tracker, t_s, estimates, T_w_b_est, T_b_c_est, **told)
+    # The estimator stamps the image with its exposure time, not the simulator's.
+    t_s = truth.t_s if timing is None else timing.exposure_pose_s
+    estimates = localizer.update(
+        t_s, detections, depth_m, T_w_b_est, T_b_c_est, cov_T_w_b=cov_T_w_b, cov_T_b_c=cov_T_b_c
+    )
     cone_of = _match(estimates, truth.cones_w)
     T_c_w = se3.invert(T_w_c)
     records = [
@@ -142,7 +131,7 @@ def evaluate_tick(
     ]
     if timing is not None and timing.T_w_b_latest is not None:
         records = [
-            _with_latest(r, timing, T_w_b_est, T_b_c_est, truth, camera, depth_m, far_m)
+            _with_latest(r, timing, T_w_b_est, T_b_c_est, truth, localizer, depth_m)
             for r in records
         ]
     return TickRecord(
@@ -168,11 +157,10 @@ def _with_latest(
     T_w_b_est: np.ndarray,
     T_b_c_est: np.ndarray,
     truth: TickTruth,
-    camera: PinholeCamera,
+    localizer: Localizer,
     depth_m: np.ndarray | None,
-    far_m: float,
 ) -> DetectionRecord:
-    """``record`` with its latest-pose ``depth_image`` estimate, error and prediction.
+    """``record`` with its latest-pose estimate (``NEWEST_POSE_METHOD``), error and prediction.
 
     The prediction is first order: a pose older by ``dt`` is off by the body's motion over
     ``dt``, ``|v| dt`` in position and ``|omega| dt`` in attitude, and the attitude error
@@ -184,10 +172,10 @@ def _with_latest(
     T_w_b_latest = timing.T_w_b_latest
     assert T_w_b_latest is not None
     if np.array_equal(T_w_b_latest, T_w_b_est):  # the same pose: the same estimate
-        p_w = record.estimates_w.get("depth_image")
+        p_w = record.estimates_w.get(NEWEST_POSE_METHOD)
     else:
-        p_w = estimate_from_depth(
-            record.detection, depth_m, camera, T_w_b_latest @ T_b_c_est, far_m=far_m
+        p_w = localizer.estimate_with_pose(
+            NEWEST_POSE_METHOD, record.detection, depth_m, T_w_b_latest, T_b_c_est
         )
     if p_w is None:
         return record
@@ -197,53 +185,6 @@ def _with_latest(
         latest_error_m=float(metrics.position_error(truth.cones_w[record.cone_index], p_w)[0]),
         predicted_latest_error_m=timing.true_motion_m + record.range_m * timing.true_motion_rad,
     )
-
-
-_ZERO_6 = np.zeros((6, 6))
-
-
-def _triangulated(
-    tracker: ApexTracker,
-    t_s: float,
-    estimates: list[ConeEstimates],
-    T_w_b: np.ndarray,
-    T_b_c: np.ndarray,
-    *,
-    noise: SensorNoise,
-    cov_T_w_b: np.ndarray | None,
-    cov_T_b_c: np.ndarray | None,
-) -> list[ConeEstimates]:
-    """Each detection's ``triangulated`` estimate from its apex track (``vnav.tracking``),
-    merged into its ``ConeEstimates``: the apex fitted along the image vertical the pose gives
-    (``ConeEstimates.apex_uv``), its noise the keypoint table's along-figure in every
-    direction (``vnav.sensor_noise``), the camera pose's covariance composed as
-    ``vnav.localize`` composes it."""
-    T_w_c = T_w_b @ T_b_c
-    cov_T_w_c = _ZERO_6 if cov_T_w_b is None else cov_T_w_b
-    if cov_T_b_c is not None:
-        cov_T_w_c = compose(T_w_b, cov_T_w_c, T_b_c, cov_T_b_c)[1]
-    apexes = {i: e.apex_uv for i, e in enumerate(estimates) if e.apex_uv is not None}
-    std_px = keypoint_std_px("apex", noise.pixel_std)[0]
-    tracked = tracker.update(
-        t_s,
-        T_w_c,
-        np.array(list(apexes.values())).reshape(-1, 2),
-        cov_T_w_c=cov_T_w_c,
-        cov_uv=std_px**2 * np.eye(2),
-    )
-    out = list(estimates)
-    for i, t in zip(apexes, tracked, strict=True):
-        e = estimates[i]
-        points = dict(e.p_w_by_method)
-        reasons = {m: r for m, r in e.no_estimate.items() if m != "triangulated"}
-        covs = dict(e.cov_w_by_method)
-        if t.p_w is None:
-            reasons["triangulated"] = NoEstimate.PARALLAX
-        else:
-            points["triangulated"] = t.p_w
-            covs["triangulated"] = t.cov_w
-        out[i] = ConeEstimates(points, reasons, covs, e.apex_uv)
-    return out
 
 
 def _match(estimates: list[ConeEstimates], cones_w: np.ndarray) -> dict[int, int]:

@@ -50,8 +50,8 @@ from vnav import quat, se3, so3
 from vnav.camera import PinholeCamera
 from vnav.detect import detect_cones
 from vnav.frames import FrameBuffer
+from vnav.localize import Localizer
 from vnav.sensor_noise import SensorNoise, body_pose_covariance, mount_covariance
-from vnav.tracking import ApexTracker
 
 __all__ = ["STAGES", "TickObserver", "run_scenario"]
 
@@ -250,8 +250,11 @@ class _Flow:
         # The scenario's fixed mount error: T_b_c_true = T_b_c_declared @ E, so the estimator's
         # declared mount is the true one times E^-1 (then the per-run extrinsic noise).
         self.true_to_declared = se3.invert(spec.scene.camera.mount_error.T)
-        self.tracker = ApexTracker(world.camera)  # the triangulated method's apex tracks
-        self.sensor_noise = SensorNoise(n.pixel_std_px, n.depth_std_m, n.depth_std_per_m2)
+        self.localizer = Localizer(
+            world.camera,
+            far_m=spec.scene.zfar_m,
+            noise=SensorNoise(n.pixel_std_px, n.depth_std_m, n.depth_std_per_m2),
+        )
         self.streams = Streams(
             pose_latency_s=t.pose_latency_s,
             image_latency_s=t.image_latency_s,
@@ -384,15 +387,12 @@ class _Flow:
             image.truth,
             image.detections,
             image.depth,
-            self.world.camera,
+            self.localizer,
             d.T_w_b_at_exposure,
-            self.spec.scene.zfar_m,
             self.image_timing(d),
             T_b_c_est=self.mount_error @ image.truth.T_b_c @ self.true_to_declared,
-            noise=self.sensor_noise,
             cov_T_w_b=self.pose_covariance(d),
             cov_T_b_c=self.cov_T_b_c,
-            tracker=self.tracker,
         )
 
     def pose_covariance(self, d: Delivered) -> np.ndarray:

@@ -14,11 +14,12 @@ from typing import Any
 
 from scenarios.scenario.check_kinds import KINDS, default_checks
 from scenarios.scenario.spec import ScenarioError, ScenarioSpec, from_dict
+from vnav.methods import METHODS, PREFERENCE, method
 
 Scenario = dict[str, Any]
 
 
-def _check(kind: str, limit: float, method: str = "depth_image", name: str = "") -> dict:
+def _check(kind: str, limit: float, method: str = PREFERENCE[0], name: str = "") -> dict:
     """A ``[[checks]]`` entry: the method only where the kind uses one, the limit in metres
     (``limit_m``) where the kind measures metres."""
     entry: dict[str, Any] = {"kind": kind}
@@ -33,17 +34,17 @@ def _check(kind: str, limit: float, method: str = "depth_image", name: str = "")
 ACCURACY_CHECKS = [
     _check(c.kind, c.limit, c.method, c.name)
     for c in default_checks()
-    if c.kind == "error_bound" and c.method != "triangulated"
+    if c.kind == "error_bound" and not method(c.method).needs_several_images
 ]
 """The single-image methods' accuracy checks (every flight)."""
 
 MOTION_CHECKS = [
     _check(c.kind, c.limit, c.method, c.name)
     for c in default_checks()
-    if c.kind == "error_bound" and c.method == "triangulated"
+    if c.kind == "error_bound" and method(c.method).needs_several_images
 ]
-"""The triangulated method's, for flights that move across the line of sight (a hover or a
-yaw in place gives its rays no parallax)."""
+"""The several-image methods' (``triangulated``), for flights that move across the line of
+sight (a hover or a yaw in place gives its rays no parallax)."""
 """The accuracy bound of every checked method (``vnav.methods``), in PREFERENCE order."""
 
 
@@ -380,7 +381,7 @@ def uncertainty() -> Scenario:
         },
         "checks": [
             _check("consistent", 0.05, m, f"{m} covariance consistent (NEES in 95% band)")
-            for m in ("depth_image", "ground_plane", "known_height")
+            for m in (m.name for m in METHODS if m.bound and not m.needs_several_images)
         ]
         + [_check("detection_rate", 0.95, name="cone detected whenever fully in view")],
     }

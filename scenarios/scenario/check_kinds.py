@@ -14,7 +14,7 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass
 
-from vnav.methods import METHODS, method
+from vnav.methods import METHODS, PREFERENCE, method
 
 __all__ = ["KINDS", "Check", "CheckKind", "Unit", "default_checks"]
 
@@ -217,7 +217,7 @@ class Check:
 
     kind: str
     limit: float
-    method: str = "depth_image"
+    method: str = PREFERENCE[0]
     name: str = ""
     default: bool = False
 

@@ -16,6 +16,7 @@ from typing import Any
 
 from scenarios.scenario.check_kinds import KINDS
 from sim.config import CameraConfig
+from vnav.methods import PREFERENCE
 
 __all__ = [
     "CAMERA",
@@ -332,7 +333,7 @@ TIMING: tuple[Key, ...] = (
 )
 CHECK: tuple[Key, ...] = (
     Key("kind", "any", "a check kind (scenarios.scenario.check_kinds.KINDS)"),
-    Key("method", "any", "a localisation method (vnav.methods)", "depth_image"),
+    Key("method", "any", "a localisation method (vnav.methods)", PREFERENCE[0]),
     Key("limit", "any", "the limit (give limit or limit_m)", None),
     Key("limit_m", "any", "the limit in metres", None),
     Key("name", "string", "what the report calls it", None),

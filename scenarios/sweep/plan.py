@@ -35,7 +35,7 @@ from typing import Any
 
 from scenarios.scenario import builtin, schema, toml_out
 from scenarios.scenario.spec import MAX_SEED, ScenarioError, ScenarioSpec, from_dict, read_toml
-from vnav.methods import METHOD_NAMES
+from vnav.methods import METHOD_NAMES, PREFERENCE
 
 __all__ = ["MAX_EPISODES", "GridPoint", "SweepError", "SweepPlan", "label", "load", "plan"]
 
@@ -147,7 +147,7 @@ def plan(data: dict[str, Any], where: str, base_dir: Path = Path()) -> SweepPlan
         raise SweepError(f"{where}: scenario: required: a built-in name or a scenario file path")
     base = _base_scenario(data["scenario"], where, base_dir)
     seeds = _seeds(data.get("seeds", 1), where)
-    rank_by = data.get("rank_by", "depth_image")
+    rank_by = data.get("rank_by", PREFERENCE[0])
     if rank_by not in METHOD_NAMES:
         raise SweepError(f"{where}: rank_by: must be one of {list(METHOD_NAMES)}, got {rank_by!r}")
     grid = data.get("grid", {})
