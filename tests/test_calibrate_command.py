@@ -111,7 +111,7 @@ def test_calibrate_refuses_what_it_cannot_use(builtin_runs, tmp_path, capsys):
 def test_calibration_with_image_noise_stays_within_the_noisy_targets():
     """The built-in with 8 levels of image noise (the most under which the detector's
     keypoints stay calibrated, ``vnav.sensor_noise``) at 5 Hz: the errors are reported and
-    stay within the issue's noisy targets, 0.2 deg, 2 cm and 3 ms."""
+    stay within the targets set for a noisy flight, 0.2 deg, 2 cm and 3 ms."""
     import dataclasses
 
     from scenarios import pipeline

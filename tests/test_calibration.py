@@ -70,7 +70,7 @@ def test_recovers_a_random_mount_error_and_offset(seed: int) -> None:
     """A random mount error (a few degrees and centimetres) and offset (-50..50 ms), 0.4 px of
     noise: each recovered within 4 of its own reported standard errors (rotation and
     translation: sqrt(3) times the largest axis's, the norm of three), which are themselves
-    below the issue's noisy targets (0.2 deg, 2 cm, 3 ms)."""
+    below the targets set for a noisy flight (0.2 deg, 2 cm, 3 ms)."""
     rng = np.random.default_rng(400 + seed)
     E = se3.make(so3.from_rpy(*np.radians(rng.uniform(-3, 3, 3))), rng.uniform(-0.03, 0.03, 3))
     offset = float(rng.uniform(-0.05, 0.05))

@@ -123,7 +123,7 @@ def pose_monte_carlo(index: int) -> tuple:
 # ground_plane is left out at the far view: its line of sight is 10 deg below the horizontal,
 # and 1 deg of attitude noise there is not small (the ground hit's range goes as 1 / tan e);
 # first order under-predicts its spread by about 8% (measured 7-10% over seeds), beyond the
-# issue's 10% criterion once sampling error is added. A gap, documented in docs/ACCURACY.md.
+# 10% criterion once sampling error is added. A gap, documented in docs/ACCURACY.md.
 POSE_CASES = [(i, m) for i in range(len(VIEWS)) for m in ("depth_image", "known_height")] + [
     (0, "ground_plane"),
     (1, "ground_plane"),
@@ -135,7 +135,7 @@ def test_pose_covariance_matches_monte_carlo(index: int, method: str) -> None:
     """1 deg and 5 cm of pose noise through the whole estimator, the image and depth fixed: the
     sample covariance of the estimates against the pose's part of the method's covariance.
 
-    The issue's criterion, in the regime where first order holds: the traces within 10%, and
+    The criterion, in the regime where first order holds: the traces within 10%, and
     the mean NEES of the draws (about their mean) within 10% of its degrees of freedom; each
     eigenvalue within 10% (``known_height``: 15%, its Jacobian holds the keypoints where the
     image puts them, while the estimator moves them a little with the believed vertical).

@@ -60,3 +60,46 @@ def test_readme_example_is_a_valid_scenario():
 
     spec = from_dict(tomllib.loads(_readme_scenario_block()), where="README.md")
     assert spec.name == "my-scene" and spec.flight.mode == "kinematic"
+
+
+def _repository_texts() -> list[Path]:
+    skip = {".git", ".venv", "recordings", "sweeps", "node_modules"}
+    return [
+        p
+        for p in ROOT.rglob("*")
+        if p.suffix in {".py", ".md", ".sh", ".toml", ".yaml"}
+        and p.is_file()
+        and not skip & set(p.relative_to(ROOT).parts)
+    ]
+
+
+def test_no_text_cites_an_issue_or_a_path_outside_the_repository():
+    """The lecture is cited by its name (MIT 16.485 VNAV, lecture 1); issues and the folders
+    beside the repository are not there for a reader of it."""
+    outside = re.compile(r"\.\./shared|shared[/]seed")
+    issue = re.compile(r"\bthe issue\b|\bissue's\b|\bissue #?\d+", re.IGNORECASE)
+    found = [
+        f"{p.relative_to(ROOT)}:{n}: {line.strip()}"
+        for p in _repository_texts()
+        for n, line in enumerate(p.read_text(encoding="utf-8").splitlines(), 1)
+        if outside.search(line) or issue.search(line)
+    ]
+    assert not found, found
+
+
+def test_the_layer_table_lists_every_scenarios_sub_package_and_module():
+    """docs/CONVENTIONS.md's layer table names each sub-package's modules, as on disk."""
+    rows = _table_rows((ROOT / "docs/CONVENTIONS.md").read_text(), "| layer | purpose |")
+    listed = {}
+    for layer, _, modules, _ in rows:
+        name = layer.strip("`").rstrip("/")
+        listed[name] = sorted(re.findall(r"`(\w+)`", modules))
+    packages = sorted(
+        p.name for p in (ROOT / "scenarios").iterdir() if (p / "__init__.py").is_file()
+    )
+    for package in packages:
+        assert package in listed, f"scenarios/{package}/ is missing from the layer table"
+        on_disk = sorted(
+            p.stem for p in (ROOT / "scenarios" / package).glob("*.py") if p.stem != "__init__"
+        )
+        assert set(on_disk) <= set(listed[package]), (package, on_disk, listed[package])

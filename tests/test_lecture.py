@@ -1,4 +1,4 @@
-"""Every worked example and quiz answer of MIT 16.485 VNAV lecture 1 (../shared/seed/).
+"""Every worked example and quiz answer of MIT 16.485 VNAV lecture 1.
 
 The expected values are the lecture's own printed numbers, typed in here (not read from
 ``scenarios.commands.lecture``), compared at the precision the lecture prints them.

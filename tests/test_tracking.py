@@ -53,7 +53,7 @@ def test_exact_pixels_give_the_cones_once_the_parallax_suffices() -> None:
 
 def test_noisy_pixels_within_the_target() -> None:
     """0.4 px of apex noise: at the last image (parallax 10-11 deg over 21 views) each cone
-    within max(5 cm, 1% of range) (the issue's target for the triangulated method)."""
+    within max(5 cm, 1% of range) (the triangulated method's accuracy bound, ``vnav.methods``)."""
     rng = np.random.default_rng(1)
     tracker = ApexTracker(CAMERA)
     last = None
@@ -81,7 +81,7 @@ def test_rendered_flight_triangulates_each_cone_within_the_target() -> None:
     """The simulator renders three cones while the drone slides 3 m sideways at 3 m height;
     the detector's blobs and the unbiased apex fit (``SilhouetteView.apex_keypoint``) feed the
     tracker: at the end each cone's estimate is within max(5 cm, 1% of range) of the truth
-    (the issue's target once the parallax exceeds a few degrees)."""
+    (its accuracy bound, once the parallax exceeds a few degrees)."""
     from sim.config import CameraConfig, SceneConfig
     from sim.render import Renderer
     from sim.world import World

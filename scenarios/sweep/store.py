@@ -20,7 +20,6 @@ same doubles.
 from __future__ import annotations
 
 import json
-import math
 import time
 from pathlib import Path
 from typing import Any
@@ -281,8 +280,3 @@ def estimates_table(episodes: list[Episode]):
         "method",
         table["method"].dictionary_encode(),
     )
-
-
-def finite_or_none(x: float) -> float | None:
-    """``x``, or None where it is NaN (JSON has no NaN)."""
-    return None if x is None or not math.isfinite(x) else float(x)
