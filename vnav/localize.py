@@ -11,6 +11,7 @@ image arrived, as a pipeline ignoring stamps would).
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 
@@ -21,7 +22,7 @@ from vnav.camera import PinholeCamera, check_depth_image
 from vnav.cone import TRAFFIC_CONE, ConeModel
 from vnav.detect import ConeDetection, check_detection
 from vnav.estimators import NoEstimate, depth_under_mask
-from vnav.methods import METHOD_NAMES, METHODS, PREFERENCE, method
+from vnav.methods import METHOD_NAMES, METHODS, PREFERENCE, Method, method
 from vnav.observation import Exposure, Observation
 from vnav.sensor_noise import NOISELESS, SensorNoise
 from vnav.silhouette import SilhouetteView
@@ -242,37 +243,43 @@ def _observation(
     return Observation(exposure, SilhouetteView(detection, exposure.camera, exposure.T_w_c), z_c)
 
 
+@functools.cache
+def _by_kind(methods: tuple[Method, ...]) -> tuple[tuple, tuple, tuple]:
+    """``methods``' ``(name, estimator)`` pairs by what they estimate from: one image, from
+    the best single-image estimate, several images (resolved once, not per detection)."""
+    return tuple(
+        tuple((m.name, m.estimator) for m in methods if m.images == kind)
+        for kind in ("one", "from_best", "several")
+    )  # type: ignore[return-value]
+
+
 def _localize(
     obs: Observation | None, detection: ConeDetection, with_covariance: bool
 ) -> ConeEstimates:
     """Every single-image method on ``obs``, then those built from the best estimate."""
     if obs is None:
         return ConeEstimates({}, dict.fromkeys(METHOD_NAMES, NoEstimate.BORDER))
-    found: dict[str, np.ndarray | NoEstimate] = {}
-    for m in METHODS:
-        if m.images == "one":
-            found[m.name] = m.estimator.estimate(obs)
-        elif m.images == "several":
-            found[m.name] = NoEstimate.ONE_IMAGE  # Localizer's work, image after image
+    single, from_best, several = _by_kind(METHODS)
+    found = {name: estimator.estimate(obs) for name, estimator in single}
+    found.update((name, NoEstimate.ONE_IMAGE) for name, _ in several)  # Localizer's work
     no_estimate = {m: r for m, r in found.items() if isinstance(r, NoEstimate)}
     p_w_by_method = {m: p for m, p in found.items() if m not in no_estimate}
     apex_uv = obs.view.apex_keypoint(obs.exposure.cone)  # memoised: fitted by the estimators
-    derived = [m for m in METHODS if m.images == "from_best"]
     if not p_w_by_method:
-        no_estimate.update(dict.fromkeys((m.name for m in derived), NoEstimate.NO_OTHER_ESTIMATE))
+        no_estimate.update((name, NoEstimate.NO_OTHER_ESTIMATE) for name, _ in from_best)
         return ConeEstimates({}, no_estimate, apex_uv=apex_uv)
     best = next(m for m in PREFERENCE if m in p_w_by_method)
-    for m in derived:
-        p_w_by_method[m.name] = m.estimator.estimate(obs, p_w_by_method[best])
+    for name, estimator in from_best:
+        p_w_by_method[name] = estimator.estimate(obs, p_w_by_method[best])
     if not with_covariance:
         return ConeEstimates(p_w_by_method, no_estimate, apex_uv=apex_uv)
     cov_w = {
-        name: method(name).estimator.covariance(obs, p_w)
-        for name, p_w in p_w_by_method.items()
-        if method(name).images == "one"
+        name: estimator.covariance(obs, p_w_by_method[name])
+        for name, estimator in single
+        if name in p_w_by_method
     }
-    for m in derived:
-        cov_w[m.name] = m.estimator.covariance(obs, cov_w[best])
+    for name, estimator in from_best:
+        cov_w[name] = estimator.covariance(obs, cov_w[best])
     return ConeEstimates(p_w_by_method, no_estimate, cov_w, apex_uv)
 
 
@@ -303,7 +310,7 @@ class Localizer:
     ) -> None:
         self.camera, self.cone, self.far_m, self.noise = camera, cone, far_m, noise
         self._tracks = {
-            m.name: m.estimator.start(camera, cone) for m in METHODS if m.images == "several"
+            name: estimator.start(camera, cone) for name, estimator in _by_kind(METHODS)[2]
         }
 
     def update(
