@@ -1,12 +1,35 @@
-"""``vnav.noise_model``: the noise figures declared once."""
+"""``vnav.noise_model``: the noise figures declared once. The scenario file's ``[noise]`` keys
+are derived from the declaration, and a run hands the one ``NoiseModel`` to the simulator and
+to the estimator alike."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import pytest
 
-from vnav.noise_model import FIGURES, NOISELESS, SENSORS, NoiseModel
+from scenarios import pipeline
+from scenarios.cli import main
+from scenarios.judge import report
+from scenarios.run import runner
+from scenarios.scenario import builtin, schema, toml_out
+from scenarios.scenario.spec import from_dict
+from vnav.noise_model import FIGURES, NOISELESS, SENSORS, Figure, NoiseModel
+
+
+def test_noise_keys_are_the_declarations_fields_with_its_defaults_ranges_and_docs() -> None:
+    fields = dataclasses.fields(NoiseModel)
+    assert [k.name for k in schema.NOISE] == [f.name for f in fields] == list(FIGURES)
+    for key, f in zip(schema.NOISE, fields, strict=True):
+        figure = f.metadata["figure"]
+        assert isinstance(figure, Figure) and figure is FIGURES[f.name]
+        assert key.kind == "number"
+        assert key.default == f.default == getattr(NOISELESS, f.name)
+        assert (key.lo, key.hi, key.lo_open) == (figure.lo, figure.hi, False)
+        assert key.doc == figure.line and key.doc.endswith(f", {figure.unit}")
+        assert schema.comment(f"noise.{f.name}") == figure.line
+        assert figure.sensor in SENSORS
 
 
 def test_every_sensor_has_a_figure_and_every_name_says_its_unit() -> None:
@@ -14,6 +37,20 @@ def test_every_sensor_has_a_figure_and_every_name_says_its_unit() -> None:
     suffixes = {"m": "_m", "deg": "_deg", "1/m": "_per_m2", "8-bit grey levels": "_grey"}
     for name, figure in FIGURES.items():
         assert name.endswith(suffixes[figure.unit]), name
+
+
+@pytest.mark.parametrize("name", list(FIGURES))
+def test_model_and_schema_accept_and_refuse_the_same_range(name: str) -> None:
+    """The declared range, inclusive, is what both the dataclass and the file's key accept."""
+    figure = FIGURES[name]
+    for value in (figure.lo, figure.hi):
+        assert getattr(NoiseModel(**{name: value}), name) == value
+        assert schema.read({name: value}, schema.NOISE, "noise")[name] == value
+    for value in (figure.lo - 1e-9, figure.hi * (1 + 1e-9)):
+        with pytest.raises(ValueError, match=rf"NoiseModel\.{name} must be in"):
+            NoiseModel(**{name: value})
+        with pytest.raises(schema.SchemaError, match=rf"noise\.{name}: must be"):
+            schema.read({name: value}, schema.NOISE, "noise")
 
 
 def test_model_stores_floats_and_refuses_what_is_not_a_number() -> None:
@@ -41,3 +78,97 @@ def test_docstring_lists_every_figure() -> None:
     doc = NoiseModel.__doc__ or ""
     for name, figure in FIGURES.items():
         assert f"{name} : float" in doc and figure.doc in doc
+
+
+# ------------------------------------------------------------------ the scenario file
+
+
+def _scenario(noise: dict) -> dict:
+    return {
+        "name": "t",
+        "cones": [{"position_w": [5.0, 0.0, 0.0]}],
+        "flight": {
+            "mode": "kinematic",
+            "keyframes": [{"t": 0.0, "position_w": [0.0, 0.0, 3.0], "rpy_deg": [0.0, 0.0, 0.0]}],
+        },
+        "noise": noise,
+    }
+
+
+def test_the_scenario_holds_the_declaration() -> None:
+    spec = from_dict(_scenario({"intensity_std_grey": 4.0, "attitude_std_deg": 1}))
+    assert spec.noise == NoiseModel(intensity_std_grey=4.0, attitude_std_deg=1.0)
+    assert from_dict(_scenario({})).noise == NOISELESS
+
+
+def test_show_writes_the_new_key_with_its_unit(capsys) -> None:
+    """``vnav-demo show uncertainty``: the image noise under its new name and unit."""
+    assert main(["show", "uncertainty"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    line = "intensity_std_grey = 4.0  # noise on each image colour value, 8-bit grey levels"
+    assert line in lines
+    assert not any("pixel_std" in x for x in lines)
+
+
+def test_readme_example_writes_every_figure_with_its_unit() -> None:
+    text = toml_out.example_toml()
+    for name, figure in FIGURES.items():
+        assert f"{name} = 0.0  # {figure.line}" in text.splitlines()
+
+
+# ------------------------------------------------------- one object for both sides of a run
+
+
+def test_a_run_hands_the_same_model_to_the_simulator_and_the_estimator(monkeypatch) -> None:
+    """Every noise draw of the simulator (``sim.noise``, as the runner calls it) and every
+    estimate's covariance (``evaluate_tick``, which passes it to ``vnav.localize``; the pose
+    and mount covariances from ``vnav.sensor_noise``) receive the scenario's ``NoiseModel``
+    itself, not a translation of it."""
+    spec = dataclasses.replace(
+        builtin.load("uncertainty"),
+        duration_s=0.25,
+        noise=NoiseModel(
+            position_std_m=0.05,
+            attitude_std_deg=1.0,
+            intensity_std_grey=4.0,
+            depth_std_m=0.005,
+            depth_std_per_m2=0.0002,
+            extrinsic_std_m=0.01,
+            extrinsic_std_deg=0.5,
+        ),
+    )
+    seen: dict[str, list[object]] = {}
+
+    def spy(name: str, position: int) -> None:
+        original = getattr(runner, name)
+
+        def wrapped(*args, **kwargs):
+            noise = kwargs["noise"] if "noise" in kwargs else args[position]
+            seen.setdefault(name, []).append(noise)
+            return original(*args, **kwargs)
+
+        monkeypatch.setattr(runner, name, wrapped)
+
+    spy("noisy_pose", 1)
+    spy("noisy_rgb", 1)
+    spy("noisy_depth", 1)
+    spy("mount_error", 0)
+    spy("mount_covariance", 0)
+    spy("body_pose_covariance", 1)
+    spy("evaluate_tick", -1)  # keyword only
+    outcome = pipeline.run(spec, seed=3)
+    assert set(seen) == {
+        "noisy_pose",
+        "noisy_rgb",
+        "noisy_depth",
+        "mount_error",
+        "mount_covariance",
+        "body_pose_covariance",
+        "evaluate_tick",
+    }
+    assert all(noise is spec.noise for calls in seen.values() for noise in calls)
+    assert any(t.detections for t in outcome.result.ticks)
+    # The report writes the declaration's fields, values as declared.
+    assert outcome.report["report_version"] == report.REPORT_VERSION
+    assert outcome.report["noise"] == dataclasses.asdict(spec.noise)
+    assert list(outcome.report["noise"]) == list(FIGURES)

@@ -25,7 +25,7 @@ from vnav.estimators import (
     naive,
 )
 from vnav.methods import METHOD_NAMES, PREFERENCE
-from vnav.sensor_noise import NOISELESS, SensorNoise
+from vnav.noise_model import NOISELESS, NoiseModel
 from vnav.silhouette import SilhouetteView
 from vnav.uncertainty import _compose_cov2, check_covariance
 
@@ -128,7 +128,7 @@ def localize(
     cone: ConeModel = TRAFFIC_CONE,
     far_m: float = np.inf,
     *,
-    noise: SensorNoise = NOISELESS,
+    noise: NoiseModel = NOISELESS,
     cov_T_w_b: np.ndarray | None = None,
     cov_T_b_c: np.ndarray | None = None,
     with_covariance: bool = True,
@@ -149,8 +149,8 @@ def localize(
     cone : ConeModel
     far_m : float
         Depth at or beyond which a pixel has no return.
-    noise : SensorNoise
-        The image and depth noise (``vnav.sensor_noise``); default none.
+    noise : NoiseModel
+        The sensors' noise (``vnav.noise_model``): its image and depth figures; default none.
     cov_T_w_b, cov_T_b_c : ndarray, shape (6, 6), optional
         Left-perturbation covariances of the body pose and of the camera mount
         (docs/CONVENTIONS.md, "Uncertainty"); default zero (known exactly).
@@ -234,7 +234,7 @@ def _covariances(
     T_w_c: np.ndarray,
     cov_T_w_c: np.ndarray,
     n_depth_points: int,
-    noise: SensorNoise,
+    noise: NoiseModel,
     cone: ConeModel,
 ) -> dict[str, np.ndarray]:
     """Each estimate's world covariance (``vnav.covariance``); the naive one's from the best

@@ -29,7 +29,8 @@ from vnav.detect import ConeDetection
 from vnav.estimators import NoEstimate, estimate_from_depth
 from vnav.localize import ConeEstimates, localize
 from vnav.methods import CONTRACT_DOMAIN
-from vnav.sensor_noise import NOISELESS, SensorNoise, keypoint_std_px
+from vnav.noise_model import NOISELESS, NoiseModel
+from vnav.sensor_noise import keypoint_std_px
 from vnav.tracking import ApexTracker
 from vnav.uncertainty import compose, nees
 
@@ -79,7 +80,7 @@ def evaluate_tick(
     timing: ImageTiming | None = None,
     *,
     T_b_c_est: np.ndarray | None = None,
-    noise: SensorNoise = NOISELESS,
+    noise: NoiseModel = NOISELESS,
     cov_T_w_b: np.ndarray | None = None,
     cov_T_b_c: np.ndarray | None = None,
     tracker: ApexTracker | None = None,
@@ -105,8 +106,8 @@ def evaluate_tick(
         (``DetectionRecord.latest_w``), its error and its predicted error.
     T_b_c_est : ndarray, shape (4, 4), optional
         The camera mount the estimator is told (the truth's, ``truth.T_b_c``, by default).
-    noise : SensorNoise
-        The image and depth noise the estimator is told.
+    noise : NoiseModel
+        The sensors' noise the estimator is told (its image and depth figures here).
     cov_T_w_b, cov_T_b_c : ndarray, shape (6, 6), optional
         The covariances the estimator is told for ``T_w_b_est`` and ``T_b_c_est``
         (``vnav.localize``).
@@ -209,7 +210,7 @@ def _triangulated(
     T_w_b: np.ndarray,
     T_b_c: np.ndarray,
     *,
-    noise: SensorNoise,
+    noise: NoiseModel,
     cov_T_w_b: np.ndarray | None,
     cov_T_b_c: np.ndarray | None,
 ) -> list[ConeEstimates]:
@@ -223,7 +224,7 @@ def _triangulated(
     if cov_T_b_c is not None:
         cov_T_w_c = compose(T_w_b, cov_T_w_c, T_b_c, cov_T_b_c)[1]
     apexes = {i: e.apex_uv for i, e in enumerate(estimates) if e.apex_uv is not None}
-    std_px = keypoint_std_px("apex", noise.pixel_std)[0]
+    std_px = keypoint_std_px("apex", noise.intensity_std_grey)[0]
     tracked = tracker.update(
         t_s,
         T_w_c,

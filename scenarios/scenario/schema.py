@@ -3,9 +3,11 @@
 The parser (``scenarios.scenario.spec``) reads a file through ``read``, table by table;
 ``vnav-demo show`` annotates a built-in with each key's unit and meaning (``comment``); the
 README's example is ``scenarios.scenario.toml_out.example_toml`` (a test keeps the two
-identical). Units are in the key's name
-where it could be misread (``_m``, ``_deg``, ``_s``, ``_hz``); degrees become radians in
-``scenarios.scenario.spec``, once.
+identical). Units are in the key's name where it could be misread (``_m``, ``_deg``, ``_s``,
+``_hz``, ``_grey``); degrees become radians once, in ``scenarios.scenario.spec`` (the noise
+figures' in ``vnav.noise_model.NoiseModel``). Where a typed declaration already exists, its
+keys are derived from it: ``[camera]`` from ``sim.config.CameraConfig``, ``[noise]`` from
+``vnav.noise_model.NoiseModel``.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from typing import Any
 
 from scenarios.scenario.check_kinds import KINDS
 from sim.config import CameraConfig
+from vnav.noise_model import FIGURES, NOISELESS
 
 __all__ = [
     "CAMERA",
@@ -279,19 +282,12 @@ FLIGHT_MODES: dict[str, tuple[Key, ...]] = {
 }
 """The keys of ``[flight]`` per ``mode`` (besides ``mode`` itself)."""
 
-NOISE: tuple[Key, ...] = (
-    Key("position_std_m", "number", "error added to the body position, m", 0.0, 0.0, 100.0),
-    Key("attitude_std_deg", "number", "error added to the attitude, deg", 0.0, 0.0, 180.0),
-    Key(
-        "pixel_std_px", "number", "noise on each image colour value, 0-255 levels", 0.0, 0.0, 128.0
-    ),
-    Key("depth_std_m", "number", "depth noise: sigma = depth_std_m + ...", 0.0, 0.0, 10.0),
-    Key("depth_std_per_m2", "number", "... + depth_std_per_m2 * z^2, 1/m", 0.0, 0.0, 1.0),
-    Key("extrinsic_std_m", "number", "error on the declared camera mount T_b_c, m", 0.0, 0.0, 1.0),
-    Key(
-        "extrinsic_std_deg", "number", "error on the declared mount's rotation, deg", 0.0, 0.0, 45.0
-    ),
+NOISE: tuple[Key, ...] = tuple(
+    Key(name, "number", figure.line, getattr(NOISELESS, name), figure.lo, figure.hi)
+    for name, figure in FIGURES.items()
 )
+"""``[noise]``: one key per ``vnav.noise_model.NoiseModel`` field, its doc, unit, range and
+default from the field's ``Figure``; validated here, then by ``NoiseModel``."""
 MAX_LATENCY_S = 5.0
 """Largest latency, clock offset and jitter of ``[timing]``, seconds."""
 TIMING: tuple[Key, ...] = (
