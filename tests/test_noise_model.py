@@ -1,6 +1,6 @@
 """``vnav.noise_model``: the noise figures declared once. The scenario file's ``[noise]`` keys
-are derived from the declaration, and a run hands the one ``NoiseModel`` to the simulator and
-to the estimator alike."""
+are derived from the declaration, a key of an earlier version is refused with its new name, and
+a run hands the one ``NoiseModel`` to the simulator and to the estimator alike."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from scenarios.cli import main
 from scenarios.judge import report
 from scenarios.run import runner
 from scenarios.scenario import builtin, schema, toml_out
-from scenarios.scenario.spec import from_dict
+from scenarios.scenario.spec import ScenarioError, from_dict
 from vnav.noise_model import FIGURES, NOISELESS, SENSORS, Figure, NoiseModel
 
 
@@ -99,6 +99,21 @@ def test_the_scenario_holds_the_declaration() -> None:
     spec = from_dict(_scenario({"intensity_std_grey": 4.0, "attitude_std_deg": 1}))
     assert spec.noise == NoiseModel(intensity_std_grey=4.0, attitude_std_deg=1.0)
     assert from_dict(_scenario({})).noise == NOISELESS
+
+
+def test_the_old_image_noise_key_is_refused_naming_the_new_one() -> None:
+    with pytest.raises(ScenarioError) as info:
+        from_dict(_scenario({"pixel_std_px": 4.0}), where="old.toml")
+    message = str(info.value)
+    assert message == (
+        "old.toml: noise.pixel_std_px: renamed; write noise.intensity_std_grey "
+        "(the same figure: 8-bit grey levels, not pixels)"
+    )
+
+
+def test_the_old_key_is_refused_even_beside_the_new_one() -> None:
+    with pytest.raises(ScenarioError, match=r"renamed; write noise\.intensity_std_grey"):
+        from_dict(_scenario({"pixel_std_px": 4.0, "intensity_std_grey": 4.0}))
 
 
 def test_show_writes_the_new_key_with_its_unit(capsys) -> None:

@@ -7,7 +7,8 @@ identical). Units are in the key's name where it could be misread (``_m``, ``_de
 ``_hz``, ``_grey``); degrees become radians once, in ``scenarios.scenario.spec`` (the noise
 figures' in ``vnav.noise_model.NoiseModel``). Where a typed declaration already exists, its
 keys are derived from it: ``[camera]`` from ``sim.config.CameraConfig``, ``[noise]`` from
-``vnav.noise_model.NoiseModel``.
+``vnav.noise_model.NoiseModel``. A key renamed since an earlier version (``RENAMED``) is
+refused with its new name.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ __all__ = [
     "FLIGHT_MODES",
     "KEYFRAME",
     "NOISE",
+    "RENAMED",
     "TIMING",
     "TOP",
     "WAYPOINT",
@@ -56,6 +58,12 @@ MAX_LIMIT = 1.0e6
 
 REQUIRED = object()
 """The default of a key that must be given."""
+
+RENAMED: dict[str, tuple[str, str]] = {
+    "noise.pixel_std_px": ("intensity_std_grey", "the same figure: 8-bit grey levels, not pixels"),
+}
+"""Keys of earlier versions of the file, by path: the new name and why it changed. A file that
+still uses one is refused with the new name (the value means the same)."""
 
 
 class SchemaError(ValueError):
@@ -150,8 +158,12 @@ def read(table: Any, keys: tuple[Key, ...], path: str) -> dict[str, Any]:
         raise SchemaError(f"{path}: must be a table, got {type(table).__name__}")
     allowed = {k.name for k in keys}
     unknown = sorted(set(table) - allowed)
+    prefix = f"{path}." if path else ""
+    for name in unknown:
+        if prefix + name in RENAMED:
+            new, why = RENAMED[prefix + name]
+            raise SchemaError(f"{prefix}{name}: renamed; write {prefix}{new} ({why})")
     if unknown:
-        prefix = f"{path}." if path else ""
         raise SchemaError(f"{prefix}{unknown[0]}: unknown key; expected one of {sorted(allowed)}")
     out = {}
     for key in keys:
