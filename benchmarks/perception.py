@@ -17,7 +17,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from vnav.sensor_noise import SensorNoise
+from vnav.noise_model import NoiseModel
 
 TARGETS_MS = {
     "detect_cones": 3.0,
@@ -65,19 +65,13 @@ def _frame() -> dict:
     return {"world": world, "rgb": frame.rgb, "depth": frame.depth, "far_m": far_m}
 
 
-def _uncertainty_noise(T_w_b: np.ndarray) -> tuple[SensorNoise, np.ndarray]:
+def _uncertainty_noise(T_w_b: np.ndarray) -> tuple[NoiseModel, np.ndarray]:
     """The built-in ``uncertainty`` scenario's sensor noise and pose covariance at ``T_w_b``."""
     from scenarios.scenario.builtin import load
     from vnav.sensor_noise import body_pose_covariance
 
-    spec_noise = load("uncertainty").noise
-    noise = SensorNoise(
-        spec_noise.pixel_std_px, spec_noise.depth_std_m, spec_noise.depth_std_per_m2
-    )
-    cov = body_pose_covariance(
-        T_w_b, spec_noise.position_std_m, np.radians(spec_noise.attitude_std_deg)
-    )
-    return noise, cov
+    noise = load("uncertainty").noise
+    return noise, body_pose_covariance(T_w_b, noise)
 
 
 def run(args: argparse.Namespace) -> dict:

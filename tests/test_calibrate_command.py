@@ -121,7 +121,7 @@ def test_calibration_with_image_noise_stays_within_the_noisy_targets():
     spec = dataclasses.replace(
         spec,
         camera_rate_hz=5.0,
-        noise=dataclasses.replace(spec.noise, pixel_std_px=8.0),
+        noise=dataclasses.replace(spec.noise, intensity_std_grey=8.0),
     )
     outcome = pipeline.run(spec, seed=2)
     errors = outcome.report["calibration"]["errors"]

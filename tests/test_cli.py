@@ -641,6 +641,12 @@ def _file_with(tmp_path: Path, old: str, new: str) -> Path:
             r"noise\.position_std_m: must be <= 100",
         ),
         (
+            "[[checks]]",
+            "[noise]\npixel_std_px = 4.0\n\n[[checks]]",
+            r"noise\.pixel_std_px: renamed; write noise\.intensity_std_grey \(the same figure: "
+            r"8-bit grey levels, not pixels\)$",
+        ),
+        (
             "position_w = [1.5, 0.5, 0.0]",
             "position_w = [1e300, 0.5, 0.0]",
             r"cones\[0\]\.position_w\[0\]: must be <= 1000",

@@ -24,7 +24,8 @@ from vnav.covariance import (
 )
 from vnav.estimators import _solve_known_height, known_height_on_view
 from vnav.localize import localize
-from vnav.sensor_noise import NOISELESS, SensorNoise, body_pose_covariance, keypoint_cov
+from vnav.noise_model import NOISELESS, NoiseModel
+from vnav.sensor_noise import body_pose_covariance, keypoint_cov
 from vnav.silhouette import SilhouetteView, triangle_fraction
 from vnav.uncertainty import point_from_ground, se3_exp, transform_point
 
@@ -38,6 +39,9 @@ VIEWS = [
 N_DRAWS = 2000
 """Monte Carlo draws per view: a sample variance's relative standard error is sqrt(2 / N) =
 3.2%, a mean NEES's sqrt(2 k / N) / k = 3.2% (k = 2) or 2.6% (k = 3)."""
+
+_POSE_NOISE = NoiseModel(position_std_m=0.05, attitude_std_deg=1.0)
+"""The built-in ``uncertainty``'s pose stream: 5 cm and 1 deg per sample."""
 
 
 @pytest.fixture(scope="module", params=VIEWS, ids=lambda v: f"cone{v[0]}-h{v[1]}-pitch{v[2]}")
@@ -88,7 +92,7 @@ def test_known_height_jacobian_matches_central_differences(view) -> None:
 def _pose_monte_carlo(view: dict) -> tuple[dict, dict, dict]:
     world, frame, det = view["world"], view["frame"], view["detection"]
     cam, T_w_b, T_b_c = world.camera, world.T_w_b, world.T_b_c
-    cov_T_w_b = body_pose_covariance(T_w_b, 0.05, np.radians(1.0))
+    cov_T_w_b = body_pose_covariance(T_w_b, _POSE_NOISE)
     args = (det, cam, T_w_b, T_b_c, frame.depth)
     with_pose = localize(*args, far_m=view["far_m"], cov_T_w_b=cov_T_w_b)
     without = localize(*args, far_m=view["far_m"])
@@ -165,7 +169,7 @@ def test_depth_noise_covariance_covers_monte_carlo(view) -> None:
     the upper 99% chi-square bound for 3 dof."""
     world, frame, det = view["world"], view["frame"], view["detection"]
     cam, T_w_b, T_b_c, far_m = world.camera, world.T_w_b, world.T_b_c, view["far_m"]
-    noise = SensorNoise(0.0, 0.005, 0.0002)
+    noise = NoiseModel(depth_std_m=0.005, depth_std_per_m2=0.0002)
     base = localize(det, cam, T_w_b, T_b_c, frame.depth, far_m=far_m)
     noisy = localize(det, cam, T_w_b, T_b_c, frame.depth, far_m=far_m, noise=noise)
     term = noisy.covariance("depth_image") - base.covariance("depth_image")
@@ -177,7 +181,7 @@ def test_depth_noise_covariance_covers_monte_carlo(view) -> None:
                 cam,
                 T_w_b,
                 T_b_c,
-                noisy_depth(frame.depth, 0.005, 0.0002, far_m, rng),
+                noisy_depth(frame.depth, noise, far_m, rng),
                 far_m=far_m,
                 with_covariance=False,
             ).depth_image
@@ -201,9 +205,9 @@ def test_ground_plane_cov_is_point_from_ground_plus_the_plate(view) -> None:
     own ``GROUND_PLANE_MODEL_STD`` of range in x and y."""
     world, det = view["world"], view["detection"]
     cam, T_w_c = world.camera, world.T_w_c
-    cov_T = body_pose_covariance(world.T_w_b, 0.05, np.radians(1.0))
+    cov_T = body_pose_covariance(world.T_w_b, _POSE_NOISE)
     sv = SilhouetteView(det, cam, T_w_c)
-    noise = SensorNoise(4.0)
+    noise = NoiseModel(intensity_std_grey=4.0)
     p_w = localize(det, cam, world.T_w_b, world.T_b_c).ground_plane
     d, _ = sv.vertical_at_blob()
     _, expected = point_from_ground(
@@ -227,7 +231,7 @@ def test_naive_cov_is_the_body_origin_plus_the_best_estimate_in_camera_axes(view
     point) plus the best estimate's covariance turned into camera axes."""
     world = view["world"]
     T_w_b = world.T_w_b
-    cov_T = body_pose_covariance(T_w_b, 0.05, np.radians(1.0))
+    cov_T = body_pose_covariance(T_w_b, _POSE_NOISE)
     rng = np.random.default_rng(3)
     A = rng.standard_normal((3, 3))
     cov_best = A @ A.T

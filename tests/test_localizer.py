@@ -19,7 +19,8 @@ from vnav.detect import detect_cones
 from vnav.estimators import NoEstimate, estimate_from_depth
 from vnav.localize import ConeEstimates, Localizer, localize
 from vnav.methods import METHOD_NAMES, METHODS, NEWEST_POSE_METHOD, method
-from vnav.sensor_noise import SensorNoise, body_pose_covariance
+from vnav.noise_model import NoiseModel
+from vnav.sensor_noise import body_pose_covariance
 from vnav.silhouette import SilhouetteView
 from vnav.tracking import ApexTracker
 
@@ -39,7 +40,14 @@ def test_each_single_image_covariance_has_the_declared_degrees_of_freedom(one_vi
     """With pose and image noise every covariance is the method's ``dof`` rank: 3, but 2 for
     ground_plane, whose estimate lies on z = 0 whatever the noise."""
     world, frame, detection = one_view["world"], one_view["frame"], one_view["detection"]
-    cov_T_w_b = body_pose_covariance(world.T_w_b, 0.05, np.radians(1.0))
+    noise = NoiseModel(
+        position_std_m=0.05,
+        attitude_std_deg=1.0,
+        intensity_std_grey=4.0,
+        depth_std_m=0.01,
+        depth_std_per_m2=0.0002,
+    )
+    cov_T_w_b = body_pose_covariance(world.T_w_b, noise)
     estimates = localize(
         detection,
         world.camera,
@@ -47,7 +55,7 @@ def test_each_single_image_covariance_has_the_declared_degrees_of_freedom(one_vi
         world.T_b_c,
         frame.depth,
         far_m=one_view["far_m"],
-        noise=SensorNoise(4.0, 0.01, 0.0002),
+        noise=noise,
         cov_T_w_b=cov_T_w_b,
     )
     checked = [m for m in METHODS if not m.needs_several_images]

@@ -1,5 +1,6 @@
 """``vnav.sensor_noise``: the keypoint figures re-measured on fresh renders, the keypoint
-covariance's shape, and the pose covariances against Monte Carlo."""
+covariance's shape, and the pose covariances against Monte Carlo of the simulator's draws from
+the same ``NoiseModel``."""
 
 from __future__ import annotations
 
@@ -9,16 +10,16 @@ import numpy as np
 import pytest
 
 from sim.config import SceneConfig
-from sim.noise import noisy_rgb
+from sim.noise import mount_error, noisy_pose, noisy_rgb
 from sim.render import Renderer
 from sim.world import World
 from vnav import se3, so3
 from vnav.cone import TRAFFIC_CONE
 from vnav.detect import detect_cones
 from vnav.estimators import MIN_TRIANGLE_FRACTION
+from vnav.noise_model import NoiseModel
 from vnav.sensor_noise import (
     KEYPOINT_STD_PX,
-    SensorNoise,
     body_pose_covariance,
     keypoint_cov,
     keypoint_std_px,
@@ -30,12 +31,13 @@ from vnav.uncertainty import se3_exp, se3_log
 N_VIEWS = 150
 
 
-def _keypoint_errors(pixel_std: float, seed: int) -> dict[str, np.ndarray]:
+def _keypoint_errors(intensity_std_grey: float, seed: int) -> dict[str, np.ndarray]:
     """Each keypoint's error from the true projection, (n, 2) px, along and across the image of
     the vertical, over ``N_VIEWS`` random views drawn as ``KEYPOINT_STD_PX`` says: the default
     camera on a level drone, range 3-20 m, 1.5-8 m high, any bearing, the cone within 17 deg of
     the heading; image noise from ``sim.noise.noisy_rgb``."""
     rng = np.random.default_rng(seed)
+    noise = NoiseModel(intensity_std_grey=intensity_std_grey)
     world = World.from_config(SceneConfig(cones_w=((0.0, 0.0, 0.0),)))
     cam, cone = world.camera, TRAFFIC_CONE
     errors: dict[str, list] = {"apex": [], "bottom": []}
@@ -46,7 +48,7 @@ def _keypoint_errors(pixel_std: float, seed: int) -> dict[str, np.ndarray]:
             t_w_b = [-range_m * math.cos(bearing), -range_m * math.sin(bearing), height_m]
             yaw = bearing + rng.uniform(-0.3, 0.3)
             world.set_pose(se3.make(so3.rot_z(yaw), t_w_b))
-            rgb = noisy_rgb(renderer.render(depth=False).rgb, pixel_std, rng)
+            rgb = noisy_rgb(renderer.render(depth=False).rgb, noise, rng)
             detections = detect_cones(rgb)
             if len(detections) != 1 or detections[0].touches_border:
                 continue
@@ -76,16 +78,16 @@ def _keypoint_errors(pixel_std: float, seed: int) -> dict[str, np.ndarray]:
     return {k: np.array(v) for k, v in errors.items()}
 
 
-@pytest.mark.parametrize("pixel_std", [0.0, 10.0])
-def test_keypoint_figures_hold_on_fresh_renders(pixel_std: float) -> None:
+@pytest.mark.parametrize("intensity_std_grey", [0.0, 10.0])
+def test_keypoint_figures_hold_on_fresh_renders(intensity_std_grey: float) -> None:
     """The table's root-mean-square errors against a fresh sample (another seed than the one
     measured): the mean squared error over the sample, divided by the table's square, is 1
     within 4 standard errors of that mean (the standard error from the sample's own spread of
     squared errors, which are heavy-tailed: a few views miss by 2 px)."""
-    errors = _keypoint_errors(pixel_std, seed=20261124)
+    errors = _keypoint_errors(intensity_std_grey, seed=20261124)
     for kind, e in errors.items():
         assert len(e) >= 0.8 * N_VIEWS, "most views must give both keypoints"
-        for axis, std in enumerate(keypoint_std_px(kind, pixel_std)):
+        for axis, std in enumerate(keypoint_std_px(kind, intensity_std_grey)):
             sq = e[:, axis] ** 2
             ratio = sq.mean() / std**2
             standard_error = sq.std(ddof=1) / math.sqrt(len(sq)) / std**2
@@ -121,23 +123,21 @@ def test_keypoint_cov_has_the_figures_along_and_across_the_vertical() -> None:
 
 
 def test_body_pose_covariance_matches_monte_carlo() -> None:
-    """The pose stream's noise, drawn as the simulator draws it (position in world axes,
-    attitude ``R_w_b exp(dtheta_b)``), expressed as a left perturbation ``se3_log(T_noisy
-    T^-1)``: its sample covariance over 20,000 draws against ``body_pose_covariance``, each
-    entry within 5 standard errors (a sample covariance's entry has standard error
-    ``sqrt((S_ii S_jj + S_ij^2) / n)``)."""
+    """The pose stream's noise, drawn by the simulator (``sim.noise.noisy_pose``: position in
+    world axes, attitude ``R_w_b exp(dtheta_b)``) from the same ``NoiseModel`` the estimator
+    is told, expressed as a left perturbation ``se3_log(T_noisy T^-1)``: its sample covariance
+    over 20,000 draws against ``body_pose_covariance``, each entry within 5 standard errors (a
+    sample covariance's entry has standard error ``sqrt((S_ii S_jj + S_ij^2) / n)``)."""
     rng = np.random.default_rng(5)
     T = se3.make(so3.from_rpy(0.3, -0.2, 2.0), [4.0, -3.0, 6.0])
-    std_p, std_a = 0.05, math.radians(2.0)
+    noise = NoiseModel(position_std_m=0.05, attitude_std_deg=2.0)
     n = 20_000
-    xis = np.empty((n, 6))
-    for i in range(n):
-        noisy = se3.make(
-            T[:3, :3] @ so3.exp(rng.normal(0.0, std_a, 3)), T[:3, 3] + rng.normal(0.0, std_p, 3)
-        )
-        xis[i] = se3_log(noisy @ se3.invert(T))
+    xis = np.array([se3_log(noisy_pose(T, noise, rng) @ se3.invert(T)) for _ in range(n)])
     sample = np.cov(xis.T)
-    predicted = body_pose_covariance(T, std_p, std_a)
+    predicted = body_pose_covariance(T, noise)
+    np.testing.assert_allclose(
+        np.diag(predicted)[3:], math.radians(2.0) ** 2 * np.ones(3), rtol=1e-12
+    )
     d = np.diag(predicted)
     standard_error = np.sqrt((np.outer(d, d) + predicted**2) / n)
     assert np.all(np.abs(sample - predicted) <= 5.0 * standard_error)
@@ -145,38 +145,41 @@ def test_body_pose_covariance_matches_monte_carlo() -> None:
 
 def test_mount_covariance_is_what_the_simulator_draws() -> None:
     """``mount_covariance`` against the sample covariance of ``se3_log`` of
-    ``sim.noise.mount_error`` draws (5 standard errors per entry)."""
-    from sim.noise import mount_error
-
+    ``sim.noise.mount_error`` draws from the same ``NoiseModel`` (5 standard errors per
+    entry)."""
     rng = np.random.default_rng(9)
     n = 20_000
-    xis = np.array([se3_log(mount_error(0.01, 2.0, rng)) for _ in range(n)])
-    predicted = mount_covariance(0.01, math.radians(2.0))
+    noise = NoiseModel(extrinsic_std_m=0.01, extrinsic_std_deg=2.0)
+    xis = np.array([se3_log(mount_error(noise, rng)) for _ in range(n)])
+    predicted = mount_covariance(noise)
+    np.testing.assert_allclose(
+        np.diag(predicted), [0.01**2] * 3 + [math.radians(2.0) ** 2] * 3, rtol=1e-12
+    )
     d = np.diag(predicted)
     standard_error = np.sqrt((np.outer(d, d) + predicted**2) / n)
     assert np.all(np.abs(np.cov(xis.T) - predicted) <= 5.0 * standard_error)
-    np.testing.assert_array_equal(se3_exp(np.zeros(6)), mount_error(0.0, 0.0, rng))
+    np.testing.assert_array_equal(se3_exp(np.zeros(6)), mount_error(NoiseModel(), rng))
 
 
 @pytest.mark.parametrize(
     ("kwargs", "message"),
     [
-        ({"pixel_std": -1.0}, "pixel_std"),
+        ({"intensity_std_grey": -1.0}, "intensity_std_grey"),
         ({"depth_std_m": float("nan")}, "depth_std_m"),
         ({"depth_std_per_m2": "0.1"}, "depth_std_per_m2"),
     ],
 )
-def test_sensor_noise_refuses_bad_figures(kwargs: dict, message: str) -> None:
+def test_noise_model_refuses_bad_figures(kwargs: dict, message: str) -> None:
     with pytest.raises(ValueError, match=message):
-        SensorNoise(**kwargs)
+        NoiseModel(**kwargs)
 
 
 @pytest.mark.parametrize(
     ("args", "message"),
     [
         (("tip", 0.0), "keypoint kind"),
-        (("apex", -2.0), "pixel_std"),
-        (("apex", [1.0]), "pixel_std"),
+        (("apex", -2.0), "intensity_std_grey"),
+        (("apex", [1.0]), "intensity_std_grey"),
     ],
 )
 def test_keypoint_std_refuses_bad_input(args: tuple, message: str) -> None:
@@ -185,5 +188,5 @@ def test_keypoint_std_refuses_bad_input(args: tuple, message: str) -> None:
 
 
 def test_depth_std_grows_with_the_square_of_depth() -> None:
-    noise = SensorNoise(0.0, 0.005, 0.0002)
+    noise = NoiseModel(depth_std_m=0.005, depth_std_per_m2=0.0002)
     np.testing.assert_allclose(noise.depth_std_at(np.array([0.0, 10.0])), [0.005, 0.025])

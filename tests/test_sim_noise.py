@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from sim.noise import mount_error, noisy_depth, noisy_rgb
+from vnav.noise_model import NoiseModel
 from vnav.uncertainty import se3_log
 
 N_SIGMA = 5.0
@@ -29,7 +30,7 @@ def test_noisy_rgb_with_zero_std_returns_the_input_itself() -> None:
     state is left as it was (the next draw equals a fresh generator's)."""
     rng = np.random.default_rng(0)
     grey = np.full((4, 5, 3), 77, dtype=np.uint8)
-    assert noisy_rgb(grey, 0.0, rng) is grey
+    assert noisy_rgb(grey, NoiseModel(), rng) is grey
     assert rng.standard_normal() == np.random.default_rng(0).standard_normal()
 
 
@@ -41,7 +42,7 @@ def test_noisy_rgb_has_zero_mean_and_the_declared_std_and_keeps_the_image_type()
     rng = np.random.default_rng(1)
     std = 4.0
     grey = np.full((200, 200, 3), 128, dtype=np.uint8)
-    out = noisy_rgb(grey, std, rng)
+    out = noisy_rgb(grey, NoiseModel(intensity_std_grey=std), rng)
     assert out.dtype == np.uint8 and out.shape == grey.shape
     assert np.all(grey == 128)
     err = out.astype(np.float64) - 128.0
@@ -76,8 +77,9 @@ def test_noisy_rgb_clips_at_black_and_white_instead_of_wrapping() -> None:
     assert expected == pytest.approx(std / math.sqrt(2.0 * math.pi), abs=0.5)
     black = np.zeros((200, 200, 3), dtype=np.uint8)
     white = np.full((200, 200, 3), 255, dtype=np.uint8)
-    out_black = noisy_rgb(black, std, rng).astype(np.float64)
-    out_white = noisy_rgb(white, std, rng).astype(np.float64)
+    noise = NoiseModel(intensity_std_grey=std)
+    out_black = noisy_rgb(black, noise, rng).astype(np.float64)
+    out_white = noisy_rgb(white, noise, rng).astype(np.float64)
     # Nothing beyond 10 std of the clip: a wrapped value would be ~255 levels away.
     assert out_black.max() <= 10 * std and out_white.min() >= 255 - 10 * std
     # The clipped value's std is below ``std``: ``std / sqrt(n)`` bounds its standard error.
@@ -89,9 +91,10 @@ def test_noisy_rgb_clips_at_black_and_white_instead_of_wrapping() -> None:
 def test_noisy_rgb_is_reproducible_from_the_seed() -> None:
     """The same seed gives the same image (a run is repeatable); another seed another one."""
     grey = np.full((50, 50, 3), 100, dtype=np.uint8)
-    a = noisy_rgb(grey, 3.0, np.random.default_rng(7))
-    b = noisy_rgb(grey, 3.0, np.random.default_rng(7))
-    c = noisy_rgb(grey, 3.0, np.random.default_rng(8))
+    noise = NoiseModel(intensity_std_grey=3.0)
+    a = noisy_rgb(grey, noise, np.random.default_rng(7))
+    b = noisy_rgb(grey, noise, np.random.default_rng(7))
+    c = noisy_rgb(grey, noise, np.random.default_rng(8))
     np.testing.assert_array_equal(a, b)
     assert not np.array_equal(a, c)
 
@@ -109,7 +112,7 @@ def test_noisy_depth_std_grows_with_the_square_of_depth() -> None:
     depth[:100] = 2.0
     depth[100:] = 10.0
     before = depth.copy()
-    out = noisy_depth(depth, std_m, std_per_m2, far_m, rng)
+    out = noisy_depth(depth, NoiseModel(depth_std_m=std_m, depth_std_per_m2=std_per_m2), far_m, rng)
     np.testing.assert_array_equal(depth, before)
     assert out.dtype == np.float32 and out.shape == depth.shape
     for rows, z in ((slice(0, 100), 2.0), (slice(100, 200), 10.0)):
@@ -130,7 +133,7 @@ def test_noisy_depth_leaves_pixels_with_no_return_alone() -> None:
     depth[20:30] = far_m + 5.0
     depth[30:40] = 0.0
     depth[40:] = 5.0
-    out = noisy_depth(depth, 0.05, 0.01, far_m, rng)
+    out = noisy_depth(depth, NoiseModel(depth_std_m=0.05, depth_std_per_m2=0.01), far_m, rng)
     np.testing.assert_array_equal(out[:40], depth[:40])
     assert np.all(out[40:] != depth[40:])
 
@@ -140,14 +143,14 @@ def test_noisy_depth_never_reports_a_negative_depth() -> None:
     the result stays positive (a sensor reports no negative depth)."""
     rng = np.random.default_rng(5)
     depth = np.full((100, 100), 0.01, dtype=np.float32)
-    out = noisy_depth(depth, 0.05, 0.0, 10.0, rng)
+    out = noisy_depth(depth, NoiseModel(depth_std_m=0.05), 10.0, rng)
     assert np.all(out > 0.0)
 
 
 def test_noisy_depth_with_both_std_zero_returns_the_input_itself() -> None:
     """Both figures zero: nothing to add, the input itself comes back."""
     depth = np.full((8, 8), 3.0, dtype=np.float32)
-    assert noisy_depth(depth, 0.0, 0.0, 10.0, np.random.default_rng(6)) is depth
+    assert noisy_depth(depth, NoiseModel(), 10.0, np.random.default_rng(6)) is depth
 
 
 # ---------------------------------------------------------------------------- mount_error
@@ -155,15 +158,17 @@ def test_noisy_depth_with_both_std_zero_returns_the_input_itself() -> None:
 
 def test_mount_error_is_the_identity_without_noise() -> None:
     """Both std zero: the declared mount is the true one."""
-    np.testing.assert_array_equal(mount_error(0.0, 0.0, np.random.default_rng(7)), np.eye(4))
+    np.testing.assert_array_equal(mount_error(NoiseModel(), np.random.default_rng(7)), np.eye(4))
 
 
 def test_mount_error_is_a_rigid_transform() -> None:
     """Each draw is in SE(3): rotation block orthonormal with determinant +1, last row
-    ``[0, 0, 0, 1]`` (large std so that rotations are far from the identity)."""
+    ``[0, 0, 0, 1]`` (the largest rotation std declared, 45 deg, so that rotations are far
+    from the identity)."""
     rng = np.random.default_rng(8)
+    noise = NoiseModel(extrinsic_std_m=0.5, extrinsic_std_deg=45.0)
     for _ in range(50):
-        E = mount_error(0.5, 60.0, rng)
+        E = mount_error(noise, rng)
         R = E[:3, :3]
         np.testing.assert_allclose(R @ R.T, np.eye(3), atol=1e-12)
         assert np.linalg.det(R) == pytest.approx(1.0, abs=1e-12)
@@ -177,7 +182,8 @@ def test_mount_error_draws_the_declared_left_perturbation() -> None:
     rng = np.random.default_rng(9)
     std_m, std_deg = 0.01, 2.0
     n = 4000
-    xis = np.array([se3_log(mount_error(std_m, std_deg, rng)) for _ in range(n)])
+    noise = NoiseModel(extrinsic_std_m=std_m, extrinsic_std_deg=std_deg)
+    xis = np.array([se3_log(mount_error(noise, rng)) for _ in range(n)])
     expected_var = np.array([std_m**2] * 3 + [math.radians(std_deg) ** 2] * 3)
     assert np.all(np.abs(xis.mean(axis=0)) <= N_SIGMA * np.sqrt(expected_var / n))
     cov = np.cov(xis, rowvar=False)
@@ -192,8 +198,9 @@ def test_mount_error_draws_the_declared_left_perturbation() -> None:
 def test_mount_error_is_reproducible_from_the_seed() -> None:
     """The mount error is drawn once per run from the run's generator: the same seed gives
     the same error, another seed another one."""
-    a = mount_error(0.01, 1.0, np.random.default_rng(10))
-    b = mount_error(0.01, 1.0, np.random.default_rng(10))
-    c = mount_error(0.01, 1.0, np.random.default_rng(11))
+    noise = NoiseModel(extrinsic_std_m=0.01, extrinsic_std_deg=1.0)
+    a = mount_error(noise, np.random.default_rng(10))
+    b = mount_error(noise, np.random.default_rng(10))
+    c = mount_error(noise, np.random.default_rng(11))
     np.testing.assert_array_equal(a, b)
     assert not np.array_equal(a, c)

@@ -92,6 +92,11 @@ def test_scenario_file_relative_to_the_sweep_file(tmp_path):
             "grid point 0 (camera.tilt_deg = 1.0): camera.tilt_deg: unknown key",
         ),
         (
+            {"scenario": "uncertainty", "grid": {"noise.pixel_std_px": [8.0]}},
+            "grid point 0 (noise.pixel_std_px = 8.0): noise.pixel_std_px: renamed; write "
+            "noise.intensity_std_grey",
+        ),
+        (
             {"scenario": "approach", "grid": {"flight.waypoints.9.t": [1.0]}},
             "flight.waypoints is a list of 3",
         ),

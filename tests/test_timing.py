@@ -20,8 +20,9 @@ from scenarios import pipeline
 from scenarios.cli import main
 from scenarios.judge import checks
 from scenarios.scenario import builtin, check_kinds
-from scenarios.scenario.spec import Noise, ScenarioSpec, Timing
+from scenarios.scenario.spec import ScenarioSpec, Timing
 from vnav.methods import method
+from vnav.noise_model import NoiseModel
 
 
 def _keyframe_pose(spec: ScenarioSpec):
@@ -178,7 +179,7 @@ def test_estimator_pose_is_the_noisy_stream_interpolated_at_the_exposure():
     spec = dataclasses.replace(
         spec,
         duration_s=2.0,
-        noise=Noise(position_std_m=0.01, attitude_std_deg=0.5),
+        noise=NoiseModel(position_std_m=0.01, attitude_std_deg=0.5),
         timing=Timing(pose_rate_hz=47.0, image_latency_s=0.03, pose_latency_s=0.01),
     )
     result = pipeline.run(spec, seed=7).result

@@ -29,7 +29,8 @@ import numpy as np
 from vnav.camera import PinholeCamera
 from vnav.cone import ConeModel
 from vnav.estimators import _solve_known_height
-from vnav.sensor_noise import SensorNoise, keypoint_cov
+from vnav.noise_model import NoiseModel
+from vnav.sensor_noise import keypoint_cov
 from vnav.silhouette import SilhouetteView, triangle_fraction
 from vnav.uncertainty import _point_from_ground, _point_jacobian
 
@@ -93,7 +94,7 @@ def ground_plane_cov(
     T_w_c: np.ndarray,
     cov_T_w_c: np.ndarray,
     p_w: np.ndarray,
-    noise: SensorNoise,
+    noise: NoiseModel,
     cone: ConeModel,
 ) -> np.ndarray:
     """Covariance of ``ground_plane``'s estimate ``p_w``, (3, 3), m^2 (rank 2: z is 0).
@@ -112,7 +113,7 @@ def ground_plane_cov(
         T_w_c,
         float(bottom[0]),
         float(bottom[1]),
-        keypoint_cov("bottom", noise.pixel_std, down),
+        keypoint_cov("bottom", noise.intensity_std_grey, down),
         cov_T_w_c,
     )
     cov = _add_plate(cov, p_w, view.t, cone)
@@ -128,7 +129,7 @@ def known_height_cov(
     T_w_c: np.ndarray,
     cov_T_w_c: np.ndarray,
     p_w: np.ndarray,
-    noise: SensorNoise,
+    noise: NoiseModel,
     cone: ConeModel,
 ) -> np.ndarray:
     """Covariance of ``known_height``'s estimate ``p_w``, (3, 3), m^2.
@@ -146,8 +147,8 @@ def known_height_cov(
     bottom = view.axis_exit(d, apex)
     J = _known_height_jacobian(view, camera, T_w_c, apex, bottom, cone)
     S = np.zeros((10, 10))
-    S[:2, :2] = keypoint_cov("apex", noise.pixel_std, d)
-    S[2:4, 2:4] = keypoint_cov("bottom", noise.pixel_std, d)
+    S[:2, :2] = keypoint_cov("apex", noise.intensity_std_grey, d)
+    S[2:4, 2:4] = keypoint_cov("bottom", noise.intensity_std_grey, d)
     S[4:, 4:] = cov_T_w_c
     return _add_plate(J @ S @ J.T, p_w, view.t, cone, KNOWN_HEIGHT_MODEL_STD)
 
@@ -259,7 +260,7 @@ def depth_image_cov(
     cov_T_w_c: np.ndarray,
     p_w: np.ndarray,
     n_points: int,
-    noise: SensorNoise,
+    noise: NoiseModel,
 ) -> np.ndarray:
     """Covariance of ``depth_image``'s estimate ``p_w``, (3, 3), m^2.
 

@@ -23,8 +23,8 @@ from vnav.cone import TRAFFIC_CONE, ConeModel
 from vnav.detect import ConeDetection, check_detection
 from vnav.estimators import NoEstimate, depth_under_mask
 from vnav.methods import METHOD_NAMES, METHODS, PREFERENCE, Method, method
+from vnav.noise_model import NOISELESS, NoiseModel
 from vnav.observation import Exposure, Observation
-from vnav.sensor_noise import NOISELESS, SensorNoise
 from vnav.silhouette import SilhouetteView
 from vnav.uncertainty import check_covariance
 
@@ -143,7 +143,7 @@ def localize(
     cone: ConeModel = TRAFFIC_CONE,
     far_m: float = np.inf,
     *,
-    noise: SensorNoise = NOISELESS,
+    noise: NoiseModel = NOISELESS,
     cov_T_w_b: np.ndarray | None = None,
     cov_T_b_c: np.ndarray | None = None,
     with_covariance: bool = True,
@@ -164,8 +164,8 @@ def localize(
     cone : ConeModel
     far_m : float
         Depth at or beyond which a pixel has no return.
-    noise : SensorNoise
-        The image and depth noise (``vnav.sensor_noise``); default none.
+    noise : NoiseModel
+        The sensors' noise (``vnav.noise_model``): its image and depth figures; default none.
     cov_T_w_b, cov_T_b_c : ndarray, shape (6, 6), optional
         Left-perturbation covariances of the body pose and of the camera mount
         (docs/CONVENTIONS.md, "Uncertainty"); default zero (known exactly).
@@ -205,7 +205,7 @@ def _exposure(
     cone: ConeModel,
     far_m: float,
     *,
-    noise: SensorNoise,
+    noise: NoiseModel,
     cov_T_w_b: np.ndarray | None,
     cov_T_b_c: np.ndarray | None,
 ) -> Exposure:
@@ -296,8 +296,8 @@ class Localizer:
     cone : ConeModel
     far_m : float
         Depth at or beyond which a pixel has no return.
-    noise : SensorNoise
-        The image and depth noise the estimators are told (``vnav.sensor_noise``).
+    noise : NoiseModel
+        The image and depth noise the estimators are told (``vnav.noise_model``).
     """
 
     def __init__(
@@ -306,7 +306,7 @@ class Localizer:
         cone: ConeModel = TRAFFIC_CONE,
         far_m: float = np.inf,
         *,
-        noise: SensorNoise = NOISELESS,
+        noise: NoiseModel = NOISELESS,
     ) -> None:
         self.camera, self.cone, self.far_m, self.noise = camera, cone, far_m, noise
         self._tracks = {

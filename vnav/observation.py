@@ -15,7 +15,7 @@ import numpy as np
 from vnav.camera import PinholeCamera
 from vnav.cone import ConeModel
 from vnav.detect import ConeDetection
-from vnav.sensor_noise import SensorNoise
+from vnav.noise_model import NoiseModel
 from vnav.silhouette import SilhouetteView
 from vnav.uncertainty import compose_covariance
 
@@ -37,8 +37,8 @@ class Exposure:
     cov_T_w_b, cov_T_b_c : ndarray, shape (6, 6)
         Left-perturbation covariances of the body pose and of the mount (docs/CONVENTIONS.md,
         "Uncertainty"); zero for a pose known exactly.
-    noise : SensorNoise
-        The image and depth noise (``vnav.sensor_noise``).
+    noise : NoiseModel
+        The image and depth noise (``vnav.noise_model``).
     camera : PinholeCamera
     cone : ConeModel
     far_m : float
@@ -50,7 +50,7 @@ class Exposure:
     T_w_c: np.ndarray
     cov_T_w_b: np.ndarray
     cov_T_b_c: np.ndarray
-    noise: SensorNoise
+    noise: NoiseModel
     camera: PinholeCamera
     cone: ConeModel
     far_m: float

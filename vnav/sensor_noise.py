@@ -1,16 +1,16 @@
-"""What the estimator knows about its sensors' noise: the figures it propagates into each
-estimate's covariance (``vnav.localize``).
+"""What the estimator makes of its sensors' noise: the covariances it propagates into each
+estimate (``vnav.localize``), from the figures it is told (``vnav.noise_model.NoiseModel``).
 
 A real estimator is told its sensors' data sheets; here they are the scenario's ``[noise]``
-table. Three kinds of figure:
+table, the same ``NoiseModel`` the simulator draws from. What each figure becomes:
 
-- **the image**: Gaussian noise on each 8-bit colour value, and how far the detector's
-  keypoints (the apex and the bottom pixel of a cone's silhouette) then lie from the true
-  projections, ``keypoint_cov``. Both keypoints are measured from the silhouette, so they
-  carry its quantisation even without noise; the figures are measured against the
-  simulator's truth (``KEYPOINT_STD_PX``, and ``tests/test_sensor_noise.py`` checks them on
-  fresh renders).
-- **the depth image**: Gaussian per pixel, ``sigma = depth_std_m + depth_std_per_m2 * z**2``.
+- **the image**: Gaussian noise on each 8-bit colour value (``intensity_std_grey``, grey
+  levels) moves the detector's keypoints (the apex and the bottom pixel of a cone's
+  silhouette) away from the true projections, ``keypoint_cov``, pixels. Both keypoints are
+  measured from the silhouette, so they carry its quantisation even without noise; the figures
+  are measured against the simulator's truth (``KEYPOINT_STD_PX``, and
+  ``tests/test_sensor_noise.py`` checks them on fresh renders).
+- **the depth image**: ``NoiseModel.depth_std_at``, used by ``vnav.covariance``.
 - **the poses**: the body pose stream and the declared camera mount, as 6x6 covariances of a
   left perturbation ``xi = [rho, phi]`` (docs/CONVENTIONS.md, "Uncertainty"):
   ``body_pose_covariance``, ``mount_covariance``.
@@ -21,17 +21,15 @@ from __future__ import annotations
 import functools
 import itertools
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
+from vnav.noise_model import NoiseModel
 from vnav.uncertainty import adjoint
 
 __all__ = [
     "KEYPOINT_STD_PX",
-    "MAX_CALIBRATED_PIXEL_STD",
-    "NOISELESS",
-    "SensorNoise",
+    "MAX_CALIBRATED_INTENSITY_STD_GREY",
     "body_pose_covariance",
     "keypoint_cov",
     "keypoint_std_px",
@@ -39,12 +37,12 @@ __all__ = [
 ]
 
 KEYPOINT_STD_PX: dict[str, tuple[tuple[float, float, float], ...]] = {
-    # image noise std (levels), along the image vertical (px), across it (px)
+    # image noise std (grey levels), along the image vertical (px), across it (px)
     "apex": ((0.0, 0.37, 0.08), (8.0, 0.41, 0.09), (10.0, 0.46, 0.11), (12.0, 0.73, 0.20)),
     "bottom": ((0.0, 0.25, 0.08), (8.0, 0.25, 0.09), (10.0, 0.26, 0.11), (12.0, 0.38, 0.20)),
 }
 """Root-mean-square error of each keypoint from the true projection, pixels, along and across
-the image of the vertical at the cone, against the image noise.
+the image of the vertical at the cone, against the image noise (``intensity_std_grey``).
 
 Measured on about 390 views per noise level (``tests/test_sensor_noise.py`` draws them the
 same way and checks the figures: the default camera on a level drone, range 3-20 m, 1.5-8 m
@@ -60,21 +58,21 @@ vertical across the pixel grid and its staircase edges: with roll and pitch unif
 change little); the covariance does not model the tilt. Between the rows the figures are
 interpolated linearly."""
 
-MAX_CALIBRATED_PIXEL_STD = 12.0
-"""The highest image noise (8-bit levels) at which the keypoint figures were measured; at 15
+MAX_CALIBRATED_INTENSITY_STD_GREY = 12.0
+"""The highest image noise (8-bit grey levels) at which the keypoint figures were measured; at 15
 levels the default detector already splits or loses most cones."""
 
 
-def keypoint_std_px(kind: str, pixel_std: float) -> tuple[float, float]:
+def keypoint_std_px(kind: str, intensity_std_grey: float) -> tuple[float, float]:
     """``(along, across)`` standard deviations of a keypoint, pixels (``KEYPOINT_STD_PX``).
 
     Parameters
     ----------
     kind : {"apex", "bottom"}
-    pixel_std : float
-        Image noise, 8-bit levels, >= 0; beyond ``MAX_CALIBRATED_PIXEL_STD`` the last row's
-        figures are scaled by ``pixel_std / MAX_CALIBRATED_PIXEL_STD`` (an extrapolation:
-        nothing was measured there).
+    intensity_std_grey : float
+        Image noise, 8-bit grey levels, >= 0; beyond ``MAX_CALIBRATED_INTENSITY_STD_GREY`` the
+        last row's figures are scaled by ``intensity_std_grey /
+        MAX_CALIBRATED_INTENSITY_STD_GREY`` (an extrapolation: nothing was measured there).
 
     Raises
     ------
@@ -83,31 +81,33 @@ def keypoint_std_px(kind: str, pixel_std: float) -> tuple[float, float]:
     """
     if kind not in KEYPOINT_STD_PX:
         raise ValueError(f"keypoint kind must be one of {sorted(KEYPOINT_STD_PX)}, got {kind!r}")
-    if not (isinstance(pixel_std, int | float) and math.isfinite(pixel_std) and pixel_std >= 0.0):
-        raise ValueError(f"pixel_std must be a finite number >= 0, got {pixel_std!r}")
-    return _keypoint_std_px(kind, float(pixel_std))
+    std = intensity_std_grey
+    if not (isinstance(std, int | float) and math.isfinite(std) and std >= 0.0):
+        raise ValueError(f"intensity_std_grey must be a finite number >= 0, got {std!r}")
+    return _keypoint_std_px(kind, float(std))
 
 
 @functools.lru_cache(maxsize=64)  # one noise level per run: every detection asks the same
-def _keypoint_std_px(kind: str, pixel_std: float) -> tuple[float, float]:
+def _keypoint_std_px(kind: str, intensity_std_grey: float) -> tuple[float, float]:
     rows = KEYPOINT_STD_PX[kind]
     top_level, top_along, top_across = rows[-1]
-    if pixel_std > top_level:
-        scale = pixel_std / top_level
+    if intensity_std_grey > top_level:
+        scale = intensity_std_grey / top_level
         return top_along * scale, top_across * scale
     # Linear interpolation between the rows (np.interp, in plain floats: a scalar is cheaper
     # without numpy, and this runs for every keypoint of every detection).
     for (lo, along_lo, across_lo), (hi, along_hi, across_hi) in itertools.pairwise(rows):
-        if pixel_std <= hi:
-            w = (pixel_std - lo) / (hi - lo)
+        if intensity_std_grey <= hi:
+            w = (intensity_std_grey - lo) / (hi - lo)
             return along_lo + w * (along_hi - along_lo), across_lo + w * (across_hi - across_lo)
     return top_along, top_across  # a table of one row
 
 
-def keypoint_cov(kind: str, pixel_std: float, down_uv: np.ndarray) -> np.ndarray:
+def keypoint_cov(kind: str, intensity_std_grey: float, down_uv: np.ndarray) -> np.ndarray:
     """Covariance of a keypoint, px^2, (2, 2): ``keypoint_std_px`` along and across
-    ``down_uv``, the image of the downward vertical at the cone (any length, not zero)."""
-    along, across = keypoint_std_px(kind, pixel_std)
+    ``down_uv``, the image of the downward vertical at the cone (any length, not zero), under
+    image noise of ``intensity_std_grey`` 8-bit grey levels."""
+    along, across = keypoint_std_px(kind, intensity_std_grey)
     du, dv = float(down_uv[0]), float(down_uv[1])
     norm = math.hypot(du, dv)
     if not norm > 0.0:
@@ -123,46 +123,12 @@ def keypoint_cov(kind: str, pixel_std: float, down_uv: np.ndarray) -> np.ndarray
     )
 
 
-@dataclass(frozen=True)
-class SensorNoise:
-    """The image and depth noise the estimator is told about.
+def body_pose_covariance(T_w_b: np.ndarray, noise: NoiseModel) -> np.ndarray:
+    """The 6x6 left-perturbation covariance of a body pose with the pose stream's noise.
 
-    Attributes
-    ----------
-    pixel_std : float
-        Gaussian noise on each 8-bit colour value of the image, levels.
-    depth_std_m : float
-        Depth noise at zero range, metres.
-    depth_std_per_m2 : float
-        Its growth with the square of the depth, 1/m.
-    """
-
-    pixel_std: float = 0.0
-    depth_std_m: float = 0.0
-    depth_std_per_m2: float = 0.0
-
-    def __post_init__(self) -> None:
-        for name in ("pixel_std", "depth_std_m", "depth_std_per_m2"):
-            value = getattr(self, name)
-            if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0.0):
-                raise ValueError(f"SensorNoise.{name} must be a finite number >= 0, got {value!r}")
-
-    def depth_std_at(self, z_m: float | np.ndarray) -> float | np.ndarray:
-        """Depth noise at planar depth ``z_m``, metres (same shape)."""
-        return self.depth_std_m + self.depth_std_per_m2 * z_m * z_m
-
-
-NOISELESS = SensorNoise()
-"""No image or depth noise: ``localize``'s default."""
-
-
-def body_pose_covariance(
-    T_w_b: np.ndarray, position_std_m: float, attitude_std_rad: float
-) -> np.ndarray:
-    """The 6x6 left-perturbation covariance of a body pose with position and attitude noise.
-
-    The noisy pose is ``(R_w_b exp(dtheta_b), t_w_b + dp_w)`` with ``dp_w ~ N(0, s_p^2 I)``
-    and ``dtheta_b ~ N(0, s_a^2 I)``: to first order the right perturbation
+    The noisy pose (``sim.noise.noisy_pose``) is ``(R_w_b exp(dtheta_b), t_w_b + dp_w)`` with
+    ``dp_w ~ N(0, s_p^2 I)`` and ``dtheta_b ~ N(0, s_a^2 I)``, ``s_p = noise.position_std_m``
+    and ``s_a = noise.attitude_std_rad``: to first order the right perturbation
     ``T exp(eta^)``, ``eta = [R^T dp_w, dtheta_b]`` with covariance ``diag(s_p^2 I, s_a^2 I)``
     (a rotated isotropic covariance stays isotropic), and ``xi = Ad(T) eta`` (Barfoot &
     Furgale 2014, eq. 12).
@@ -171,12 +137,13 @@ def body_pose_covariance(
     -------
     ndarray, shape (6, 6)
     """
-    eta = np.diag([position_std_m**2] * 3 + [attitude_std_rad**2] * 3)
+    eta = np.diag([noise.position_std_m**2] * 3 + [noise.attitude_std_rad**2] * 3)
     Ad = adjoint(T_w_b)
     return Ad @ eta @ Ad.T
 
 
-def mount_covariance(std_m: float, std_rad: float) -> np.ndarray:
-    """The 6x6 covariance of the declared camera mount: ``diag(s_m^2 I, s_r^2 I)``, the
-    left perturbation ``sim.noise.mount_error`` draws."""
-    return np.diag([std_m**2] * 3 + [std_rad**2] * 3)
+def mount_covariance(noise: NoiseModel) -> np.ndarray:
+    """The 6x6 covariance of the declared camera mount: ``diag(s_m^2 I, s_r^2 I)`` with
+    ``s_m = noise.extrinsic_std_m`` and ``s_r = noise.extrinsic_std_rad``, the left
+    perturbation ``sim.noise.mount_error`` draws."""
+    return np.diag([noise.extrinsic_std_m**2] * 3 + [noise.extrinsic_std_rad**2] * 3)

@@ -347,7 +347,7 @@ class _TriangulatedTrack:
             for i, obs in enumerate(observations)
             if obs is not None and (uv := obs.view.apex_keypoint(exposure.cone)) is not None
         }
-        std_px = keypoint_std_px("apex", exposure.noise.pixel_std)[0]
+        std_px = keypoint_std_px("apex", exposure.noise.intensity_std_grey)[0]
         tracked = self.tracker.update(
             t_s,
             exposure.T_w_c,

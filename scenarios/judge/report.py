@@ -28,7 +28,7 @@ from vnav import metrics
 from vnav.methods import METHOD_NAMES, NEWEST_POSE_METHOD
 from vnav.uncertainty import nees_band
 
-REPORT_VERSION = 6
+REPORT_VERSION = 7
 """2: ``camera_ticks`` (was ``frames``): the word frame means a coordinate frame only;
 ``recording`` names the ``.rrd`` file and its Rerun recording id.
 3: each check has an ``outcome`` (passed, failed, no data, skipped), a ``unit``, the figure
@@ -43,7 +43,9 @@ whether the mean lies in it); ``noise``, the scenario's sensor noise.
 6: ``calibration`` (null unless a check asks for it): the camera mount ``T_b_c`` and clock
 offset recovered from the flight, their reprojection RMS, images used, errors against the
 truth, or why the flight was refused; ``camera_mount_error``, the scenario's true mount's
-error from the declared one."""
+error from the declared one.
+7: ``noise`` holds ``intensity_std_grey`` (was ``pixel_std_px``, the same figure: the image
+noise in 8-bit grey levels); its keys are ``vnav.noise_model.NoiseModel``'s fields."""
 
 
 def _calibration(run: RunResult) -> dict[str, Any] | None:

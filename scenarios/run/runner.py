@@ -22,7 +22,6 @@ from __future__ import annotations
 import bisect
 import contextlib
 import logging
-import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -42,7 +41,7 @@ from sim.flight import (
     OrbitTrajectory,
 )
 from sim.mesh import Scenery, scenery
-from sim.noise import mount_error, noisy_depth, noisy_rgb
+from sim.noise import mount_error, noisy_depth, noisy_pose, noisy_rgb
 from sim.render import Renderer
 from sim.scene_cache import SceneCache
 from sim.world import World
@@ -51,7 +50,7 @@ from vnav.camera import PinholeCamera
 from vnav.detect import detect_cones
 from vnav.frames import FrameBuffer
 from vnav.localize import Localizer
-from vnav.sensor_noise import SensorNoise, body_pose_covariance, mount_covariance
+from vnav.sensor_noise import body_pose_covariance, mount_covariance
 
 __all__ = ["STAGES", "TickObserver", "run_scenario"]
 
@@ -242,18 +241,15 @@ class _Flow:
         self._noise_rng = np.random.default_rng(noise_seq)
         self.image_rng = np.random.default_rng(image_seq)
         self.depth_rng = np.random.default_rng(depth_seq)
-        n = spec.noise
-        self.mount_error = mount_error(
-            n.extrinsic_std_m, n.extrinsic_std_deg, np.random.default_rng(mount_seq)
-        )
-        self.cov_T_b_c = mount_covariance(n.extrinsic_std_m, math.radians(n.extrinsic_std_deg))
+        self.mount_error = mount_error(spec.noise, np.random.default_rng(mount_seq))
+        self.cov_T_b_c = mount_covariance(spec.noise)
         # The scenario's fixed mount error: T_b_c_true = T_b_c_declared @ E, so the estimator's
         # declared mount is the true one times E^-1 (then the per-run extrinsic noise).
         self.true_to_declared = se3.invert(spec.scene.camera.mount_error.T)
         self.localizer = Localizer(
             world.camera,
             far_m=spec.scene.zfar_m,
-            noise=SensorNoise(n.pixel_std_px, n.depth_std_m, n.depth_std_per_m2),
+            noise=spec.noise,
         )
         self.streams = Streams(
             pose_latency_s=t.pose_latency_s,
@@ -292,7 +288,7 @@ class _Flow:
     def _send(self, stamp_s: float, T_w_b: np.ndarray) -> None:
         """Keep the true pose at ``stamp_s`` and send it, with the pose noise, to the estimator."""
         self._truth_new.append((stamp_s, T_w_b))
-        sent = _noisy_pose(T_w_b, self.spec, self._noise_rng)
+        sent = noisy_pose(T_w_b, self.spec.noise, self._noise_rng)
         self._arrivals.append(self.streams.send_pose(stamp_s, sent))
         self._stamps.append(stamp_s)
         self._sent.append(sent)
@@ -368,14 +364,12 @@ class _Flow:
 
     def render(self, renderer: Renderer) -> tuple[np.ndarray, np.ndarray | None]:
         """The camera's image and depth now, with the scenario's image and depth noise."""
-        n = self.spec.noise
+        noise = self.spec.noise
         image = renderer.render(depth=True)
-        rgb = noisy_rgb(image.rgb, n.pixel_std_px, self.image_rng)
+        rgb = noisy_rgb(image.rgb, noise, self.image_rng)
         depth = image.depth
-        if depth is not None and n.depth_noisy:
-            depth = noisy_depth(
-                depth, n.depth_std_m, n.depth_std_per_m2, self.spec.scene.zfar_m, self.depth_rng
-            )
+        if depth is not None:
+            depth = noisy_depth(depth, noise, self.spec.scene.zfar_m, self.depth_rng)
         return rgb, depth
 
     def evaluate(self, d: Delivered) -> TickRecord:
@@ -402,8 +396,7 @@ class _Flow:
         two samples carries ``(1 - a) xi_0 + a xi_1`` to first order, so its covariance is the
         sample's times ``(1 - a)^2 + a^2`` (1 on a sample, 1/2 half-way).
         """
-        n = self.spec.noise
-        if not n.pose_noisy:
+        if not self.spec.noise.noisy("pose"):
             return np.zeros((6, 6))
         t = d.exposure_pose_s
         j = bisect.bisect_left(self._stamps, t - 1e-9)
@@ -412,9 +405,7 @@ class _Flow:
             t0, t1 = self._stamps[j - 1], self._stamps[j]
             a = (t - t0) / (t1 - t0)
         factor = (1.0 - a) ** 2 + a * a
-        return factor * body_pose_covariance(
-            d.T_w_b_at_exposure, n.position_std_m, math.radians(n.attitude_std_deg)
-        )
+        return factor * body_pose_covariance(d.T_w_b_at_exposure, self.spec.noise)
 
     def image_timing(self, d: Delivered) -> ImageTiming:
         """The stamps of a delivered image and the body's true motion since the newest pose."""
@@ -481,16 +472,6 @@ def _interpolate(track: list[tuple[float, np.ndarray]], t_s: float) -> np.ndarra
     times = np.array([t for t, _ in track])
     values = np.array([v for _, v in track])
     return np.array([np.interp(t_s, times, values[:, i]) for i in range(values.shape[1])])
-
-
-def _noisy_pose(T_w_b: np.ndarray, spec: ScenarioSpec, rng: np.random.Generator) -> np.ndarray:
-    """The pose the estimator is given: the truth, perturbed by the scenario's pose noise."""
-    noise = spec.noise
-    if noise.position_std_m == 0.0 and noise.attitude_std_deg == 0.0:
-        return T_w_b
-    dp_w = rng.normal(0.0, noise.position_std_m, 3)
-    dtheta_b = rng.normal(0.0, math.radians(noise.attitude_std_deg), 3)
-    return se3.make(T_w_b[:3, :3] @ so3.exp(dtheta_b), T_w_b[:3, 3] + dp_w)
 
 
 def _driver(world: World, spec: ScenarioSpec):

@@ -375,7 +375,7 @@ def uncertainty() -> Scenario:
         "noise": {
             "position_std_m": 0.05,
             "attitude_std_deg": 1.0,
-            "pixel_std_px": 4.0,
+            "intensity_std_grey": 4.0,
             "depth_std_m": 0.005,
             "depth_std_per_m2": 0.0002,
         },

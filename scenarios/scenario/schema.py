@@ -3,9 +3,12 @@
 The parser (``scenarios.scenario.spec``) reads a file through ``read``, table by table;
 ``vnav-demo show`` annotates a built-in with each key's unit and meaning (``comment``); the
 README's example is ``scenarios.scenario.toml_out.example_toml`` (a test keeps the two
-identical). Units are in the key's name
-where it could be misread (``_m``, ``_deg``, ``_s``, ``_hz``); degrees become radians in
-``scenarios.scenario.spec``, once.
+identical). Units are in the key's name where it could be misread (``_m``, ``_deg``, ``_s``,
+``_hz``, ``_grey``); degrees become radians once, in ``scenarios.scenario.spec`` (the noise
+figures' in ``vnav.noise_model.NoiseModel``). Where a typed declaration already exists, its
+keys are derived from it: ``[camera]`` from ``sim.config.CameraConfig``, ``[noise]`` from
+``vnav.noise_model.NoiseModel``. A key renamed since an earlier version (``RENAMED``) is
+refused with its new name.
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ from typing import Any
 from scenarios.scenario.check_kinds import KINDS
 from sim.config import CameraConfig
 from vnav.methods import PREFERENCE
+from vnav.noise_model import FIGURES, NOISELESS
 
 __all__ = [
     "CAMERA",
@@ -25,6 +29,7 @@ __all__ = [
     "FLIGHT_MODES",
     "KEYFRAME",
     "NOISE",
+    "RENAMED",
     "TIMING",
     "TOP",
     "WAYPOINT",
@@ -54,6 +59,12 @@ MAX_LIMIT = 1.0e6
 
 REQUIRED = object()
 """The default of a key that must be given."""
+
+RENAMED: dict[str, tuple[str, str]] = {
+    "noise.pixel_std_px": ("intensity_std_grey", "the same figure: 8-bit grey levels, not pixels"),
+}
+"""Keys of earlier versions of the file, by path: the new name and why it changed. A file that
+still uses one is refused with the new name (the value means the same)."""
 
 
 class SchemaError(ValueError):
@@ -148,8 +159,12 @@ def read(table: Any, keys: tuple[Key, ...], path: str) -> dict[str, Any]:
         raise SchemaError(f"{path}: must be a table, got {type(table).__name__}")
     allowed = {k.name for k in keys}
     unknown = sorted(set(table) - allowed)
+    prefix = f"{path}." if path else ""
+    for name in unknown:
+        if prefix + name in RENAMED:
+            new, why = RENAMED[prefix + name]
+            raise SchemaError(f"{prefix}{name}: renamed; write {prefix}{new} ({why})")
     if unknown:
-        prefix = f"{path}." if path else ""
         raise SchemaError(f"{prefix}{unknown[0]}: unknown key; expected one of {sorted(allowed)}")
     out = {}
     for key in keys:
@@ -280,19 +295,12 @@ FLIGHT_MODES: dict[str, tuple[Key, ...]] = {
 }
 """The keys of ``[flight]`` per ``mode`` (besides ``mode`` itself)."""
 
-NOISE: tuple[Key, ...] = (
-    Key("position_std_m", "number", "error added to the body position, m", 0.0, 0.0, 100.0),
-    Key("attitude_std_deg", "number", "error added to the attitude, deg", 0.0, 0.0, 180.0),
-    Key(
-        "pixel_std_px", "number", "noise on each image colour value, 0-255 levels", 0.0, 0.0, 128.0
-    ),
-    Key("depth_std_m", "number", "depth noise: sigma = depth_std_m + ...", 0.0, 0.0, 10.0),
-    Key("depth_std_per_m2", "number", "... + depth_std_per_m2 * z^2, 1/m", 0.0, 0.0, 1.0),
-    Key("extrinsic_std_m", "number", "error on the declared camera mount T_b_c, m", 0.0, 0.0, 1.0),
-    Key(
-        "extrinsic_std_deg", "number", "error on the declared mount's rotation, deg", 0.0, 0.0, 45.0
-    ),
+NOISE: tuple[Key, ...] = tuple(
+    Key(name, "number", figure.line, getattr(NOISELESS, name), figure.lo, figure.hi)
+    for name, figure in FIGURES.items()
 )
+"""``[noise]``: one key per ``vnav.noise_model.NoiseModel`` field, its doc, unit, range and
+default from the field's ``Figure``; validated here, then by ``NoiseModel``."""
 MAX_LATENCY_S = 5.0
 """Largest latency, clock offset and jitter of ``[timing]``, seconds."""
 TIMING: tuple[Key, ...] = (

@@ -27,6 +27,7 @@ from scenarios.scenario.check_kinds import KINDS, Check, Unit
 from sim.config import CameraConfig, SceneConfig
 from vnav import quat, so3
 from vnav.methods import METHOD_NAMES, METHODS, method
+from vnav.noise_model import NOISELESS, NoiseModel
 
 MAX_FILE_BYTES = 1_000_000
 MAX_SEED = 2**63 - 1
@@ -121,56 +122,6 @@ class OrbitFlight:
 
 
 @dataclass(frozen=True)
-class Noise:
-    """Sensor noise: errors on what the estimator is given (the truth is untouched).
-
-    Every draw comes from the run's seed. The estimator is told these figures (as a real
-    one is told its sensors' data sheets) and propagates them into each estimate's covariance.
-
-    Attributes
-    ----------
-    position_std_m : float
-        Per pose sample, a Gaussian error on the body position, each world axis, metres.
-    attitude_std_deg : float
-        Per pose sample, a Gaussian rotation vector in the body frame, each axis, degrees
-        (``R_w_b @ exp(dtheta_b)``).
-    pixel_std_px : float
-        Gaussian noise added to each colour value of each rendered image, in 8-bit levels
-        (0-255), clipped to that range.
-    depth_std_m, depth_std_per_m2 : float
-        Gaussian noise on each depth pixel, ``sigma = depth_std_m + depth_std_per_m2 * z**2``
-        (stereo-like growth with range).
-    extrinsic_std_m, extrinsic_std_deg : float
-        One draw per run: the camera mount given to the estimator is
-        ``exp([rho, phi]^) @ T_b_c`` (a left perturbation, docs/CONVENTIONS.md "Uncertainty"),
-        each component of ``rho`` (metres) and ``phi`` (degrees here) Gaussian.
-    """
-
-    position_std_m: float = 0.0
-    attitude_std_deg: float = 0.0
-    pixel_std_px: float = 0.0
-    depth_std_m: float = 0.0
-    depth_std_per_m2: float = 0.0
-    extrinsic_std_m: float = 0.0
-    extrinsic_std_deg: float = 0.0
-
-    @property
-    def pose_noisy(self) -> bool:
-        """Whether the pose stream carries noise."""
-        return self.position_std_m > 0.0 or self.attitude_std_deg > 0.0
-
-    @property
-    def depth_noisy(self) -> bool:
-        """Whether the depth image carries noise."""
-        return self.depth_std_m > 0.0 or self.depth_std_per_m2 > 0.0
-
-    @property
-    def extrinsic_noisy(self) -> bool:
-        """Whether the declared camera mount is off."""
-        return self.extrinsic_std_m > 0.0 or self.extrinsic_std_deg > 0.0
-
-
-@dataclass(frozen=True)
 class Timing:
     """The sensors' clocks and links (``scenarios.run.streams``; docs/CONVENTIONS.md, "Time").
 
@@ -223,7 +174,8 @@ class ScenarioSpec:
     flight: KinematicFlight | ControlledFlight | OrbitFlight
     camera_rate_hz: float = 10.0
     duration_s: float | None = None
-    noise: Noise = field(default_factory=Noise)
+    noise: NoiseModel = NOISELESS
+    """The sensors' noise (``[noise]``): what the simulator draws and the estimator is told."""
     timing: Timing = field(default_factory=Timing)
     checks: tuple[Check, ...] = ()
     lesson: str = ""
@@ -453,7 +405,7 @@ def from_dict(data: dict[str, Any], where: str = "<scenario>") -> ScenarioSpec:
         )
     except ValueError as exc:
         raise _err(where, "cones", str(exc)) from None
-    noise = Noise(**_read(top["noise"] or {}, schema.NOISE, where, "noise"))
+    noise = NoiseModel(**_read(top["noise"] or {}, schema.NOISE, where, "noise"))
     timing = Timing(**_read(top["timing"] or {}, schema.TIMING, where, "timing"))
     _at_most_physics_rate(1.0 / scene.timestep_s, top["camera_rate_hz"], timing, where)
     if not isinstance(top["lesson"], str):
