@@ -60,14 +60,16 @@ logged parent-from-child (Rerun's default relation), which is exactly vnav's
 ``vnav.frames.FrameTree``).
 
 ``Recording`` is a ``scenarios.run.runner.TickObserver``: it is fed the run's records
-(``scenarios.run.records``) and images, as evo's Rerun bridge is fed its trajectory objects. It
-writes to a temporary name; ``scenarios.record.outputs`` checks the finished file and puts it in
-place together with the report.
+(``scenarios.run.records``) and images, as evo's Rerun bridge is fed its trajectory objects,
+and finished by ``scenarios.pipeline`` once the run is judged, with the verdicts. It writes to
+a temporary name; ``scenarios.record.outputs`` checks the finished file and puts it in place
+together with the report.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -77,6 +79,7 @@ import cv2
 import numpy as np
 import rerun as rr
 
+from scenarios.judge.checks import CheckResult
 from scenarios.record.panel import state_text
 from scenarios.record.plots import depth_scale_png, error_against_range_png
 from scenarios.record.viewer import (
@@ -332,8 +335,20 @@ class Recording:
         if len(self._buffer) >= FLUSH_EVERY_TICKS:
             self._flush()
 
-    def finish(self, result: RunResult) -> None:
-        """Log the flown path, the plots, the depth scale and the layout; finish the file."""
+    def finish(self, result: RunResult, judged: Sequence[CheckResult]) -> None:
+        """Log the flown path, the plots, the depth scale, the run's outcome (what calibration
+        recovered, the checks' verdicts) and the layout; finish the file.
+
+        Called once the run is judged (``scenarios.pipeline.run``), so that the recording
+        holds what the report holds.
+
+        Parameters
+        ----------
+        result : RunResult
+            The whole run, with its ``calibration`` if a check asked for one.
+        judged : sequence of CheckResult
+            Every check's outcome.
+        """
         assert self.rec is not None and self._spec is not None, "start() first"
         self._flush()
         rec = self.rec
