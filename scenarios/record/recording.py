@@ -96,6 +96,7 @@ from scenarios.record.viewer import (
     STREAM_QUANTITIES,
     TRUTH_COLOR,
     blueprint,
+    checks_summary,
     describe,
     entity,
     eye_for,
@@ -363,7 +364,8 @@ class Recording:
             rr.EncodedImage(contents=error_against_range_png(result), media_type="image/png"),
             static=True,
         )
-        _log_run_inputs(rec, result, self._spec, self._seed, self._latency)
+        _log_run_inputs(rec, result, self._latency)
+        _log_outcome(rec, self._spec, self._seed, result, judged)
         depth_max_m = _depth_scale_m(result, self._depth_p95_m)
         rec.log(
             entity.DEPTH,
@@ -392,6 +394,7 @@ class Recording:
                 error_top_m=_error_tops_m(result, self._latency),
                 cone0_top_m=_cone0_top_m(result, self._cones_w[0]),
                 latency=self._latency,
+                verdict=checks_summary(judged),
             )
         )
         self._close()
@@ -830,12 +833,9 @@ def _transform_columns(T_parent_child: np.ndarray, **more) -> object:
     )
 
 
-def _log_run_inputs(
-    rec: rr.RecordingStream, result: RunResult, spec: ScenarioSpec, seed: int, latency: bool
-) -> None:
-    """At the end of a run: the pose stream as the estimator received it, the true clock
-    offset (what ``vnav-demo calibrate`` reads beside the detections), and, when the run was
-    calibrated, what it recovered, appended to the scenario's description."""
+def _log_run_inputs(rec: rr.RecordingStream, result: RunResult, latency: bool) -> None:
+    """At the end of a run: the pose stream as the estimator received it and the true clock
+    offset (what ``vnav-demo calibrate`` reads beside the detections)."""
     if result.poses is not None:
         if latency:
             _send_pose_samples(rec, result.poses)
@@ -846,12 +846,25 @@ def _log_run_inputs(
         )
     rec.log(
         entity.TRUTH_VALUES,
-        rr.AnyValues(camera_clock_offset_s=spec.timing.camera_clock_offset_s),
+        rr.AnyValues(camera_clock_offset_s=result.spec.timing.camera_clock_offset_s),
         static=True,
     )
+
+
+def _log_outcome(
+    rec: rr.RecordingStream,
+    spec: ScenarioSpec,
+    seed: int,
+    result: RunResult,
+    judged: Sequence[CheckResult],
+) -> None:
+    """Once the run is judged: the scenario's description again, now with every check's
+    verdict and, when the run was calibrated, what calibration recovered (a static row
+    replaces the one logged at the start)."""
+    text = describe(spec, seed, judged)
     if result.calibration is not None:
-        text = describe(spec, seed) + "\n\n" + calibration_text(result.calibration)
-        rec.log(entity.DESCRIPTION, rr.TextDocument(text, media_type="text/markdown"), static=True)
+        text += "\n\n" + calibration_text(result.calibration)
+    rec.log(entity.DESCRIPTION, rr.TextDocument(text, media_type="text/markdown"), static=True)
 
 
 def _send_estimator_inputs(send: _Sender, rows: list[_Buffered]) -> None:

@@ -11,11 +11,13 @@ Everything here is a viewer concern, declared once and shared by the recording
   the newest pose's (runs with latency: ``NEWEST_POSE_COLOR``);
 - ``STREAM_*``: the pose stream's plots against the image stamps (runs with latency);
 - ``blueprint``: the default layout; ``eye_for``: where the 3D view looks from;
-- ``describe``: the markdown shown beside the recording.
+- ``describe``: the markdown shown beside the recording, with the checks' verdicts
+  (``checks_text``) once the run is judged.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from types import SimpleNamespace
 from typing import TYPE_CHECKING
 
@@ -23,6 +25,7 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
+from scenarios.judge.checks import CheckResult, Outcome
 from scenarios.scenario.schema import VIEW_NAMES
 from scenarios.scenario.spec import ScenarioSpec
 from vnav import so3
@@ -47,8 +50,11 @@ __all__ = [
     "STREAM_SERIES",
     "STREAM_WINDOW_S",
     "TRUTH_COLOR",
+    "VERDICT_WORDS",
     "VIEWS",
     "blueprint",
+    "checks_summary",
+    "checks_text",
     "describe",
     "entity",
     "eye_for",
@@ -196,6 +202,7 @@ def blueprint(
     error_top_m: dict[str, float | None] | None = None,
     cone0_top_m: float | None = None,
     latency: bool = False,
+    verdict: str | None = None,
 ) -> rrb.Blueprint:
     """The default layout: images and plots on the left; the world, a close-up of the drone
     and the state panel on the right.
@@ -224,6 +231,9 @@ def blueprint(
         The run delivered its images late (its ``[timing]`` is not synchronous): the error
         tab also plots the newest-pose estimate's error and the pose stream against the image
         stamps, and the time panel starts on ``sim_time`` (a pose sample has no tick).
+    verdict : str, optional
+        The run's verdict in a few words (``checks_summary``): the scenario document's tab
+        names it, so that it shows without opening the tab.
     """
     if view not in VIEWS:
         raise ValueError(f"view must be one of {list(VIEWS)}, got {view!r}")
@@ -259,7 +269,10 @@ def blueprint(
                 ),
                 rrb.Tabs(
                     rrb.TextDocumentView(name="state at the time cursor", origin=entity.STATE),
-                    rrb.TextDocumentView(name="scenario", origin=entity.DESCRIPTION),
+                    rrb.TextDocumentView(
+                        name="scenario" if verdict is None else f"scenario, checks: {verdict}",
+                        origin=entity.DESCRIPTION,
+                    ),
                 ),
                 row_shares=[1, 1] if latency else [3, 2],
             ),
@@ -587,12 +600,48 @@ def eye_for(spec: ScenarioSpec, result: RunResult | None = None) -> tuple[np.nda
     return eye_w, target_w
 
 
-def describe(spec: ScenarioSpec, seed: int) -> str:
-    """Markdown shown beside the recording: what the scenario is, teaches, and what is drawn."""
+VERDICT_WORDS = {
+    Outcome.PASSED: "passed",
+    Outcome.FAILED: "FAILED",
+    Outcome.NO_DATA: "NO DATA",
+    Outcome.SKIPPED: "skipped",
+}
+"""How the scenario document marks each check's outcome: what fails the run in capitals, as
+``vnav-demo run`` prints it."""
+
+
+def checks_summary(judged: Sequence[CheckResult]) -> str:
+    """The run's verdict in a few words: ``all 4 passed``, ``3 passed, 1 skipped``, ``FAILED:
+    1 of 4`` (a check that had no data fails the run too), ``no checks``."""
+    if not judged:
+        return "no checks"
+    failing = sum(c.outcome.fails_run for c in judged)
+    if failing:
+        return f"FAILED: {failing} of {len(judged)}"
+    skipped = sum(c.outcome is Outcome.SKIPPED for c in judged)
+    if skipped:
+        return f"{len(judged) - skipped} passed, {skipped} skipped"
+    return f"all {len(judged)} passed"
+
+
+def checks_text(judged: Sequence[CheckResult]) -> str:
+    """Markdown: each check's verdict, its name and its figure next to its limit (the JSON
+    report's ``checks``: ``outcome``, ``name``, ``shown``), under the run's verdict."""
+    lines = [f"## Checks: {checks_summary(judged)}", ""]
+    lines += [f"- **{VERDICT_WORDS[c.outcome]}** {c.name}: {c.shown}" for c in judged]
+    return "\n".join(lines)
+
+
+def describe(spec: ScenarioSpec, seed: int, judged: Sequence[CheckResult] | None = None) -> str:
+    """Markdown shown beside the recording: what the scenario is, teaches, and what is drawn;
+    with ``judged`` (the run's checks, known when the recording is finished) each verdict
+    under the lesson."""
     cam = spec.scene.camera
     lines = [f"# {spec.name}", "", spec.description, ""]
     if spec.lesson:
         lines += [spec.lesson.strip(), ""]
+    if judged is not None:
+        lines += [checks_text(judged), ""]
     estimates = ", ".join(
         f"**{m.name}** ({m.color_name}{': ' + m.depth_from if m.bound is None else ''})"
         for m in METHODS
