@@ -187,7 +187,7 @@ def test_scenario_document_lists_every_checks_verdict(builtin_runs, name):
     assert heading is not None
     assert heading.group(1).startswith("FAILED") == (not rep["passed"])
     words = {"passed": "passed", "failed": "FAILED", "no data": "NO DATA", "skipped": "skipped"}
-    listed = re.findall(r"^- \*\*([A-Za-z ]+)\*\* (.+)$", text, flags=re.M)
+    listed = re.findall(r"^\* \*\*([A-Za-z ]+)\*\* (.+)$", text, flags=re.M)
     assert listed == [(words[c["outcome"]], f"{c['name']}: {c['shown']}") for c in rep["checks"]]
     assert ("## Calibration" in text) == (rep["calibration"] is not None)
 

@@ -714,7 +714,9 @@ def checks_text(judged: Sequence[CheckResult]) -> str:
     """Markdown: each check's verdict, its name and its figure next to its limit (the JSON
     report's ``checks``: ``outcome``, ``name``, ``shown``), under the run's verdict."""
     lines = [f"## Checks: {checks_summary(judged)}", ""]
-    lines += [f"- **{VERDICT_WORDS[c.outcome]}** {c.name}: {c.shown}" for c in judged]
+    # "*", not "-": a list with another marker is another list, and the description's list
+    # follows this one (in markdown a blank line alone would join the two).
+    lines += [f"* **{VERDICT_WORDS[c.outcome]}** {c.name}: {c.shown}" for c in judged]
     return "\n".join(lines)
 
 
