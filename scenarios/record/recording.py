@@ -280,7 +280,8 @@ def _depth_cloud_w(
 
 
 class Recording:
-    """A scenario's ``.rrd`` file, finished when the run finishes or deleted if it fails.
+    """A scenario's ``.rrd`` file, finished once the run is judged (``finish``, with the
+    verdicts) or deleted if the run, its judging or the finish fails (``abort``).
 
     Parameters
     ----------
@@ -586,7 +587,8 @@ def _mesh(mesh: TriangleMesh) -> rr.Mesh3D:
 def _log_mounts(rec: rr.RecordingStream, calibration: CalibrationRecord) -> None:
     """A calibrated run's declared and recovered camera mounts beside the true one, each a
     named frame on the body (``T_b_c_declared``, ``T_b_c_recovered``) with its axes drawn in
-    one colour and labelled at the tip of its optical axis (z), static."""
+    one colour and named once (the declared mount on its x axis, the recovered one on its
+    optical axis z), static."""
     mounts = (
         (
             entity.CAMERA_DECLARED,

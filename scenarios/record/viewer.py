@@ -233,7 +233,7 @@ def blueprint(
     cone0_top_m: float | None = None,
     latency: bool = False,
     verdict: str | None = None,
-    mounts_T_w_c=None,
+    mounts_T_w_c: np.ndarray | None = None,
 ) -> rrb.Blueprint:
     """The default layout: images and plots on the left; the world, a close-up of the drone
     and the state panel on the right.
@@ -415,7 +415,7 @@ MOUNTS_EYE_C = MOUNTS_TARGET_C + np.array([0.45, -0.85, -0.7])
 forward): 1.2 m to the right, above and behind the axes, so that none points at it."""
 
 
-def mounts_close_up(T_w_c) -> rrb.Spatial3DView:
+def mounts_close_up(T_w_c: np.ndarray) -> rrb.Spatial3DView:
     """The three camera mounts on the body at the last tick, from 1.2 m: the true
     camera's axes (red, green, blue), the declared mount's (``DECLARED_MOUNT_COLOR``) and the
     recovered one's (``RECOVERED_MOUNT_COLOR``), with the body's axes (not the drone's mesh).
