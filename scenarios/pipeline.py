@@ -3,13 +3,20 @@
 The command line (``vnav-demo run``), the benchmarks and the tests all call ``run``, so a
 scenario is run, judged and written the same way everywhere::
 
-    run     scenarios.run.runner.run_scenario   (MuJoCo; the recording observes every tick)
-    judge   scenarios.judge.checks.judge          (the spec's checks, else the default ones)
-    report  scenarios.judge.report.build / write  (JSON)
+    run        scenarios.run.runner.run_scenario        (MuJoCo; the recording observes every tick)
+    calibrate  scenarios.judge.calibration.calibrate_run  (only if a check asks for it)
+    judge      scenarios.judge.checks.judge             (the spec's checks, else the default ones)
+    finish     scenarios.record.recording.Recording.finish  (with the verdicts and calibration)
+    report     scenarios.judge.report.build              (JSON)
+    commit     scenarios.record.outputs.OutputPair.commit  (both files in place, or neither)
+
+The recording is finished only after the run is judged: what the checks found (and the mount
+calibration recovered) is in the recording as well as in the report.
 """
 
 from __future__ import annotations
 
+import time
 import uuid
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -95,16 +102,26 @@ def run(
     recording_id = f"{spec.name}-seed{seed}-{uuid.uuid4().hex[:12]}"
     if out_dir is None:
         result = run_scenario(spec, seed=seed, progress=progress, scenes=scenes)
-        _calibrate_if_checked(spec, result)
-        judged = _judge(spec, result)
+        judged = _calibrate_and_judge(spec, result)
         return Outcome(result, judged, report.build(result, judged))
     rrd_path, json_path = output_paths(spec, Path(out_dir))
     pair = OutputPair(rrd_path, json_path)
     try:
         recording = Recording(pair.rrd_tmp, recording_id)
-        result = run_scenario(spec, seed=seed, observer=recording, progress=progress, scenes=scenes)
-        _calibrate_if_checked(spec, result)
-        judged = _judge(spec, result)
+        try:
+            result = run_scenario(
+                spec, seed=seed, observer=recording, progress=progress, scenes=scenes
+            )
+            judged = _calibrate_and_judge(spec, result)
+            finish_start = time.perf_counter()
+            recording.finish(result, judged)
+        except BaseException:
+            # A failed run has aborted its observer already (a second abort does nothing); a
+            # failure while judging or finishing must not leave the file open.
+            recording.abort()
+            raise
+        # The recording's end (plots, layout, footer) is set-up work, as its start is.
+        result.timing_s["setup"] += time.perf_counter() - finish_start
         rep = report.build(result, judged, recording={"file": rrd_path.name, "id": recording_id})
         pair.write_json(report.dumps(rep))
         pair.commit()
@@ -114,13 +131,11 @@ def run(
     return Outcome(result, judged, rep, rrd_path, json_path)
 
 
-def _calibrate_if_checked(spec: ScenarioSpec, result: RunResult) -> None:
-    """Recover the camera mount and clock offset from the run when a check judges them."""
-    if any(c.kind.startswith("calibration_") for c in spec.checks):
+def _calibrate_and_judge(spec: ScenarioSpec, result: RunResult) -> list[checks.CheckResult]:
+    """Recover the camera mount and clock offset from the run if a check judges them (into
+    ``result.calibration``), then judge every check of ``spec`` (or the default ones)."""
+    if spec.checks_calibration:
         from scenarios.judge.calibration import calibrate_run
 
         result.calibration = calibrate_run(result)
-
-
-def _judge(spec: ScenarioSpec, result: RunResult) -> list[checks.CheckResult]:
     return [checks.judge(c, result) for c in (spec.checks or check_kinds.default_checks())]

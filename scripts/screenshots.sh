@@ -28,7 +28,7 @@ if [ $# -gt 0 ]; then
   scenarios=("$@")
 else
   mapfile -t scenarios < <(.venv/bin/python -c \
-    'from scenarios import builtin; print("\n".join(builtin.names()))')
+    'from scenarios.scenario import builtin; print("\n".join(builtin.names()))')
 fi
 
 display=":$((90 + RANDOM % 100))"

@@ -453,8 +453,8 @@ def test_injected_short_recording_exits_3_and_keeps_the_previous_pair(
     before = _first_pair(tmp_path)
     real_finish = Recording.finish
 
-    def finish_short(self, result):
-        real_finish(self, result)
+    def finish_short(self, result, judged):
+        real_finish(self, result, judged)
         data = self.path.read_bytes()
         self.path.write_bytes(data[: len(data) // 2])
 

@@ -103,12 +103,17 @@ def calibrate_run(result: RunResult) -> CalibrationRecord:
     """
     cam = result.spec.scene.camera
     camera = PinholeCamera.from_fovy(cam.fovy_deg, cam.width, cam.height)
+    first_pass = inputs_from_run(result, camera)
+    mounts = {
+        "T_b_c_declared": first_pass.T_b_c_declared,
+        "T_b_c_true": None if first_pass.truth is None else first_pass.truth.T_b_c,
+    }
     try:
-        first = inputs_from_run(result, camera).solve()
+        first = first_pass.solve()
         inputs = inputs_from_run(result, camera, first.T_b_c)
         solved = inputs.solve()
     except CalibrationError as exc:
-        return CalibrationRecord(None, None, None, 0, {}, refused=str(exc))
+        return CalibrationRecord(None, None, None, 0, {}, refused=str(exc), **mounts)
     assert inputs.truth is not None
     errors = errors_against(solved, inputs.truth)
     return CalibrationRecord(
@@ -121,6 +126,7 @@ def calibrate_run(result: RunResult) -> CalibrationRecord:
             "translation_m": errors["translation_mm"] * 1e-3,
             "time_offset_s": errors["time_offset_ms"] * 1e-3,
         },
+        **mounts,
     )
 
 

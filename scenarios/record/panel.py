@@ -11,9 +11,13 @@ At the time cursor the recording shows, as numbers (VNAV lecture 1):
 - the image's time (docs/CONVENTIONS.md, "Time and stamps"): its exposure stamp on the camera
   clock and on the pose clock, its arrival, the stamp of the pose it was given and of the
   newest pose received by then, with the body's true motion in between; for an image that
-  was neither late nor stamped on another clock (a synchronous run), one line in the header.
+  was neither late nor stamped on another clock (a synchronous run), one line in the header;
+- in a calibrated run (``mount_lines``), the camera mount the estimator was told, the true
+  one and the one calibration recovered, side by side, each with its error against the true
+  mount, and the clock offset, true and recovered.
 
-All of it is the simulator's truth at that tick (the estimator's noisy pose is not shown).
+All of it is the simulator's truth at that tick (the estimator's noisy pose is not shown),
+except the declared and recovered mounts, shown against it.
 """
 
 from __future__ import annotations
@@ -22,11 +26,11 @@ import math
 
 import numpy as np
 
-from scenarios.run.records import ImageTiming, TickRecord
+from scenarios.run.records import CalibrationRecord, ImageTiming, TickRecord
 from vnav import quat, se3, so3
 from vnav.estimators import naive
 
-__all__ = ["SYNCHRONOUS_NOTE", "state_text"]
+__all__ = ["SYNCHRONOUS_NOTE", "mount_lines", "state_text"]
 
 
 def _number(x: float, decimals: int, width: int) -> str:
@@ -34,12 +38,25 @@ def _number(x: float, decimals: int, width: int) -> str:
     return f"{round(float(x), decimals) + 0.0:{width}.{decimals}f}"
 
 
-def _matrix_rows(T: np.ndarray) -> list[str]:
-    """Four rows of a 4x4 pose: rotation to 3 decimals | translation to the centimetre."""
+_COLUMN = 29
+"""Width of one 4x4 pose in the panel (three side by side, three spaces apart)."""
+
+
+def _matrix_rows(T: np.ndarray, translation_decimals: int = 2) -> list[str]:
+    """Four rows of a 4x4 pose: rotation to 3 decimals | translation to the centimetre (or
+    to ``translation_decimals``)."""
     return [
-        " ".join(_number(T[i, j], 3, 6) for j in range(3)) + " |" + _number(T[i, 3], 2, 7)
+        " ".join(_number(T[i, j], 3, 6) for j in range(3))
+        + " |"
+        + _number(T[i, 3], translation_decimals, 7)
         for i in range(4)
     ]
+
+
+def _side_by_side(titles: list[str], blocks: list[list[str]]) -> list[str]:
+    """Columns of text, ``_COLUMN`` wide, three spaces apart: a title over each block."""
+    rows = [titles, *zip(*blocks, strict=True)]
+    return ["   ".join(f"{cell:<{_COLUMN}}" for cell in row).rstrip() for row in rows]
 
 
 def _vector(p: np.ndarray, decimals: int = 2, width: int = 7) -> str:
@@ -100,7 +117,74 @@ def _time_lines(timing: ImageTiming) -> list[str]:
     ]
 
 
-def state_text(record: TickRecord, quat_xyzw: np.ndarray, cone0_w: np.ndarray) -> str:
+def _mount_error(T_b_c: np.ndarray, T_b_c_true: np.ndarray) -> tuple[float, float]:
+    """A mount's error against the true one: the angle of the rotation between them (deg)
+    and the distance between the camera centres (mm), as ``scenarios.judge.calibration``
+    measures the recovered mount's."""
+    R_err = T_b_c[:3, :3].T @ T_b_c_true[:3, :3]
+    return (
+        math.degrees(float(np.linalg.norm(so3.log(R_err)))),
+        1e3 * float(np.linalg.norm(T_b_c[:3, 3] - T_b_c_true[:3, 3])),
+    )
+
+
+def _off(deg: float, mm: float) -> str:
+    """A mount's error against the true one, to fit under its column."""
+    return f"error {deg:.4f} deg, {mm:.2f} mm"
+
+
+def mount_lines(calibration: CalibrationRecord, camera_clock_offset_s: float) -> list[str]:
+    """The state panel's mounts block of a calibrated run: the mount the estimator was told,
+    the true one and the one recovered, side by side (translations to the millimetre), each
+    with its error against the true one; the clock offset, true and recovered.
+
+    The same at every tick (calibration uses the whole flight): computed once per run.
+
+    Parameters
+    ----------
+    calibration : CalibrationRecord
+        What calibration recovered (or why it refused), with the declared and true mounts.
+    camera_clock_offset_s : float
+        The true offset of the camera's clock: ``t_pose = t_cam + offset``, seconds.
+    """
+    c = calibration
+    assert c.T_b_c_declared is not None and c.T_b_c_true is not None, "calibrate_run sets them"
+    titles = ["T_b_c declared (told)", "T_b_c true (simulator)", "T_b_c recovered (calibrated)"]
+    mounts = [c.T_b_c_declared, c.T_b_c_true, c.T_b_c]
+    blocks = [
+        ["refused", "", "", ""] if T is None else _matrix_rows(T, translation_decimals=3)
+        for T in mounts
+    ]
+    errors = [_off(*_mount_error(c.T_b_c_declared, c.T_b_c_true)), "(the reference)"]
+    if c.T_b_c is not None:
+        # The report's errors, to the digit: the recovered mount's is what the checks judge.
+        errors.append(_off(c.errors["rotation_deg"], 1e3 * c.errors["translation_m"]))
+    else:
+        errors.append("")
+    lines = _side_by_side(titles, [[*b, e] for b, e in zip(blocks, errors, strict=True)])
+    true_ms = 1e3 * camera_clock_offset_s
+    if c.refused is not None:
+        return [
+            *lines,
+            f"clock   t_pose = t_cam + {true_ms:.3f} ms (true)",
+            f"        calibration refused: {c.refused}",
+        ]
+    assert c.time_offset_s is not None and c.reprojection_rms_px is not None
+    return [
+        *lines,
+        f"clock   t_pose = t_cam + {true_ms:.3f} ms (true), + {1e3 * c.time_offset_s:.3f} ms "
+        f"(recovered, off the true {1e3 * c.errors['time_offset_s']:.3f} ms)",
+        f"        from the reprojection of every cone apex seen: RMS {c.reprojection_rms_px:.3f} "
+        f"px over {c.frames_used} images",
+    ]
+
+
+def state_text(
+    record: TickRecord,
+    quat_xyzw: np.ndarray,
+    cone0_w: np.ndarray,
+    mounts: list[str] | None = None,
+) -> str:
     """Markdown for the state panel at one tick.
 
     Parameters
@@ -112,13 +196,15 @@ def state_text(record: TickRecord, quat_xyzw: np.ndarray, cone0_w: np.ndarray) -
         quaternion continuous (``q`` and ``-q`` are the same rotation).
     cone0_w : ndarray, shape (3,)
         Cone 0's true base centre in the world, metres.
+    mounts : list of str, optional
+        A calibrated run's mounts block (``mount_lines``), shown under the poses.
     """
     T_w_b, T_b_c = record.T_w_b, record.T_b_c
     T_w_c = T_w_b @ T_b_c
-    names = ("T_w_b: body in world", "T_b_c: camera in body", "T_w_c = T_w_b T_b_c")
-    blocks = [_matrix_rows(T) for T in (T_w_b, T_b_c, T_w_c)]
-    lines = ["   ".join(f"{n:<29}" for n in names).rstrip()]
-    lines += ["   ".join(rows[i] for rows in blocks) for i in range(4)]
+    names = ["T_w_b: body in world", "T_b_c: camera in body", "T_w_c = T_w_b T_b_c"]
+    lines = _side_by_side(names, [_matrix_rows(T) for T in (T_w_b, T_b_c, T_w_c)])
+    if mounts is not None:
+        lines += ["", *mounts]
 
     p = record.coordinates_of(cone0_w)
     lines += [
@@ -144,9 +230,9 @@ def state_text(record: TickRecord, quat_xyzw: np.ndarray, cone0_w: np.ndarray) -
         f"{_number(math.degrees(angle), 1, 6)} deg  (R = I + sin(a) K + (1 - cos(a)) K^2)",
     ]
     mount_off = se3.invert(record.T_b_c_est) @ T_b_c
-    if not np.allclose(mount_off, np.eye(4), atol=1e-9):
-        off_deg = math.degrees(float(np.linalg.norm(so3.log(mount_off[:3, :3]))))
-        off_mm = 1e3 * float(np.linalg.norm(mount_off[:3, 3]))
+    # With the mounts block the declared mount's error is shown there, beside the recovered one.
+    if mounts is None and not np.allclose(mount_off, np.eye(4), atol=1e-9):
+        off_deg, off_mm = _mount_error(record.T_b_c_est, T_b_c)
         lines += [
             "",
             f"mount   the estimator is told a T_b_c {off_deg:.2f} deg and {off_mm:.1f} mm off "

@@ -13,6 +13,10 @@ docs/CONVENTIONS.md; "in F" is the named transform frame an entity is drawn in):
     world/body/camera/image        in image: JPEG-compressed RGB
     world/body/camera/depth        in image: planar z-depth, PNG 16-bit mm, every 5th tick
     world/body/camera/detections   in image: Boxes2D + Points2D (apex, base keypoints)
+    world/body/camera_declared     calibrated runs: Transform3D T_b_c_declared (body <- the
+                                   mount the estimator was told), static; its axes (yellow)
+    world/body/camera_recovered    calibrated runs: Transform3D T_b_c_recovered (body <- the
+                                   mount calibration recovered), static; its axes (cyan)
     world/cones/mesh, truth        in world: the cones' MuJoCo geoms; true base centres
     world/cones/estimate/<method>  in world: Points3D per method, every tick
     world/cones/error/<method>     in world: segment from the true cone to each estimate
@@ -38,10 +42,12 @@ docs/CONVENTIONS.md; "in F" is the named transform frame an entity is drawn in):
     time/<quantity>/exposure       the pose given with each image, at its exposure;
     time/<quantity>/arrival        the newest pose received, at each image's arrival
     state                          TextDocument every tick: poses, p_c -> p_b -> p_w, attitude,
-                                   the image's stamps
+                                   the image's stamps; in a calibrated run the declared, true
+                                   and recovered mounts (its rows are sent at the end)
     plots/error_vs_range           image (matplotlib), logged at the end (static)
     plots/depth_scale              the depth colour scale, logged at the end (static)
-    description                    TextDocument (markdown)
+    description                    TextDocument (markdown), logged again at the end with
+                                   every check's verdict and what calibration recovered
     estimator/pose_stream          sim_time only: Transform3D T_w_b of every pose sample the
                                    estimator was sent (noise included), at its stamp
     estimator/mount                Transform3D T_b_c the estimator was told, every tick
@@ -60,14 +66,16 @@ logged parent-from-child (Rerun's default relation), which is exactly vnav's
 ``vnav.frames.FrameTree``).
 
 ``Recording`` is a ``scenarios.run.runner.TickObserver``: it is fed the run's records
-(``scenarios.run.records``) and images, as evo's Rerun bridge is fed its trajectory objects. It
-writes to a temporary name; ``scenarios.record.outputs`` checks the finished file and puts it in
-place together with the report.
+(``scenarios.run.records``) and images, as evo's Rerun bridge is fed its trajectory objects,
+and finished by ``scenarios.pipeline`` once the run is judged, with the verdicts. It writes to
+a temporary name; ``scenarios.record.outputs`` checks the finished file and puts it in place
+together with the report.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -77,22 +85,27 @@ import cv2
 import numpy as np
 import rerun as rr
 
-from scenarios.record.panel import state_text
+from scenarios.judge.checks import CheckResult
+from scenarios.record.panel import mount_lines, state_text
 from scenarios.record.plots import depth_scale_png, error_against_range_png
 from scenarios.record.viewer import (
     AXIS_COLORS,
     AXIS_LENGTH_M,
     CONE0_SERIES,
+    DECLARED_MOUNT_COLOR,
     EXPOSURE_POSE_COLOR,
     FRAME,
     IMAGE_PLANE_M,
+    MOUNT_AXIS_LENGTH_M,
     NEWEST_POSE_COLOR,
     NEWEST_POSE_METHOD,
     POSE_SAMPLE_COLOR,
     RAY_COLOR,
+    RECOVERED_MOUNT_COLOR,
     STREAM_QUANTITIES,
     TRUTH_COLOR,
     blueprint,
+    checks_summary,
     describe,
     entity,
     eye_for,
@@ -139,6 +152,12 @@ LINE_UI_POINTS = rr.Radius.ui_points(0.9)
 """Error segments and the naive offset: a width on screen, not in metres, so that they stay
 thin in the close-up and visible in the wide view."""
 RAY_UI_POINTS = rr.Radius.ui_points(0.7)
+MOUNT_ARROW_UI_POINTS = {
+    "declared": rr.Radius.ui_points(1.5),
+    "recovered": rr.Radius.ui_points(0.8),
+}
+"""The declared mount's axes are about as thick on screen as the true camera's; the recovered
+mount's thinner, so that where they coincide with the true axes those stay in sight."""
 
 ELLIPSOID_LINE = rr.Radius.ui_points(1.8)
 """The ellipsoids' three principal ellipses: twice an error segment's width, so that they
@@ -261,7 +280,8 @@ def _depth_cloud_w(
 
 
 class Recording:
-    """A scenario's ``.rrd`` file, finished when the run finishes or deleted if it fails.
+    """A scenario's ``.rrd`` file, finished once the run is judged (``finish``, with the
+    verdicts) or deleted if the run, its judging or the finish fails (``abort``).
 
     Parameters
     ----------
@@ -288,6 +308,9 @@ class Recording:
         # freedom so far in the run (the running mean and its band span flushes).
         self._nees_totals: dict[str, list[float]] = {m: [0.0, 0.0, 0.0] for m in METHOD_NAMES}
         self._depth_p95_m: list[float] = []
+        self._state_waits = False
+        self._waiting_state: list[tuple[TickRecord, np.ndarray]] = []
+        """(record, plotted quaternion) of each tick whose state panel waits for the finish."""
 
     # ------------------------------------------------------------------ TickObserver
     def start(self, spec: ScenarioSpec, seed: int, camera: PinholeCamera, scenery: Scenery) -> None:
@@ -302,6 +325,9 @@ class Recording:
         self._latency = spec.timing.delivers_late
         self._cones_w = np.array(spec.scene.cones_w, dtype=np.float64).reshape(-1, 3)
         self._seed = seed
+        # A calibrated run's state panel shows what calibration recovers from the whole flight,
+        # known only at the end: its rows wait until then (the records are kept by the run).
+        self._state_waits = spec.checks_calibration
         _log_static(self.rec, spec, seed, camera, scenery)
         if self._latency:
             _log_latency_static(self.rec)
@@ -332,8 +358,20 @@ class Recording:
         if len(self._buffer) >= FLUSH_EVERY_TICKS:
             self._flush()
 
-    def finish(self, result: RunResult) -> None:
-        """Log the flown path, the plots, the depth scale and the layout; finish the file."""
+    def finish(self, result: RunResult, judged: Sequence[CheckResult]) -> None:
+        """Log the flown path, the plots, the depth scale, the run's outcome (what calibration
+        recovered, the checks' verdicts) and the layout; finish the file.
+
+        Called once the run is judged (``scenarios.pipeline.run``), so that the recording
+        holds what the report holds.
+
+        Parameters
+        ----------
+        result : RunResult
+            The whole run, with its ``calibration`` if a check asked for one.
+        judged : sequence of CheckResult
+            Every check's outcome.
+        """
         assert self.rec is not None and self._spec is not None, "start() first"
         self._flush()
         rec = self.rec
@@ -348,7 +386,11 @@ class Recording:
             rr.EncodedImage(contents=error_against_range_png(result), media_type="image/png"),
             static=True,
         )
-        _log_run_inputs(rec, result, self._spec, self._seed, self._latency)
+        _log_run_inputs(rec, result, self._latency)
+        _log_outcome(rec, self._spec, self._seed, result, judged)
+        if result.calibration is not None:
+            _log_mounts(rec, result.calibration)
+        self._send_waiting_state(result)
         depth_max_m = _depth_scale_m(result, self._depth_p95_m)
         rec.log(
             entity.DEPTH,
@@ -377,9 +419,25 @@ class Recording:
                 error_top_m=_error_tops_m(result, self._latency),
                 cone0_top_m=_cone0_top_m(result, self._cones_w[0]),
                 latency=self._latency,
+                verdict=checks_summary(judged),
+                mounts_T_w_c=_last_T_w_c(result) if result.calibration is not None else None,
             )
         )
         self._close()
+
+    def _send_waiting_state(self, result: RunResult) -> None:
+        """The state panel of the ticks that waited for the run's end, with the mounts block
+        of a calibrated run, in column batches of ``FLUSH_EVERY_TICKS``."""
+        assert self.rec is not None and self._spec is not None
+        waiting, self._waiting_state = self._waiting_state, []
+        mounts = None
+        if result.calibration is not None:
+            mounts = mount_lines(result.calibration, self._spec.timing.camera_clock_offset_s)
+        send = _Sender(self.rec)
+        for i in range(0, len(waiting), FLUSH_EVERY_TICKS):
+            batch = waiting[i : i + FLUSH_EVERY_TICKS]
+            texts = [state_text(r, q, self._cones_w[0], mounts) for r, q in batch]
+            send.records(entity.STATE, [r for r, _ in batch], _state_columns(texts))
 
     def abort(self) -> None:
         """Stop recording and delete the unfinished file."""
@@ -421,17 +479,12 @@ class Recording:
         if self._latency:
             _send_newest_pose(send, rows, self._cones_w)
             _send_stream_markers(self.rec, rows)
-        send(
-            entity.STATE,
-            rows,
-            rr.TextDocument.columns(
-                text=[
-                    state_text(r.record, q, self._cones_w[0])
-                    for r, q in zip(rows, quats, strict=True)
-                ],
-                media_type=["text/markdown"] * len(rows),
-            ),
-        )
+        plotted = [(r.record, q) for r, q in zip(rows, quats, strict=True)]
+        if self._state_waits:
+            self._waiting_state += plotted
+        else:
+            texts = [state_text(record, q, self._cones_w[0]) for record, q in plotted]
+            send(entity.STATE, rows, _state_columns(texts))
         with_cloud = [r for r in rows if r.cloud_w is not None]
         clouds = [r.cloud_w for r in with_cloud]
         send(
@@ -441,6 +494,17 @@ class Recording:
                 positions=np.concatenate(clouds) if clouds else np.zeros((0, 3)),
             ).partition([len(c) for c in clouds]),
         )
+
+
+def _state_columns(texts: list[str]) -> rr.ComponentColumnList:
+    """``TextDocument`` columns of the state panel's markdown, one per tick."""
+    return rr.TextDocument.columns(text=texts, media_type=["text/markdown"] * len(texts))
+
+
+def _last_T_w_c(result: RunResult) -> np.ndarray:
+    """The true camera's pose at the run's last tick (the mounts close-up looks at it)."""
+    last = result.ticks[-1]
+    return last.T_w_b @ last.T_b_c
 
 
 def _depth_scale_m(result: RunResult, depth_p95_m: list[float]) -> float:
@@ -518,6 +582,51 @@ def _mesh(mesh: TriangleMesh) -> rr.Mesh3D:
         vertex_normals=mesh.normals.astype(np.float32),
         vertex_colors=mesh.colors_rgba,
     )
+
+
+def _log_mounts(rec: rr.RecordingStream, calibration: CalibrationRecord) -> None:
+    """A calibrated run's declared and recovered camera mounts beside the true one, each a
+    named frame on the body (``T_b_c_declared``, ``T_b_c_recovered``) with its axes drawn in
+    one colour and named once (the declared mount on its x axis, the recovered one on its
+    optical axis z), static."""
+    mounts = (
+        (
+            entity.CAMERA_DECLARED,
+            entity.CAMERA_DECLARED_AXES,
+            FRAME.CAMERA_DECLARED,
+            calibration.T_b_c_declared,
+            DECLARED_MOUNT_COLOR,
+            "declared",
+            ["declared", "", ""],
+        ),
+        (
+            entity.CAMERA_RECOVERED,
+            entity.CAMERA_RECOVERED_AXES,
+            FRAME.CAMERA_RECOVERED,
+            calibration.T_b_c,
+            RECOVERED_MOUNT_COLOR,
+            "recovered",
+            ["", "", "recovered"],
+        ),
+    )
+    for path, axes_path, frame, T_b_c, color, which, labels in mounts:
+        if T_b_c is None:  # calibration refused: nothing recovered to draw
+            continue
+        rec.log(path, _pose_transform(T_b_c, FRAME.BODY, frame), static=True)
+        _in_frame(rec, axes_path, frame)
+        rec.log(
+            axes_path,
+            rr.Arrows3D(
+                vectors=MOUNT_AXIS_LENGTH_M[frame] * np.eye(3),
+                colors=[color],
+                radii=MOUNT_ARROW_UI_POINTS[which],
+                # One label per mount, at the middle of one axis, a different axis for each:
+                # the two mounts are centimetres apart and their labels would otherwise pile up.
+                labels=labels,
+                show_labels=True,
+            ),
+            static=True,
+        )
 
 
 def calibration_text(c: CalibrationRecord) -> str:
@@ -779,16 +888,20 @@ def _log_latency_static(rec: rr.RecordingStream) -> None:
 
 class _Sender:
     """``send(path, rows, columns)``: one column batch on the ``tick`` and ``sim_time``
-    timelines of ``rows``; nothing for no rows."""
+    timelines of ``rows``; nothing for no rows. ``send.records(path, records, columns)``: the
+    same for tick records."""
 
     def __init__(self, rec: rr.RecordingStream) -> None:
         self.rec = rec
 
     def __call__(self, path: str, rows: list[_Buffered], columns) -> None:
-        if rows:
+        self.records(path, [r.record for r in rows], columns)
+
+    def records(self, path: str, records: list[TickRecord], columns) -> None:
+        if records:
             indexes = [
-                rr.TimeColumn("tick", sequence=[r.record.tick for r in rows]),
-                rr.TimeColumn("sim_time", duration=[r.record.t_s for r in rows]),
+                rr.TimeColumn("tick", sequence=[t.tick for t in records]),
+                rr.TimeColumn("sim_time", duration=[t.t_s for t in records]),
             ]
             self.rec.send_columns(path, indexes=indexes, columns=columns)
 
@@ -815,12 +928,9 @@ def _transform_columns(T_parent_child: np.ndarray, **more) -> object:
     )
 
 
-def _log_run_inputs(
-    rec: rr.RecordingStream, result: RunResult, spec: ScenarioSpec, seed: int, latency: bool
-) -> None:
-    """At the end of a run: the pose stream as the estimator received it, the true clock
-    offset (what ``vnav-demo calibrate`` reads beside the detections), and, when the run was
-    calibrated, what it recovered, appended to the scenario's description."""
+def _log_run_inputs(rec: rr.RecordingStream, result: RunResult, latency: bool) -> None:
+    """At the end of a run: the pose stream as the estimator received it and the true clock
+    offset (what ``vnav-demo calibrate`` reads beside the detections)."""
     if result.poses is not None:
         if latency:
             _send_pose_samples(rec, result.poses)
@@ -831,12 +941,25 @@ def _log_run_inputs(
         )
     rec.log(
         entity.TRUTH_VALUES,
-        rr.AnyValues(camera_clock_offset_s=spec.timing.camera_clock_offset_s),
+        rr.AnyValues(camera_clock_offset_s=result.spec.timing.camera_clock_offset_s),
         static=True,
     )
+
+
+def _log_outcome(
+    rec: rr.RecordingStream,
+    spec: ScenarioSpec,
+    seed: int,
+    result: RunResult,
+    judged: Sequence[CheckResult],
+) -> None:
+    """Once the run is judged: the scenario's description again, now with every check's
+    verdict and, when the run was calibrated, what calibration recovered (a static row
+    replaces the one logged at the start)."""
+    text = describe(spec, seed, judged)
     if result.calibration is not None:
-        text = describe(spec, seed) + "\n\n" + calibration_text(result.calibration)
-        rec.log(entity.DESCRIPTION, rr.TextDocument(text, media_type="text/markdown"), static=True)
+        text += "\n\n" + calibration_text(result.calibration)
+    rec.log(entity.DESCRIPTION, rr.TextDocument(text, media_type="text/markdown"), static=True)
 
 
 def _send_estimator_inputs(send: _Sender, rows: list[_Buffered]) -> None:

@@ -11,11 +11,13 @@ Everything here is a viewer concern, declared once and shared by the recording
   the newest pose's (runs with latency: ``NEWEST_POSE_COLOR``);
 - ``STREAM_*``: the pose stream's plots against the image stamps (runs with latency);
 - ``blueprint``: the default layout; ``eye_for``: where the 3D view looks from;
-- ``describe``: the markdown shown beside the recording.
+- ``describe``: the markdown shown beside the recording, with the checks' verdicts
+  (``checks_text``) once the run is judged.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from types import SimpleNamespace
 from typing import TYPE_CHECKING
 
@@ -23,9 +25,10 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
+from scenarios.judge.checks import CheckResult, Outcome
 from scenarios.scenario.schema import VIEW_NAMES
 from scenarios.scenario.spec import ScenarioSpec
-from vnav import so3
+from vnav import se3, so3
 from vnav.cone import TRAFFIC_CONE
 from vnav.methods import METHODS, NAIVE, NEWEST_POSE_METHOD, PREFERENCE, method
 
@@ -36,19 +39,25 @@ __all__ = [
     "AXIS_COLORS",
     "AXIS_LENGTH_M",
     "CONE0_SERIES",
+    "DECLARED_MOUNT_COLOR",
     "EXPOSURE_POSE_COLOR",
     "FRAME",
     "IMAGE_PLANE_M",
+    "MOUNT_AXIS_LENGTH_M",
     "NEWEST_POSE_COLOR",
     "NEWEST_POSE_METHOD",
     "POSE_SAMPLE_COLOR",
     "RAY_COLOR",
+    "RECOVERED_MOUNT_COLOR",
     "STREAM_QUANTITIES",
     "STREAM_SERIES",
     "STREAM_WINDOW_S",
     "TRUTH_COLOR",
+    "VERDICT_WORDS",
     "VIEWS",
     "blueprint",
+    "checks_summary",
+    "checks_text",
     "describe",
     "entity",
     "eye_for",
@@ -100,6 +109,10 @@ entity = SimpleNamespace(
     BODY="world/body",
     DRONE="world/body/drone",
     CAMERA="world/body/camera",
+    CAMERA_DECLARED="world/body/camera_declared",
+    CAMERA_DECLARED_AXES="world/body/camera_declared/axes",
+    CAMERA_RECOVERED="world/body/camera_recovered",
+    CAMERA_RECOVERED_AXES="world/body/camera_recovered/axes",
     IMAGE="world/body/camera/image",
     DEPTH="world/body/camera/depth",
     DETECTIONS="world/body/camera/detections",
@@ -144,15 +157,38 @@ entity = SimpleNamespace(
 (runs with latency only): ``quantity`` one of ``STREAM_QUANTITIES``, ``series`` one of
 ``STREAM_SERIES``."""
 
-FRAME = SimpleNamespace(WORLD="world", BODY="body", CAMERA="camera", IMAGE="image")
+FRAME = SimpleNamespace(
+    WORLD="world",
+    BODY="body",
+    CAMERA="camera",
+    IMAGE="image",
+    CAMERA_DECLARED="camera_declared",
+    CAMERA_RECOVERED="camera_recovered",
+)
 """Named transform frames: ``T_w_b`` maps body into world, ``T_b_c`` camera into body, and the
-pinhole maps the image plane into the camera (docs/CONVENTIONS.md)."""
+pinhole maps the image plane into the camera (docs/CONVENTIONS.md). In a calibrated run two
+more camera frames hang from the body: the mount the estimator was told
+(``T_b_c_declared``) and the one calibration recovered (``T_b_c_recovered``); ``camera`` is
+the true one."""
 
 AXIS_LENGTH_M = {FRAME.WORLD: 2.0, FRAME.BODY: 1.0, FRAME.CAMERA: 0.5}
 """Drawn axis length per frame: the lengths tell the three frames apart where they overlap."""
 IMAGE_PLANE_M = 0.2
 """Distance of the drawn image plane from the camera centre (the frustum's depth): small
 enough that the frustum does not hide the drone in the close-up."""
+
+DECLARED_MOUNT_COLOR = (255, 200, 0)
+"""Yellow: the camera mount the estimator was told, drawn as one-coloured axes (calibrated
+runs); no axis colour is near it."""
+RECOVERED_MOUNT_COLOR = (0, 225, 225)
+"""Cyan: the camera mount calibration recovered, drawn as one-coloured axes (calibrated runs)."""
+MOUNT_AXIS_LENGTH_M = {
+    FRAME.CAMERA_DECLARED: AXIS_LENGTH_M[FRAME.CAMERA],
+    FRAME.CAMERA_RECOVERED: 1.2 * AXIS_LENGTH_M[FRAME.CAMERA],
+}
+"""The declared mount's axes are as long as the true camera's (0.5 m), so that its tips show
+how far it is off; the recovered mount's are longer, so that where they lie on the true axes
+their ends still show beyond them."""
 
 CONE0_SERIES: tuple[str, ...] = ("world", "body", "camera", "estimate_world")
 """Cone 0's coordinate series: its truth in three frames and its depth-image estimate."""
@@ -194,6 +230,8 @@ def blueprint(
     error_top_m: dict[str, float | None] | None = None,
     cone0_top_m: float | None = None,
     latency: bool = False,
+    verdict: str | None = None,
+    mounts_T_w_c: np.ndarray | None = None,
 ) -> rrb.Blueprint:
     """The default layout: images and plots on the left; the world, a close-up of the drone
     and the state panel on the right.
@@ -222,6 +260,13 @@ def blueprint(
         The run delivered its images late (its ``[timing]`` is not synchronous): the error
         tab also plots the newest-pose estimate's error and the pose stream against the image
         stamps, and the time panel starts on ``sim_time`` (a pose sample has no tick).
+    verdict : str, optional
+        The run's verdict in a few words (``checks_summary``): the scenario document's tab
+        names it, so that it shows without opening the tab.
+    mounts_T_w_c : array_like, shape (4, 4), optional
+        The true camera's pose at the last tick of a calibrated run: the close-up then looks
+        at the declared, true and recovered camera mounts (``mounts_close_up``), and the state
+        panel gets the room its mounts block needs.
     """
     if view not in VIEWS:
         raise ValueError(f"view must be one of {list(VIEWS)}, got {view!r}")
@@ -232,13 +277,20 @@ def blueprint(
         name="world",
         origin=entity.WORLD,
         # The depth image would also be drawn back-projected in 3D; the world-frame cloud
-        # computed by vnav (world/depth_cloud) is the one to look at here.
-        contents=["+ $origin/**", f"- /{entity.DEPTH}"],
+        # computed by vnav (world/depth_cloud) is the one to look at here. The mounts are
+        # centimetres apart: seen from metres away they are one frame with three labels.
+        contents=["+ $origin/**", f"- /{entity.DEPTH}", *_NO_MOUNTS],
         eye_controls=eye,
         # Seen from metres away the camera's label would sit on the body's (they are 15 cm
         # apart): the close-up names both.
         overrides={entity.CAMERA: rr.TransformAxes3D.from_fields(show_frame=False)},
     )
+    if mounts_T_w_c is not None:
+        close_up = mounts_close_up(mounts_T_w_c)
+    elif close_up_cone_w is not None:
+        close_up = cone_close_up(close_up_cone_w, T_w_b)
+    else:
+        close_up = _close_up(T_w_b)
     return rrb.Blueprint(
         rrb.Horizontal(
             # With latency the plots and the state panel (its time block) get more room.
@@ -248,18 +300,18 @@ def blueprint(
                 row_shares=[4, 6] if latency else [3, 5],
             ),
             rrb.Vertical(
+                # A calibrated run's lesson is in the mounts close-up: it gets half the width.
                 rrb.Horizontal(
-                    world,
-                    _close_up(T_w_b)
-                    if close_up_cone_w is None
-                    else cone_close_up(close_up_cone_w, T_w_b),
-                    column_shares=[3, 2],
+                    world, close_up, column_shares=[3, 2] if mounts_T_w_c is None else [1, 1]
                 ),
                 rrb.Tabs(
                     rrb.TextDocumentView(name="state at the time cursor", origin=entity.STATE),
-                    rrb.TextDocumentView(name="scenario", origin=entity.DESCRIPTION),
+                    rrb.TextDocumentView(
+                        name="scenario" if verdict is None else f"scenario, checks: {verdict}",
+                        origin=entity.DESCRIPTION,
+                    ),
                 ),
-                row_shares=[1, 1] if latency else [3, 2],
+                row_shares=[1, 1] if latency or mounts_T_w_c is not None else [3, 2],
             ),
             column_shares=[2, 3],
         ),
@@ -272,6 +324,9 @@ def blueprint(
     )
 
 
+_NO_MOUNTS = [f"- /{entity.CAMERA_DECLARED}/**", f"- /{entity.CAMERA_RECOVERED}/**"]
+"""Views that show the world leave out the declared and recovered mounts (calibrated runs)."""
+
 CLOSE_UP_EYE_B = np.array([-2.0, 1.2, 1.2])
 """Where the close-up's eye starts in the drone's yaw frame: behind, to the left, above (m)."""
 
@@ -281,6 +336,7 @@ _CLOSE_UP_CONTENTS = [
     f"- /{entity.DEPTH}",
     f"- /{entity.DEPTH_CLOUD}",
     f"- /{entity.TRAJECTORY}",
+    *_NO_MOUNTS,
 ]
 """What a close-up shows: the world without the depth image, its cloud and the flown path."""
 
@@ -346,6 +402,49 @@ def cone_close_up(cone_w, T_w_b=None) -> rrb.Spatial3DView:
         origin=entity.WORLD,
         contents=_CLOSE_UP_CONTENTS,
         eye_controls=rrb.EyeControls3D(position=eye_w, look_target=target_w, eye_up=[0, 0, 1]),
+    )
+
+
+MOUNTS_TARGET_C = np.array([0.2, 0.2, 0.2])
+"""What the mounts close-up looks at, in the true camera frame, m: the middle of the axes'
+span."""
+MOUNTS_EYE_C = MOUNTS_TARGET_C + np.array([0.45, -0.85, -0.7])
+"""Where the mounts close-up's eye sits in the true camera frame, m (x right, y down, z
+forward): 1.2 m to the right, above and behind the axes, so that none points at it."""
+
+
+def mounts_close_up(T_w_c: np.ndarray) -> rrb.Spatial3DView:
+    """The three camera mounts on the body at the last tick, from 1.2 m: the true
+    camera's axes (red, green, blue), the declared mount's (``DECLARED_MOUNT_COLOR``) and the
+    recovered one's (``RECOVERED_MOUNT_COLOR``), with the body's axes (not the drone's mesh).
+
+    The eye does not track the drone (see ``_close_up``): scrubbing back in the flight, the
+    mounts leave this view.
+
+    Parameters
+    ----------
+    T_w_c : array_like, shape (4, 4)
+        The true camera's pose at the last tick (where the viewer opens).
+    """
+    T_w_c = np.asarray(T_w_c, dtype=np.float64)
+    return rrb.Spatial3DView(
+        name="camera mounts (true: rgb axes)",
+        origin=entity.WORLD,
+        contents=[
+            f"+ /{entity.BODY}/**",
+            f"- /{entity.DRONE}",
+            f"- /{entity.IMAGE}",
+            f"- /{entity.DEPTH}",
+            f"- /{entity.DETECTIONS}/**",
+        ],
+        # The true camera's axes and name only: its frustum and the drone's rotors would hide
+        # the centimetres between the mounts.
+        overrides={entity.CAMERA: rr.TransformAxes3D.from_fields(show_frame=True)},
+        eye_controls=rrb.EyeControls3D(
+            position=se3.apply(T_w_c, MOUNTS_EYE_C),
+            look_target=se3.apply(T_w_c, MOUNTS_TARGET_C),
+            eye_up=[0, 0, 1],
+        ),
     )
 
 
@@ -585,12 +684,50 @@ def eye_for(spec: ScenarioSpec, result: RunResult | None = None) -> tuple[np.nda
     return eye_w, target_w
 
 
-def describe(spec: ScenarioSpec, seed: int) -> str:
-    """Markdown shown beside the recording: what the scenario is, teaches, and what is drawn."""
+VERDICT_WORDS = {
+    Outcome.PASSED: "passed",
+    Outcome.FAILED: "FAILED",
+    Outcome.NO_DATA: "NO DATA",
+    Outcome.SKIPPED: "skipped",
+}
+"""How the scenario document marks each check's outcome: what fails the run in capitals, as
+``vnav-demo run`` prints it."""
+
+
+def checks_summary(judged: Sequence[CheckResult]) -> str:
+    """The run's verdict in a few words: ``all 4 passed``, ``3 passed, 1 skipped``, ``FAILED:
+    1 of 4`` (a check that had no data fails the run too), ``no checks``."""
+    if not judged:
+        return "no checks"
+    failing = sum(c.outcome.fails_run for c in judged)
+    if failing:
+        return f"FAILED: {failing} of {len(judged)}"
+    skipped = sum(c.outcome is Outcome.SKIPPED for c in judged)
+    if skipped:
+        return f"{len(judged) - skipped} passed, {skipped} skipped"
+    return f"all {len(judged)} passed"
+
+
+def checks_text(judged: Sequence[CheckResult]) -> str:
+    """Markdown: each check's verdict, its name and its figure next to its limit (the JSON
+    report's ``checks``: ``outcome``, ``name``, ``shown``), under the run's verdict."""
+    lines = [f"## Checks: {checks_summary(judged)}", ""]
+    # "*", not "-": a list with another marker is another list, and the description's list
+    # follows this one (in markdown a blank line alone would join the two).
+    lines += [f"* **{VERDICT_WORDS[c.outcome]}** {c.name}: {c.shown}" for c in judged]
+    return "\n".join(lines)
+
+
+def describe(spec: ScenarioSpec, seed: int, judged: Sequence[CheckResult] | None = None) -> str:
+    """Markdown shown beside the recording: what the scenario is, teaches, and what is drawn;
+    with ``judged`` (the run's checks, known when the recording is finished) each verdict
+    under the lesson."""
     cam = spec.scene.camera
     lines = [f"# {spec.name}", "", spec.description, ""]
     if spec.lesson:
         lines += [spec.lesson.strip(), ""]
+    if judged is not None:
+        lines += [checks_text(judged), ""]
     estimates = ", ".join(
         f"**{m.name}** ({m.color_name}{': ' + m.depth_from if m.bound is None else ''})"
         for m in METHODS
@@ -611,7 +748,23 @@ def describe(spec: ScenarioSpec, seed: int) -> str:
         "",
         _describe_timing(spec),
     ]
+    if spec.checks_calibration:
+        lines += ["", _describe_mounts()]
     return "\n".join(lines)
+
+
+def _describe_mounts() -> str:
+    """One paragraph on what a calibrated run draws of the camera mounts."""
+    declared_m = MOUNT_AXIS_LENGTH_M[FRAME.CAMERA_DECLARED]
+    recovered_m = MOUNT_AXIS_LENGTH_M[FRAME.CAMERA_RECOVERED]
+    return (
+        "Camera mounts (the close-up beside the world): the true camera's axes (red, green, "
+        f"blue, {AXIS_LENGTH_M[FRAME.CAMERA]:g} m), the mount the estimator was told "
+        f"(**yellow**, {declared_m:g} m: its tips show how far it is off) and the one "
+        f"calibration recovered from the flight (**cyan**, {recovered_m:g} m and thinner: "
+        "where it lies on the true axes only its ends show). The state panel gives the three "
+        "T_b_c side by side, each one's error against the true mount, and the clock offset."
+    )
 
 
 def _describe_timing(spec: ScenarioSpec) -> str:

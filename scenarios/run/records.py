@@ -242,6 +242,7 @@ class CalibrationRecord:
     Attributes
     ----------
     T_b_c : ndarray, shape (4, 4), or None
+        The recovered mount (camera in body).
     time_offset_s : float or None
     reprojection_rms_px : float or None
     frames_used : int
@@ -250,6 +251,9 @@ class CalibrationRecord:
         true mount and clock offset (empty when refused).
     refused : str or None
         ``vnav.calibration.CalibrationError``'s message when the flight did not determine them.
+    T_b_c_declared, T_b_c_true : ndarray, shape (4, 4), or None
+        The mount the estimator was told (calibration's first guess) and the simulator's, which
+        the errors are against; kept so that the three can be shown side by side.
     """
 
     T_b_c: np.ndarray | None
@@ -258,6 +262,8 @@ class CalibrationRecord:
     frames_used: int
     errors: dict[str, float]
     refused: str | None = None
+    T_b_c_declared: np.ndarray | None = None
+    T_b_c_true: np.ndarray | None = None
 
 
 @dataclass
@@ -270,8 +276,10 @@ class RunResult:
     seed : int
     ticks : list of TickRecord
     timing_s : dict of str to float
-        Seconds spent per stage (``physics``, ``render``, ``detect``, ``localize``, ``log``,
-        ``setup``); the only figures that depend on the machine.
+        Seconds spent per stage (``physics``, ``streams``, ``render``, ``detect``,
+        ``localize``, ``log``) and once per run (``setup``: the world, the GL context and the
+        recording's start and finish, ``scenarios.run.runner.STAGES``); the only figures that
+        depend on the machine.
     poses : PoseStream or None
         The pose stream the estimator was sent (set when the run ends).
     calibration : CalibrationRecord or None

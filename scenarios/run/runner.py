@@ -10,6 +10,9 @@ One camera tick of ``run_scenario``::
     evaluate estimates per method, matched and compared with the truth  <- scenarios.run.evaluate
     observe  the tick's record and images go to the observer (the recording, if any)
 
+The observer is started before the first tick and told to ``abort`` if the run fails; it is not
+finished here: its owner (``scenarios.pipeline``) first judges the run, then finishes it with
+the verdicts, so that what is judged is also recorded.
 The estimator is given ``T_w_b_est``: the true pose, plus the scenario's pose noise if any,
 and the camera mount with the scenario's mount error; it is told the noise figures and the
 poses' covariances, and gives each estimate a covariance. Every draw comes from the run's
@@ -57,16 +60,19 @@ __all__ = ["STAGES", "TickObserver", "run_scenario"]
 logger = logging.getLogger(__name__)
 
 STAGES = ("physics", "streams", "render", "detect", "localize", "log")
-"""The per-tick stages timed in ``RunResult.timing_s`` (``setup`` is once per run): ``streams``
-is the sensor streams' and the pose buffers' share (sampling, sending, delivering, looking up)."""
+"""The per-tick stages timed in ``RunResult.timing_s``: ``streams`` is the sensor streams' and
+the pose buffers' share (sampling, sending, delivering, looking up). ``setup`` is once per run:
+here the world, the GL context and the observer's ``start``; ``scenarios.pipeline`` adds the
+observer's finish (the recording's end: its plots, layout and file footer)."""
 
 
 class TickObserver(Protocol):
     """Receives a run as it happens (``scenarios.record.recording.Recording`` is one).
 
     ``start`` before the first tick (with the camera and the drone and cones as meshes built
-    from the MuJoCo model, ``sim.mesh``), ``on_tick`` after each, then ``finish`` with the
-    whole result, or ``abort`` if the run fails.
+    from the MuJoCo model, ``sim.mesh``), ``on_tick`` after each, or ``abort`` if the run
+    fails. The run does not finish its observer: whoever passed it in does, once the run is
+    judged (``scenarios.pipeline.run``), and aborts it if judging fails.
     """
 
     def start(
@@ -74,8 +80,6 @@ class TickObserver(Protocol):
     ) -> None: ...
 
     def on_tick(self, record: TickRecord, rgb: np.ndarray, depth_m: np.ndarray | None) -> None: ...
-
-    def finish(self, result: RunResult) -> None: ...
 
     def abort(self) -> None: ...
 
@@ -96,7 +100,8 @@ def run_scenario(
     seed : int
         Seeds the pose noise (if the scenario has any).
     observer : TickObserver, optional
-        Given every tick's record and images as they are made (e.g. a recording).
+        Given every tick's record and images as they are made (e.g. a recording); started
+        here, aborted here if the run fails, left open otherwise (the caller finishes it).
     progress : callable(done, total), optional
         Called after every camera tick.
     scenes : sim.scene_cache.SceneCache, optional
@@ -131,19 +136,15 @@ def _observe_and_run(
     progress: Callable[[int, int], None] | None,
     setup_start: float,
 ) -> None:
-    """The ticks, between the observer's ``start`` and its ``finish`` (or ``abort``)."""
+    """The ticks, after the observer's ``start`` (its ``abort`` if they fail)."""
     try:
         if observer:
             observer.start(
                 spec, seed, world.camera, scenery(world.model, world.data, len(spec.scene.cones_w))
             )
-        setup_s = time.perf_counter() - setup_start
+        # Building the world, the GL context and the observer's start.
+        result.timing_s["setup"] = time.perf_counter() - setup_start
         _run_ticks(spec, world, renderer, result, observer, progress)
-        finish_start = time.perf_counter()
-        if observer:
-            observer.finish(result)
-        # Building the world, the GL context and the observer's start, and its finish.
-        result.timing_s["setup"] = setup_s + time.perf_counter() - finish_start
     except BaseException:
         if observer:
             observer.abort()

@@ -194,6 +194,13 @@ class ScenarioSpec:
         """Camera ticks of the run: at t = 0, 1 / rate, ... up to ``end_s``."""
         return math.floor(self.end_s * self.camera_rate_hz + 1e-9) + 1
 
+    @property
+    def checks_calibration(self) -> bool:
+        """Whether a check judges the camera's calibration (a ``calibration_*`` kind): the
+        mount and clock offset are then recovered from the run (``scenarios.pipeline``) and
+        the recording shows them."""
+        return any(c.kind.startswith("calibration_") for c in self.checks)
+
 
 # --------------------------------------------------------------------------------------------
 # Parsing: ``scenarios.scenario.schema`` reads and checks each table; here values become typed
