@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from vnav.uncertainty import se3_exp
+from vnav import se3
 
 __all__ = ["mount_error", "noisy_depth", "noisy_rgb"]
 
@@ -95,4 +95,4 @@ def mount_error(std_m: float, std_deg: float, rng: np.random.Generator) -> np.nd
     if std_m == 0.0 and std_deg == 0.0:
         return np.eye(4)
     xi = np.concatenate([rng.normal(0.0, std_m, 3), rng.normal(0.0, math.radians(std_deg), 3)])
-    return se3_exp(xi)
+    return se3.exp(xi)

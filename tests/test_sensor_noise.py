@@ -25,7 +25,6 @@ from vnav.sensor_noise import (
     mount_covariance,
 )
 from vnav.silhouette import SilhouetteView, triangle_fraction
-from vnav.uncertainty import se3_exp, se3_log
 
 N_VIEWS = 150
 
@@ -122,7 +121,7 @@ def test_keypoint_cov_has_the_figures_along_and_across_the_vertical() -> None:
 
 def test_body_pose_covariance_matches_monte_carlo() -> None:
     """The pose stream's noise, drawn as the simulator draws it (position in world axes,
-    attitude ``R_w_b exp(dtheta_b)``), expressed as a left perturbation ``se3_log(T_noisy
+    attitude ``R_w_b exp(dtheta_b)``), expressed as a left perturbation ``se3.log(T_noisy
     T^-1)``: its sample covariance over 20,000 draws against ``body_pose_covariance``, each
     entry within 5 standard errors (a sample covariance's entry has standard error
     ``sqrt((S_ii S_jj + S_ij^2) / n)``)."""
@@ -135,7 +134,7 @@ def test_body_pose_covariance_matches_monte_carlo() -> None:
         noisy = se3.make(
             T[:3, :3] @ so3.exp(rng.normal(0.0, std_a, 3)), T[:3, 3] + rng.normal(0.0, std_p, 3)
         )
-        xis[i] = se3_log(noisy @ se3.invert(T))
+        xis[i] = se3.log(noisy @ se3.invert(T))
     sample = np.cov(xis.T)
     predicted = body_pose_covariance(T, std_p, std_a)
     d = np.diag(predicted)
@@ -144,18 +143,18 @@ def test_body_pose_covariance_matches_monte_carlo() -> None:
 
 
 def test_mount_covariance_is_what_the_simulator_draws() -> None:
-    """``mount_covariance`` against the sample covariance of ``se3_log`` of
+    """``mount_covariance`` against the sample covariance of ``se3.log`` of
     ``sim.noise.mount_error`` draws (5 standard errors per entry)."""
     from sim.noise import mount_error
 
     rng = np.random.default_rng(9)
     n = 20_000
-    xis = np.array([se3_log(mount_error(0.01, 2.0, rng)) for _ in range(n)])
+    xis = np.array([se3.log(mount_error(0.01, 2.0, rng)) for _ in range(n)])
     predicted = mount_covariance(0.01, math.radians(2.0))
     d = np.diag(predicted)
     standard_error = np.sqrt((np.outer(d, d) + predicted**2) / n)
     assert np.all(np.abs(np.cov(xis.T) - predicted) <= 5.0 * standard_error)
-    np.testing.assert_array_equal(se3_exp(np.zeros(6)), mount_error(0.0, 0.0, rng))
+    np.testing.assert_array_equal(se3.exp(np.zeros(6)), mount_error(0.0, 0.0, rng))
 
 
 @pytest.mark.parametrize(

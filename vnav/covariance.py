@@ -31,7 +31,7 @@ from vnav.cone import ConeModel
 from vnav.estimators import _solve_known_height
 from vnav.sensor_noise import SensorNoise, keypoint_cov
 from vnav.silhouette import SilhouetteView, triangle_fraction
-from vnav.uncertainty import _point_from_ground, _point_jacobian
+from vnav.uncertainty import point_from_ground_unchecked, point_jacobian
 
 __all__ = [
     "DEPTH_FIT_FLOOR",
@@ -107,7 +107,7 @@ def ground_plane_cov(
     vertical = view.vertical_at_blob()
     bottom = view.bottom(cone)
     down = vertical[0] if vertical is not None else np.array([0.0, 1.0])
-    _, cov = _point_from_ground(
+    _, cov = point_from_ground_unchecked(
         camera,
         T_w_c,
         float(bottom[0]),
@@ -289,7 +289,7 @@ def depth_image_cov(
         var_h = s_z * s_z / max(n_points, 1)
     # The fit's world covariance, then the pose as transform_point adds it, with the point's
     # own covariance already in world axes.
-    G = _point_jacobian((px, py, pz))
+    G = point_jacobian((px, py, pz))
     fit = np.array([[f2 + var_h, 0.0, 0.0], [0.0, f2 + var_h, 0.0], [0.0, 0.0, f2 + var_z]])
     return fit + G @ cov_T_w_c @ G.T
 
@@ -303,5 +303,5 @@ def naive_cov(
     """Covariance of the naive estimate ``t_w_b + p_c``, (3, 3), m^2: the body position's
     (``[I, -t^]`` of the left perturbation) plus the best estimate's, turned into camera
     axes. Reported for completeness: the naive estimate's error is its mistake, not noise."""
-    G = _point_jacobian(T_w_b[:3, 3].tolist())  # the body origin through the body pose
+    G = point_jacobian(T_w_b[:3, 3].tolist())  # the body origin through the body pose
     return G @ cov_T_w_b @ G.T + R_c_w @ cov_best_w @ R_c_w.T

@@ -27,7 +27,7 @@ from vnav.estimators import (
 from vnav.methods import METHOD_NAMES, PREFERENCE
 from vnav.sensor_noise import NOISELESS, SensorNoise
 from vnav.silhouette import SilhouetteView
-from vnav.uncertainty import _compose_cov2, check_covariance
+from vnav.uncertainty import check_covariance, compose_covariance
 
 _ZERO_6 = np.zeros((6, 6))
 _ZERO_6.flags.writeable = False
@@ -216,7 +216,7 @@ def localize(
         T_w_b=T_w_b,
         cov_T_w_b=cov_T_w_b,
         T_w_c=T_w_c,
-        cov_T_w_c=_compose_cov2(T_w_b, cov_T_w_b, cov_T_b_c) if cov_T_b_c.any() else cov_T_w_b,
+        cov_T_w_c=compose_covariance(T_w_b, cov_T_w_b, cov_T_b_c) if cov_T_b_c.any() else cov_T_w_b,
         n_depth_points=detection.area_px // 2,
         noise=noise,
         cone=cone,

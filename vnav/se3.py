@@ -5,6 +5,11 @@ b-coordinates into a, ``p_a = R_a_b @ p_b + t_a_b`` (``apply``). Composition is 
 the inner letters cancel, ``T_a_c = T_a_b @ T_b_c``; the inverse has the closed form
 ``T_b_a = [[R^T, -R^T t], [0, 1]]`` (``invert``). Arrays are the interchange format: (4, 4)
 float64, or (..., 4, 4) stacks where a function says so. Conventions: docs/CONVENTIONS.md.
+
+The exponential map and its inverse, ``exp`` and ``log``, and the adjoint ``adjoint`` follow
+Barfoot & Furgale, "Associating uncertainty with three-dimensional poses for use in estimation
+problems", IEEE T-RO 30(3), 2014 (here "B&F"): ``xi = [rho, phi]``, translation first, and
+``xi^ = [[phi^, rho], [0, 0]]``.
 """
 
 from __future__ import annotations
@@ -18,7 +23,16 @@ from vnav import _validate as _v
 from vnav import so3
 from vnav._validate import FloatArray
 
-__all__ = ["apply", "check_pose", "check_transform", "invert", "make"]
+__all__ = [
+    "adjoint",
+    "apply",
+    "check_pose",
+    "check_transform",
+    "exp",
+    "invert",
+    "log",
+    "make",
+]
 
 _BOTTOM = np.array([0.0, 0.0, 0.0, 1.0])
 # `_apply_blas` adds the translation to blocks of this many points at once: broadcasting a
@@ -31,6 +45,8 @@ _CHUNK = 16384
 # Rows per call of cv2.transform (its row count is a C int).
 _CV2_ROWS = 1 << 24
 _DBL_EPSILON = float(np.finfo(np.float64).eps)
+_SMALL_ANGLE = 1e-6
+"""Below this rotation angle (rad) the left Jacobian and its inverse use their Taylor series."""
 
 
 def make(R: ArrayLike, t: ArrayLike) -> FloatArray:
@@ -290,3 +306,120 @@ def check_pose(T: ArrayLike, name: str = "T") -> FloatArray:
     if T.shape != (4, 4):
         raise ValueError(f"{name} must be a single 4x4 transform, got shape {T.shape}")
     return T
+
+
+# ---------------------------------------------------------------- exponential map (B&F)
+
+
+def exp(xi: ArrayLike) -> FloatArray:
+    """The exponential map of se(3): ``exp(xi^) = [[C, J rho], [0, 1]]`` (B&F eq. 7).
+
+    ``C = so3.exp(phi)`` is Rodrigues' formula (lecture chapter 5) and ``J`` the left Jacobian
+    of SO(3) (B&F eq. 8), so the result is a transform as lecture chapter 7 writes it. A pose
+    with covariance is ``exp(xi^) @ T_mean`` (docs/CONVENTIONS.md, "Uncertainty").
+
+    Parameters
+    ----------
+    xi : array_like, shape (6,)
+        ``[rho, phi]``: ``rho`` the translation part, metres; ``phi`` the rotation vector,
+        radians (any angle).
+
+    Returns
+    -------
+    T : ndarray, shape (4, 4)
+
+    Raises
+    ------
+    ValueError
+        If ``xi`` is not of shape (6,) or holds NaN or inf.
+    """
+    xi = _v.vector(xi, "xi", 6, batched=False)
+    T = np.eye(4)
+    T[:3, :3] = so3.exp(xi[3:])
+    T[:3, 3] = _left_jacobian(xi[3:]) @ xi[:3]
+    return T
+
+
+def log(T: ArrayLike) -> FloatArray:
+    """The inverse of ``exp``: ``xi = [J(phi)^-1 t, phi]`` with ``phi = so3.log(C)``.
+
+    The rotation vector comes from ``so3.log`` (angle in [0, pi], accurate at 0 and pi); the
+    translation part inverts ``t = J(phi) rho`` (B&F eq. 7) with ``J^-1`` in closed form
+    (Barfoot, "State Estimation for Robotics", 2017, sec. 7.1.5). ``exp(log(T)) == T`` to
+    rounding.
+
+    Parameters
+    ----------
+    T : array_like, shape (4, 4)
+        A rigid transform.
+
+    Returns
+    -------
+    xi : ndarray, shape (6,)
+        ``[rho, phi]``, the rotation angle ``|phi|`` in [0, pi].
+
+    Raises
+    ------
+    ValueError
+        If ``T`` is not one rigid transform (see ``check_pose``).
+    """
+    T = check_pose(T, "T")
+    phi = so3.log(T[:3, :3])
+    return np.concatenate([_left_jacobian_inverse(phi) @ T[:3, 3], phi])
+
+
+def adjoint(T: ArrayLike) -> FloatArray:
+    """The adjoint of a transform, ``Ad(T) = [[C, t^ C], [0, C]]`` (B&F eq. 12).
+
+    It moves a perturbation across the pose: ``T exp(xi^) = exp((Ad(T) xi)^) T``, so a left
+    perturbation ``xi`` of ``T_b_c`` becomes ``Ad(T_a_b) xi`` on ``T_a_c = T_a_b @ T_b_c``.
+
+    Parameters
+    ----------
+    T : array_like, shape (4, 4)
+        A rigid transform ``[[C, t], [0, 1]]``.
+
+    Returns
+    -------
+    Ad : ndarray, shape (6, 6)
+        Acting on ``xi = [rho, phi]``.
+
+    Raises
+    ------
+    ValueError
+        If ``T`` is not one rigid transform (see ``check_pose``).
+    """
+    T = check_pose(T, "T")
+    C, t = T[:3, :3], T[:3, 3]
+    out = np.zeros((6, 6))
+    out[:3, :3] = C
+    out[3:, 3:] = C
+    out[:3, 3:] = so3.skew(t) @ C
+    return out
+
+
+def _left_jacobian(phi: FloatArray) -> FloatArray:
+    """SO(3)'s left Jacobian, (3, 3) (B&F eq. 8): ``I + (1 - cos t) / t^2 phi^ + (t - sin t) /
+    t^3 phi^2`` with ``t = |phi|``; its series to second order below ``_SMALL_ANGLE``."""
+    theta = float(np.linalg.norm(phi))
+    S = so3.skew(phi)
+    if theta < _SMALL_ANGLE:
+        return np.eye(3) + 0.5 * S + S @ S / 6.0
+    t2 = theta * theta
+    return (
+        np.eye(3)
+        + (1.0 - math.cos(theta)) / t2 * S
+        + (theta - math.sin(theta)) / (t2 * theta) * (S @ S)
+    )
+
+
+def _left_jacobian_inverse(phi: FloatArray) -> FloatArray:
+    """``J(phi)^-1`` in closed form, (3, 3) (Barfoot, "State Estimation for Robotics", 2017,
+    sec. 7.1.5): ``I - phi^ / 2 + (1 - (t / 2) cot(t / 2)) / t^2 phi^2``; finite for
+    ``t = |phi|`` in [0, pi], as ``so3.log`` returns it."""
+    theta = float(np.linalg.norm(phi))
+    S = so3.skew(phi)
+    if theta < _SMALL_ANGLE:
+        return np.eye(3) - 0.5 * S + S @ S / 12.0
+    half = 0.5 * theta
+    return np.eye(3) - 0.5 * S + (1.0 - half / math.tan(half)) / (theta * theta) * (S @ S)

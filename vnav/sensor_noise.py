@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vnav.uncertainty import adjoint
+from vnav import se3
 
 __all__ = [
     "KEYPOINT_STD_PX",
@@ -172,7 +172,7 @@ def body_pose_covariance(
     ndarray, shape (6, 6)
     """
     eta = np.diag([position_std_m**2] * 3 + [attitude_std_rad**2] * 3)
-    Ad = adjoint(T_w_b)
+    Ad = se3.adjoint(T_w_b)
     return Ad @ eta @ Ad.T
 
 
