@@ -23,7 +23,7 @@ from vnav.covariance import (
     ground_plane_cov,
     naive_cov,
 )
-from vnav.estimators import _known_height, _solve_known_height
+from vnav.estimators import known_height_from_view, solve_known_height
 from vnav.localize import localize
 from vnav.sensor_noise import NOISELESS, SensorNoise, body_pose_covariance, keypoint_cov
 from vnav.silhouette import SilhouetteView, triangle_fraction
@@ -61,7 +61,7 @@ def test_known_height_jacobian_matches_central_differences(view) -> None:
     world, det = view["world"], view["detection"]
     cam, T_w_c = world.camera, world.T_w_c
     sv = SilhouetteView(det, cam, T_w_c)
-    assert not isinstance(_known_height(sv, TRAFFIC_CONE), type(None))
+    assert not isinstance(known_height_from_view(sv, TRAFFIC_CONE), type(None))
     d, elevation = sv.vertical_at_blob()
     apex = sv.apex(d, triangle_fraction(elevation, TRAFFIC_CONE))
     bottom = sv.axis_exit(d, apex)
@@ -71,7 +71,7 @@ def test_known_height_jacobian_matches_central_differences(view) -> None:
         moved = SilhouetteView(det, cam, se3.exp(x[4:]) @ T_w_c)
         a = moved.ray(apex[0] + x[0], apex[1] + x[1])
         g = moved.ray(bottom[0] + x[2], bottom[1] + x[3])
-        solution = _solve_known_height(
+        solution = solve_known_height(
             moved.t, a, g, TRAFFIC_CONE.height_m, TRAFFIC_CONE.base_axis_distance_m
         )
         assert solution is not None

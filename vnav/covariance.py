@@ -28,7 +28,7 @@ import numpy as np
 
 from vnav.camera import PinholeCamera
 from vnav.cone import ConeModel
-from vnav.estimators import _solve_known_height
+from vnav.estimators import solve_known_height
 from vnav.sensor_noise import SensorNoise, keypoint_cov
 from vnav.silhouette import SilhouetteView, triangle_fraction
 from vnav.uncertainty import point_from_ground_unchecked, point_jacobian
@@ -160,7 +160,7 @@ def _known_height_jacobian(
     bottom: np.ndarray,
     cone: ConeModel,
 ) -> np.ndarray:
-    """``d p_w / d[apex (u, v), bottom (u, v), rho, phi]`` of ``_solve_known_height``, (3, 10).
+    """``d p_w / d[apex (u, v), bottom (u, v), rho, phi]`` of ``solve_known_height``, (3, 10).
 
     The solve is the least-squares ``A x = r`` with ``A = [a, -g]``, ``x = (alpha, gamma)``,
     ``r = (0, 0, H) + s b`` and ``p = c + gamma g + s b``, ``b`` the horizontal unit of ``g``.
@@ -190,7 +190,7 @@ def _known_height_jacobian(
     c = view.t
     a_t = view.ray(float(apex[0]), float(apex[1]))
     g_t = view.ray(float(bottom[0]), float(bottom[1]))
-    solution = _solve_known_height(c, a_t, g_t, H, s)
+    solution = solve_known_height(c, a_t, g_t, H, s)
     assert solution is not None  # the estimator solved these same rays
     _, alpha, gamma, _ = solution
     # In plain floats: some 200 operations, where numpy would pay its per-call cost on ~30

@@ -18,10 +18,10 @@ from vnav.cone import TRAFFIC_CONE, ConeModel
 from vnav.detect import ConeDetection, check_detection
 from vnav.estimators import (
     NoEstimate,
-    _from_depth,
-    _ground_plane,
-    _known_height,
+    depth_image_from_view,
     depth_under_mask,
+    ground_plane_from_view,
+    known_height_from_view,
     naive,
 )
 from vnav.methods import METHOD_NAMES, PREFERENCE
@@ -191,10 +191,13 @@ def localize(
     if detection.touches_border:
         return ConeEstimates({}, dict.fromkeys(METHOD_NAMES, NoEstimate.BORDER))
     view = SilhouetteView(detection, camera, T_w_c)
+    from_depth = (
+        NoEstimate.NO_DEPTH if z_c is None else depth_image_from_view(view, z_c, cone, far_m)
+    )
     found = {
-        "depth_image": NoEstimate.NO_DEPTH if z_c is None else _from_depth(view, z_c, cone, far_m),
-        "ground_plane": _ground_plane(view, cone),
-        "known_height": _known_height(view, cone),
+        "depth_image": from_depth,
+        "ground_plane": ground_plane_from_view(view, cone),
+        "known_height": known_height_from_view(view, cone),
         # Several images' work (vnav.tracking): scenarios.evaluate fills it in.
         "triangulated": NoEstimate.ONE_IMAGE,
     }
