@@ -19,11 +19,12 @@ from helpers import (
     rotvecs,
     transforms,
     translations,
+    unit_quaternions,
 )
 from hypothesis import given
 from hypothesis import strategies as st
 
-from vnav import se3, so3
+from vnav import quat, se3, so3
 
 SETTINGS = PROPERTY_SETTINGS
 R_OK = so3.rot_z(0.3)
@@ -212,6 +213,49 @@ def test_adjoint_is_a_group_homomorphism(rng):
     np.testing.assert_array_equal(Ad[3:, 3:], C)
     np.testing.assert_array_equal(Ad[3:, :3], np.zeros((3, 3)))
     np.testing.assert_allclose(Ad[:3, 3:], np.cross(t, C, axis=0), rtol=0, atol=1e-14)
+
+
+# ------------------------------------------ seven components: quaternion xyzw, translation
+
+
+def _matrix_of(x: tuple) -> np.ndarray:
+    """The 4x4 transform of components ``(qx, qy, qz, qw, x, y, z)`` (one pose)."""
+    return se3.make(quat.to_matrix(np.array(x[:4])), np.array(x[4:]))
+
+
+@SETTINGS
+@given(unit_quaternions(), translations, unit_quaternions(), translations)
+def test_compose_and_invert_xyzw_xyz_are_the_matrix_product_and_inverse(q_a, t_a, q_b, t_b):
+    """On plain floats (one pose, as ``FrameBuffer``'s single lookups call them): the product
+    and the closed-form inverse of the 4x4 matrices, quaternions of either sign."""
+    x_a = tuple(float(c) for c in (*q_a, *t_a))
+    x_b = tuple(float(c) for c in (*q_b, *t_b))
+    x_ab = se3.compose_xyzw_xyz(x_a, x_b)
+    assert len(x_ab) == 7 and all(type(c) is float for c in x_ab)
+    T_a, T_b = _matrix_of(x_a), _matrix_of(x_b)
+    np.testing.assert_allclose(_matrix_of(x_ab), T_a @ T_b, rtol=0, atol=1e-12)
+    x_inv = se3.invert_xyzw_xyz(x_a)
+    np.testing.assert_allclose(_matrix_of(x_inv), se3.invert(T_a), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(
+        _matrix_of(se3.compose_xyzw_xyz(x_inv, x_a)), np.eye(4), rtol=0, atol=1e-12
+    )
+
+
+def test_compose_and_invert_xyzw_xyz_on_columns_are_the_same_arithmetic(rng):
+    """(N,) columns give, pose by pose, exactly what plain floats give: one formula serves a
+    single lookup and a vectorised one."""
+    n = 64
+    q_a, q_b = quat.from_matrix(so3.exp(rotation_vectors(rng, 2 * n))).reshape(2, n, 4)
+    t_a, t_b = rng.uniform(-10.0, 10.0, (2, n, 3))
+    cols_a = tuple(np.concatenate([q_a, t_a], axis=1).T)
+    cols_b = tuple(np.concatenate([q_b, t_b], axis=1).T)
+    composed = np.array(se3.compose_xyzw_xyz(cols_a, cols_b))
+    inverted = np.array(se3.invert_xyzw_xyz(cols_a))
+    for i in range(n):
+        one_a = tuple(float(c[i]) for c in cols_a)
+        one_b = tuple(float(c[i]) for c in cols_b)
+        assert composed[:, i].tolist() == list(se3.compose_xyzw_xyz(one_a, one_b))
+        assert inverted[:, i].tolist() == list(se3.invert_xyzw_xyz(one_a))
 
 
 # ------------------------------------------------------------------------------- bad input

@@ -10,6 +10,10 @@ The exponential map and its inverse, ``exp`` and ``log``, and the adjoint ``adjo
 Barfoot & Furgale, "Associating uncertainty with three-dimensional poses for use in estimation
 problems", IEEE T-RO 30(3), 2014 (here "B&F"): ``xi = [rho, phi]``, translation first, and
 ``xi^ = [[phi^, rho], [0, 0]]``.
+
+``compose_xyzw_xyz`` and ``invert_xyzw_xyz`` are the group's product and inverse on a pose's
+seven components, a unit quaternion ``[x, y, z, w]`` then the translation: the kernels of
+``vnav.frames.FrameBuffer``'s lookups.
 """
 
 from __future__ import annotations
@@ -28,8 +32,10 @@ __all__ = [
     "apply",
     "check_pose",
     "check_transform",
+    "compose_xyzw_xyz",
     "exp",
     "invert",
+    "invert_xyzw_xyz",
     "log",
     "make",
 ]
@@ -423,3 +429,90 @@ def _left_jacobian_inverse(phi: FloatArray) -> FloatArray:
         return np.eye(3) - 0.5 * S + S @ S / 12.0
     half = 0.5 * theta
     return np.eye(3) - 0.5 * S + (1.0 - half / math.tan(half)) / (theta * theta) * (S @ S)
+
+
+# ------------------------------------------------ seven components: quaternion, translation
+
+# A pose as its components ``(qx, qy, qz, qw, x, y, z)``: the unit quaternion scalar last
+# (docs/CONVENTIONS.md, "Quaternions"), then the translation, metres (jaxlie's ``wxyz_xyz``
+# layout with vnav's quaternion order). Each component is a float, or an (N,) array for N
+# poses at once: the same arithmetic serves one pose (plain Python, no numpy call) and many
+# (numpy columns, not (N, 4, 4) stacks).
+_Component = float | FloatArray
+XyzwXyz = tuple[_Component, ...]
+
+
+def _rotate(
+    qx: _Component,
+    qy: _Component,
+    qz: _Component,
+    qw: _Component,
+    vx: _Component,
+    vy: _Component,
+    vz: _Component,
+) -> tuple[_Component, _Component, _Component]:
+    """``R(q) v`` as ``v + w t + u x t`` with ``t = 2 u x v``, ``u`` the vector part of ``q``:
+    ``q v q*`` expanded for a unit quaternion (lecture chapter 6's ``R(q)`` applied to ``v``)."""
+    tx = 2.0 * (qy * vz - qz * vy)
+    ty = 2.0 * (qz * vx - qx * vz)
+    tz = 2.0 * (qx * vy - qy * vx)
+    return (
+        vx + qw * tx + (qy * tz - qz * ty),
+        vy + qw * ty + (qz * tx - qx * tz),
+        vz + qw * tz + (qx * ty - qy * tx),
+    )
+
+
+def compose_xyzw_xyz(a: XyzwXyz, b: XyzwXyz) -> XyzwXyz:
+    """``T_a @ T_b`` of two poses given as components ``(qx, qy, qz, qw, x, y, z)``.
+
+    The rotation is the Hamilton product ``q_a q_b`` (lecture chapter 6, as ``quat.multiply``),
+    the translation ``t_a + R(q_a) t_b`` (lecture chapter 7): as 4x4 matrices, the result is
+    ``T_a @ T_b`` to rounding, and the inner letters cancel as there
+    (``compose_xyzw_xyz(x_w_b, x_b_c)`` is ``x_w_c``).
+
+    No check of any kind: this is ``vnav.frames.FrameBuffer``'s inner loop (several calls per
+    lookup, a few microseconds each), where a check would cost more than the arithmetic. The
+    caller passes unit quaternions.
+
+    Parameters
+    ----------
+    a, b : tuple of 7 floats, or of 7 arrays of shape (N,)
+        ``(qx, qy, qz, qw, x, y, z)``; arrays broadcast against each other and against floats.
+
+    Returns
+    -------
+    tuple of 7 floats, or of 7 arrays of shape (N,)
+        The composed pose's components, in the same order.
+    """
+    ax, ay, az, aw, apx, apy, apz = a
+    bx, by, bz, bw, bpx, bpy, bpz = b
+    px, py, pz = _rotate(ax, ay, az, aw, bpx, bpy, bpz)
+    return (
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
+        aw * bw - ax * bx - ay * by - az * bz,
+        apx + px,
+        apy + py,
+        apz + pz,
+    )
+
+
+def invert_xyzw_xyz(a: XyzwXyz) -> XyzwXyz:
+    """``T^-1`` of a pose given as components ``(qx, qy, qz, qw, x, y, z)``.
+
+    The conjugate quaternion (lecture chapter 6) and ``-R^T t`` (lecture chapter 7, as
+    ``invert``). Unchecked, as ``compose_xyzw_xyz``: the caller passes a unit quaternion.
+
+    Parameters
+    ----------
+    a : tuple of 7 floats, or of 7 arrays of shape (N,)
+
+    Returns
+    -------
+    tuple of 7 floats, or of 7 arrays of shape (N,)
+    """
+    qx, qy, qz, qw, px, py, pz = a
+    ix, iy, iz = _rotate(-qx, -qy, -qz, qw, px, py, pz)
+    return (-qx, -qy, -qz, qw, -ix, -iy, -iz)
