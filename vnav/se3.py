@@ -338,6 +338,13 @@ def exp(xi: ArrayLike) -> FloatArray:
     ------
     ValueError
         If ``xi`` is not of shape (6,) or holds NaN or inf.
+
+    Notes
+    -----
+    Below ``|phi| = 1e-6`` rad ``J`` is its series; above, ``(1 - cos t) / t^2`` loses about
+    ``eps / t^2`` to cancellation, so the translation is exact to about ``eps |rho| / |phi|``
+    (2e-10 ``|rho|`` just above the branch, 2e-12 ``|rho|`` at 1e-4 rad; tests/test_se3.py
+    holds it to that bound against the matrix exponential).
     """
     xi = _v.vector(xi, "xi", 6, batched=False)
     T = np.eye(4)
@@ -463,13 +470,12 @@ def _rotate(
     )
 
 
-def compose_xyzw_xyz(a: XyzwXyz, b: XyzwXyz) -> XyzwXyz:
-    """``T_a @ T_b`` of two poses given as components ``(qx, qy, qz, qw, x, y, z)``.
+def compose_xyzw_xyz(pose_a_b: XyzwXyz, pose_b_c: XyzwXyz) -> XyzwXyz:
+    """``T_a_c = T_a_b @ T_b_c`` of two poses given as components ``(qx, qy, qz, qw, x, y, z)``.
 
-    The rotation is the Hamilton product ``q_a q_b`` (lecture chapter 6, as ``quat.multiply``),
-    the translation ``t_a + R(q_a) t_b`` (lecture chapter 7): as 4x4 matrices, the result is
-    ``T_a @ T_b`` to rounding, and the inner letters cancel as there
-    (``compose_xyzw_xyz(x_w_b, x_b_c)`` is ``x_w_c``).
+    The rotation is the Hamilton product ``q_a_b q_b_c`` (lecture chapter 6, as
+    ``quat.multiply``), the translation ``t_a_b + R(q_a_b) t_b_c`` (lecture chapter 7): as 4x4
+    matrices, the result is ``T_a_b @ T_b_c`` to rounding, the inner letters cancelling.
 
     No check of any kind: this is ``vnav.frames.FrameBuffer``'s inner loop (several calls per
     lookup, a few microseconds each), where a check would cost more than the arithmetic. The
@@ -477,16 +483,17 @@ def compose_xyzw_xyz(a: XyzwXyz, b: XyzwXyz) -> XyzwXyz:
 
     Parameters
     ----------
-    a, b : tuple of 7 floats, or of 7 arrays of shape (N,)
-        ``(qx, qy, qz, qw, x, y, z)``; arrays broadcast against each other and against floats.
+    pose_a_b, pose_b_c : tuple of 7 floats, or of 7 arrays of shape (N,)
+        ``(qx, qy, qz, qw, x, y, z)``, translations in metres; arrays broadcast against each
+        other and against floats.
 
     Returns
     -------
-    tuple of 7 floats, or of 7 arrays of shape (N,)
-        The composed pose's components, in the same order.
+    pose_a_c : tuple of 7 floats, or of 7 arrays of shape (N,)
+        In the same order.
     """
-    ax, ay, az, aw, apx, apy, apz = a
-    bx, by, bz, bw, bpx, bpy, bpz = b
+    ax, ay, az, aw, apx, apy, apz = pose_a_b
+    bx, by, bz, bw, bpx, bpy, bpz = pose_b_c
     px, py, pz = _rotate(ax, ay, az, aw, bpx, bpy, bpz)
     return (
         aw * bx + ax * bw + ay * bz - az * by,
@@ -499,20 +506,22 @@ def compose_xyzw_xyz(a: XyzwXyz, b: XyzwXyz) -> XyzwXyz:
     )
 
 
-def invert_xyzw_xyz(a: XyzwXyz) -> XyzwXyz:
-    """``T^-1`` of a pose given as components ``(qx, qy, qz, qw, x, y, z)``.
+def invert_xyzw_xyz(pose_a_b: XyzwXyz) -> XyzwXyz:
+    """``T_b_a = T_a_b^-1`` of a pose given as components ``(qx, qy, qz, qw, x, y, z)``.
 
     The conjugate quaternion (lecture chapter 6) and ``-R^T t`` (lecture chapter 7, as
     ``invert``). Unchecked, as ``compose_xyzw_xyz``: the caller passes a unit quaternion.
 
     Parameters
     ----------
-    a : tuple of 7 floats, or of 7 arrays of shape (N,)
+    pose_a_b : tuple of 7 floats, or of 7 arrays of shape (N,)
+        ``(qx, qy, qz, qw, x, y, z)``, translation in metres.
 
     Returns
     -------
-    tuple of 7 floats, or of 7 arrays of shape (N,)
+    pose_b_a : tuple of 7 floats, or of 7 arrays of shape (N,)
+        In the same order.
     """
-    qx, qy, qz, qw, px, py, pz = a
+    qx, qy, qz, qw, px, py, pz = pose_a_b
     ix, iy, iz = _rotate(-qx, -qy, -qz, qw, px, py, pz)
     return (-qx, -qy, -qz, qw, -ix, -iy, -iz)
