@@ -13,7 +13,6 @@ import numpy as np
 
 from vnav import se3, so3
 from vnav.noise_model import NoiseModel
-from vnav.uncertainty import se3_exp
 
 __all__ = ["mount_error", "noisy_depth", "noisy_pose", "noisy_rgb"]
 
@@ -109,4 +108,4 @@ def mount_error(noise: NoiseModel, rng: np.random.Generator) -> np.ndarray:
     xi = np.concatenate(
         [rng.normal(0.0, noise.extrinsic_std_m, 3), rng.normal(0.0, noise.extrinsic_std_rad, 3)]
     )
-    return se3_exp(xi)
+    return se3.exp(xi)

@@ -14,6 +14,7 @@ import pytest
 from helpers import render_one
 
 from sim.noise import noisy_depth
+from vnav import se3
 from vnav.cone import TRAFFIC_CONE
 from vnav.covariance import (
     DEPTH_FIT_FLOOR,
@@ -22,12 +23,12 @@ from vnav.covariance import (
     ground_plane_cov,
     naive_cov,
 )
-from vnav.estimators import _solve_known_height, known_height_on_view
+from vnav.estimators import known_height_from_view, solve_known_height
 from vnav.localize import localize
 from vnav.noise_model import NOISELESS, NoiseModel
 from vnav.sensor_noise import body_pose_covariance, keypoint_cov
 from vnav.silhouette import SilhouetteView, triangle_fraction
-from vnav.uncertainty import point_from_ground, se3_exp, transform_point
+from vnav.uncertainty import point_from_ground, transform_point
 
 VIEWS = [
     # (cone x, y) m, drone height m, camera pitch down deg: near and steep, mid-range, far
@@ -64,17 +65,17 @@ def test_known_height_jacobian_matches_central_differences(view) -> None:
     world, det = view["world"], view["detection"]
     cam, T_w_c = world.camera, world.T_w_c
     sv = SilhouetteView(det, cam, T_w_c)
-    assert not isinstance(known_height_on_view(sv, TRAFFIC_CONE), type(None))
+    assert not isinstance(known_height_from_view(sv, TRAFFIC_CONE), type(None))
     d, elevation = sv.vertical_at_blob()
     apex = sv.apex(d, triangle_fraction(elevation, TRAFFIC_CONE))
     bottom = sv.axis_exit(d, apex)
     J = _known_height_jacobian(sv, cam, T_w_c, apex, bottom, TRAFFIC_CONE)
 
     def p_at(x: np.ndarray) -> np.ndarray:
-        moved = SilhouetteView(det, cam, se3_exp(x[4:]) @ T_w_c)
+        moved = SilhouetteView(det, cam, se3.exp(x[4:]) @ T_w_c)
         a = moved.ray(apex[0] + x[0], apex[1] + x[1])
         g = moved.ray(bottom[0] + x[2], bottom[1] + x[3])
-        solution = _solve_known_height(
+        solution = solve_known_height(
             moved.t, a, g, TRAFFIC_CONE.height_m, TRAFFIC_CONE.base_axis_distance_m
         )
         assert solution is not None
@@ -100,7 +101,7 @@ def _pose_monte_carlo(view: dict) -> tuple[dict, dict, dict]:
     rng = np.random.default_rng(20261124)
     samples: dict[str, list] = {m: [] for m in ("depth_image", "ground_plane", "known_height")}
     for _ in range(N_DRAWS):
-        T_drawn = se3_exp(L @ rng.standard_normal(6)) @ T_w_b
+        T_drawn = se3.exp(L @ rng.standard_normal(6)) @ T_w_b
         e = localize(
             det, cam, T_drawn, T_b_c, frame.depth, far_m=view["far_m"], with_covariance=False
         )

@@ -3,7 +3,7 @@ lecture forms that sit next to them in the library.
 
 The kernels run in plain floats or with hand-written statistics for speed; each is compared
 with its lecture form on random inputs: ``_world_points`` with ``_world_points_reference``,
-``_solve_known_height`` with ``_solve_known_height_reference``, ``_median`` and
+``solve_known_height`` with ``_solve_known_height_reference``, ``_median`` and
 ``_percentile`` with ``np.median`` and ``np.percentile``, and ``_fit_axis`` (Gauss-Newton
 with one outlier trim) with ``scipy.optimize.least_squares`` on the same circle-fit residuals
 (SciPy is a test-only oracle). The accuracy of every method over rendered poses is in
@@ -28,7 +28,6 @@ from vnav.estimators import (
     _fit_axis,
     _median,
     _percentile,
-    _solve_known_height,
     _solve_known_height_reference,
     _world_points,
     _world_points_reference,
@@ -37,6 +36,7 @@ from vnav.estimators import (
     estimate_from_known_height,
     known_height_max_elevation_rad,
     naive_estimate,
+    solve_known_height,
 )
 from vnav.localize import localize
 from vnav.silhouette import SilhouetteView, triangle_fraction
@@ -218,7 +218,7 @@ def test_solve_known_height_matches_lstsq_reference(seed: int) -> None:
             g_w = _unit(g_w + rng.uniform(-0.05, 0.05, 3))
         if np.arccos(np.clip(a_w @ g_w, -1.0, 1.0)) < 1e-2:
             continue  # well-conditioned rays only
-        fast = _solve_known_height(tuple(c_w), tuple(a_w), tuple(g_w), H, s)
+        fast = solve_known_height(tuple(c_w), tuple(a_w), tuple(g_w), H, s)
         reference = _solve_known_height_reference(c_w, a_w, g_w, H, s)
         assert fast is not None
         p_fast, alpha, gamma, residual = fast
@@ -238,9 +238,9 @@ def test_solve_known_height_refuses_degenerate_rays() -> None:
     c_w = (0.0, 0.0, 3.0)
     g_w = tuple(_unit(np.array([5.0, 0.0, -3.0])))
     # Parallel rays (the apex and the edge on one line of sight).
-    assert _solve_known_height(c_w, g_w, g_w, 0.7, 0.2) is None
+    assert solve_known_height(c_w, g_w, g_w, 0.7, 0.2) is None
     # A vertical bottom ray has no horizontal bearing.
-    assert _solve_known_height(c_w, g_w, (0.0, 0.0, -1.0), 0.7, 0.2) is None
+    assert solve_known_height(c_w, g_w, (0.0, 0.0, -1.0), 0.7, 0.2) is None
 
 
 @pytest.mark.parametrize("n", [1, 2, 3, 4, 5, 10, 11, 100, 101, 1000, 1001])

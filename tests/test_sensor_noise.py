@@ -26,7 +26,6 @@ from vnav.sensor_noise import (
     mount_covariance,
 )
 from vnav.silhouette import SilhouetteView, triangle_fraction
-from vnav.uncertainty import se3_exp, se3_log
 
 N_VIEWS = 150
 
@@ -125,14 +124,14 @@ def test_keypoint_cov_has_the_figures_along_and_across_the_vertical() -> None:
 def test_body_pose_covariance_matches_monte_carlo() -> None:
     """The pose stream's noise, drawn by the simulator (``sim.noise.noisy_pose``: position in
     world axes, attitude ``R_w_b exp(dtheta_b)``) from the same ``NoiseModel`` the estimator
-    is told, expressed as a left perturbation ``se3_log(T_noisy T^-1)``: its sample covariance
+    is told, expressed as a left perturbation ``se3.log(T_noisy T^-1)``: its sample covariance
     over 20,000 draws against ``body_pose_covariance``, each entry within 5 standard errors (a
     sample covariance's entry has standard error ``sqrt((S_ii S_jj + S_ij^2) / n)``)."""
     rng = np.random.default_rng(5)
     T = se3.make(so3.from_rpy(0.3, -0.2, 2.0), [4.0, -3.0, 6.0])
     noise = NoiseModel(position_std_m=0.05, attitude_std_deg=2.0)
     n = 20_000
-    xis = np.array([se3_log(noisy_pose(T, noise, rng) @ se3.invert(T)) for _ in range(n)])
+    xis = np.array([se3.log(noisy_pose(T, noise, rng) @ se3.invert(T)) for _ in range(n)])
     sample = np.cov(xis.T)
     predicted = body_pose_covariance(T, noise)
     np.testing.assert_allclose(
@@ -144,13 +143,13 @@ def test_body_pose_covariance_matches_monte_carlo() -> None:
 
 
 def test_mount_covariance_is_what_the_simulator_draws() -> None:
-    """``mount_covariance`` against the sample covariance of ``se3_log`` of
+    """``mount_covariance`` against the sample covariance of ``se3.log`` of
     ``sim.noise.mount_error`` draws from the same ``NoiseModel`` (5 standard errors per
     entry)."""
     rng = np.random.default_rng(9)
     n = 20_000
     noise = NoiseModel(extrinsic_std_m=0.01, extrinsic_std_deg=2.0)
-    xis = np.array([se3_log(mount_error(noise, rng)) for _ in range(n)])
+    xis = np.array([se3.log(mount_error(noise, rng)) for _ in range(n)])
     predicted = mount_covariance(noise)
     np.testing.assert_allclose(
         np.diag(predicted), [0.01**2] * 3 + [math.radians(2.0) ** 2] * 3, rtol=1e-12
@@ -158,7 +157,7 @@ def test_mount_covariance_is_what_the_simulator_draws() -> None:
     d = np.diag(predicted)
     standard_error = np.sqrt((np.outer(d, d) + predicted**2) / n)
     assert np.all(np.abs(np.cov(xis.T) - predicted) <= 5.0 * standard_error)
-    np.testing.assert_array_equal(se3_exp(np.zeros(6)), mount_error(NoiseModel(), rng))
+    np.testing.assert_array_equal(se3.exp(np.zeros(6)), mount_error(NoiseModel(), rng))
 
 
 @pytest.mark.parametrize(

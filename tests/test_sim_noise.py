@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 from sim.noise import mount_error, noisy_depth, noisy_rgb
+from vnav import se3
 from vnav.noise_model import NoiseModel
-from vnav.uncertainty import se3_log
 
 N_SIGMA = 5.0
 """How many standard errors a sample statistic may lie from its expected value."""
@@ -176,14 +176,14 @@ def test_mount_error_is_a_rigid_transform() -> None:
 
 
 def test_mount_error_draws_the_declared_left_perturbation() -> None:
-    """``se3_log(E) = [rho, phi]`` over 4000 draws has mean 0 and the covariance
+    """``se3.log(E) = [rho, phi]`` over 4000 draws has mean 0 and the covariance
     ``diag(std_m^2 I3, std_rad^2 I3)``: variances to ``sqrt(2 / n)`` relative, correlations
     to ``1 / sqrt(n)`` (each at 5 standard errors)."""
     rng = np.random.default_rng(9)
     std_m, std_deg = 0.01, 2.0
     n = 4000
     noise = NoiseModel(extrinsic_std_m=std_m, extrinsic_std_deg=std_deg)
-    xis = np.array([se3_log(mount_error(noise, rng)) for _ in range(n)])
+    xis = np.array([se3.log(mount_error(noise, rng)) for _ in range(n)])
     expected_var = np.array([std_m**2] * 3 + [math.radians(std_deg) ** 2] * 3)
     assert np.all(np.abs(xis.mean(axis=0)) <= N_SIGMA * np.sqrt(expected_var / n))
     cov = np.cov(xis, rowvar=False)

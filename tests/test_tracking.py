@@ -116,7 +116,6 @@ def test_midpoint_covariance_matches_monte_carlo() -> None:
     being about 3%)."""
     from vnav.multiview import _midpoint
     from vnav.tracking import midpoint_covariance
-    from vnav.uncertainty import se3_exp
 
     rng = np.random.default_rng(5)
     apex = APEX_W[0]
@@ -130,7 +129,7 @@ def test_midpoint_covariance_matches_monte_carlo() -> None:
     L = np.linalg.cholesky(cov_T)
     draws = []
     for _ in range(3000):
-        T_b = np.array([se3_exp(L @ rng.standard_normal(6)) @ t for t in T])
+        T_b = np.array([se3.exp(L @ rng.standard_normal(6)) @ t for t in T])
         uv_b = uv + rng.normal(0.0, 0.4, uv.shape)
         rays = np.einsum("nij,nj->ni", T_b[:, :3, :3], CAMERA.rays(uv_b))
         draws.append(_midpoint(T_b[:, :3, 3], rays))

@@ -1,4 +1,4 @@
-"""Private input checks shared by ``so3``, ``quat``, ``se3`` and ``frames``.
+"""Private input checks shared by ``so3``, ``quat``, ``se3``, ``frames`` and ``uncertainty``.
 
 Every public function of the geometry core validates at its edge through these helpers, so the
 error messages read the same everywhere: the argument's name, what was expected, what was

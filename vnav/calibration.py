@@ -36,7 +36,6 @@ from vnav import se3, so3
 from vnav.camera import PinholeCamera
 from vnav.frames import FrameBuffer
 from vnav.multiview import camera_pose_from_apexes
-from vnav.uncertainty import se3_exp, se3_log
 
 logger = logging.getLogger(__name__)
 
@@ -209,7 +208,7 @@ class _Problem:
         return int(np.unique(self.obs_image).size)
 
     def T_b_c(self, x: np.ndarray) -> np.ndarray:
-        return self.T_b_c_guess @ se3_exp(x[:6])
+        return self.T_b_c_guess @ se3.exp(x[:6])
 
     def first_mount(self) -> np.ndarray:
         """``xi`` of the mount from PnP on the images with the most apexes (up to 5): each gives
@@ -225,7 +224,7 @@ class _Problem:
             return np.zeros(6)
         spread = [sum(_distance(a, b) for b in mounts) for a in mounts]
         best = mounts[int(np.argmin(spread))]
-        return se3_log(se3.invert(self.T_b_c_guess) @ best)
+        return se3.log(se3.invert(self.T_b_c_guess) @ best)
 
     def _pnp(self, i: int) -> np.ndarray | None:
         """The camera pose of image ``i`` from its apexes, matched to the map without a prior

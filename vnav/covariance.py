@@ -28,11 +28,11 @@ import numpy as np
 
 from vnav.camera import PinholeCamera
 from vnav.cone import ConeModel
-from vnav.estimators import _solve_known_height
+from vnav.estimators import solve_known_height
 from vnav.noise_model import NoiseModel
 from vnav.sensor_noise import keypoint_cov
 from vnav.silhouette import SilhouetteView, triangle_fraction
-from vnav.uncertainty import _point_from_ground, _point_jacobian
+from vnav.uncertainty import point_from_ground_unchecked, point_jacobian
 
 __all__ = [
     "DEPTH_FIT_FLOOR",
@@ -108,7 +108,7 @@ def ground_plane_cov(
     vertical = view.vertical_at_blob()
     bottom = view.bottom(cone)
     down = vertical[0] if vertical is not None else np.array([0.0, 1.0])
-    _, cov = _point_from_ground(
+    _, cov = point_from_ground_unchecked(
         camera,
         T_w_c,
         float(bottom[0]),
@@ -161,7 +161,7 @@ def _known_height_jacobian(
     bottom: np.ndarray,
     cone: ConeModel,
 ) -> np.ndarray:
-    """``d p_w / d[apex (u, v), bottom (u, v), rho, phi]`` of ``_solve_known_height``, (3, 10).
+    """``d p_w / d[apex (u, v), bottom (u, v), rho, phi]`` of ``solve_known_height``, (3, 10).
 
     The solve is the least-squares ``A x = r`` with ``A = [a, -g]``, ``x = (alpha, gamma)``,
     ``r = (0, 0, H) + s b`` and ``p = c + gamma g + s b``, ``b`` the horizontal unit of ``g``.
@@ -191,7 +191,7 @@ def _known_height_jacobian(
     c = view.t
     a_t = view.ray(float(apex[0]), float(apex[1]))
     g_t = view.ray(float(bottom[0]), float(bottom[1]))
-    solution = _solve_known_height(c, a_t, g_t, H, s)
+    solution = solve_known_height(c, a_t, g_t, H, s)
     assert solution is not None  # the estimator solved these same rays
     _, alpha, gamma, _ = solution
     # In plain floats: some 200 operations, where numpy would pay its per-call cost on ~30
@@ -290,7 +290,7 @@ def depth_image_cov(
         var_h = s_z * s_z / max(n_points, 1)
     # The fit's world covariance, then the pose as transform_point adds it, with the point's
     # own covariance already in world axes.
-    G = _point_jacobian((px, py, pz))
+    G = point_jacobian((px, py, pz))
     fit = np.array([[f2 + var_h, 0.0, 0.0], [0.0, f2 + var_h, 0.0], [0.0, 0.0, f2 + var_z]])
     return fit + G @ cov_T_w_c @ G.T
 
@@ -304,5 +304,5 @@ def naive_cov(
     """Covariance of the naive estimate ``t_w_b + p_c``, (3, 3), m^2: the body position's
     (``[I, -t^]`` of the left perturbation) plus the best estimate's, turned into camera
     axes. Reported for completeness: the naive estimate's error is its mistake, not noise."""
-    G = _point_jacobian(T_w_b[:3, 3].tolist())  # the body origin through the body pose
+    G = point_jacobian(T_w_b[:3, 3].tolist())  # the body origin through the body pose
     return G @ cov_T_w_b @ G.T + R_c_w @ cov_best_w @ R_c_w.T

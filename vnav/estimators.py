@@ -51,16 +51,17 @@ __all__ = [
     "MAX_RANGE_ERROR_PER_PX",
     "MIN_TRIANGLE_FRACTION",
     "NoEstimate",
-    "depth_image_on_view",
+    "depth_image_from_view",
     "depth_under_mask",
     "estimate_from_depth",
     "estimate_from_ground_plane",
     "estimate_from_known_height",
-    "ground_plane_on_view",
+    "ground_plane_from_view",
+    "known_height_from_view",
     "known_height_max_elevation_rad",
-    "known_height_on_view",
     "naive",
     "naive_estimate",
+    "solve_known_height",
 ]
 
 logger = logging.getLogger(__name__)
@@ -210,7 +211,7 @@ def estimate_from_depth(
     view = _view_clear_of_border(detection, camera, T_w_c)
     check_depth_image(depth, camera)
     z_c = depth_under_mask(detection, depth)  # checked finite even when not used
-    return None if view is None else _or_none(depth_image_on_view(view, z_c, cone, far_m))
+    return None if view is None else _or_none(depth_image_from_view(view, z_c, cone, far_m))
 
 
 def _or_none(p_w: np.ndarray | NoEstimate) -> np.ndarray | None:
@@ -244,12 +245,28 @@ def _percentile(a: np.ndarray, q: float) -> float:
     return above - diff * (1.0 - gamma) if gamma >= 0.5 else below + diff * gamma
 
 
-def depth_image_on_view(
+def depth_image_from_view(
     view: SilhouetteView, z_c: np.ndarray, cone: ConeModel, far_m: float
 ) -> np.ndarray | NoEstimate:
-    """``estimate_from_depth`` after validation, on the view of a detection clear of the
-    border; ``z_c`` the depth under the mask (``depth_under_mask``). The reason there is no
-    estimate, instead of None. The ``depth_image`` method's estimate (``vnav.single_image``).
+    """``estimate_from_depth``'s method on a view its caller has validated: the estimate, or
+    why there is none instead of None. ``vnav.localize`` validates a detection once and runs
+    every method on one shared view.
+
+    Parameters
+    ----------
+    view : SilhouetteView
+        Of a detection clear of the image border, from a validated pose ``T_w_c``.
+    z_c : ndarray, shape (area_px,), float64
+        The planar depth under the detection's mask, metres (``depth_under_mask``: finite,
+        in ``view.uv()`` order).
+    cone : ConeModel
+    far_m : float
+        Depths at or beyond this are "no return".
+
+    Returns
+    -------
+    p_w : ndarray, shape (3,), or NoEstimate
+        The base centre in the world, metres, or ``NoEstimate.NO_DEPTH``.
     """
     uv = view.uv()
     u, v = uv[:, 0], uv[:, 1]
@@ -390,13 +407,18 @@ def estimate_from_ground_plane(
         is parallel to the ground or points away from it (``d_z >= -1e-9``).
     """
     view = _view_clear_of_border(detection, camera, T_w_c)
-    return None if view is None else _or_none(ground_plane_on_view(view, cone))
+    return None if view is None else _or_none(ground_plane_from_view(view, cone))
 
 
-def ground_plane_on_view(view: SilhouetteView, cone: ConeModel) -> np.ndarray | NoEstimate:
-    """``estimate_from_ground_plane`` after validation, on the view of a detection clear of the
-    border; the reason there is no estimate, instead of None. The ``ground_plane`` method's
-    estimate (``vnav.single_image``)."""
+def ground_plane_from_view(view: SilhouetteView, cone: ConeModel) -> np.ndarray | NoEstimate:
+    """``estimate_from_ground_plane``'s method on a view its caller has validated (a
+    detection clear of the image border): the estimate, or why there is none instead of None.
+
+    Returns
+    -------
+    p_w : ndarray, shape (3,), or NoEstimate
+        The base centre in the world, metres (z = 0), or ``NoEstimate.GROUND_NOT_HIT``.
+    """
     bottom = view.bottom(cone)
     tx, ty, tz = view.t
     dx, dy, dz = view.ray(float(bottom[0]), float(bottom[1]))
@@ -438,18 +460,39 @@ def known_height_max_elevation_rad(cone: ConeModel = TRAFFIC_CONE) -> float:
 # ------------------------------------------------------------------ known height
 
 
-def _solve_known_height(
+def solve_known_height(
     c_w: tuple[float, float, float],
     a_w: tuple[float, float, float],
     g_w: tuple[float, float, float],
     height_m: float,
     s: float,
 ) -> tuple[tuple[float, float, float], float, float, float] | None:
-    """``(p_w, alpha, gamma, residual)`` of the 3x2 least-squares triangle, or None.
+    """``known_height``'s similar triangles: the 3x2 least-squares system, in plain floats.
 
-    ``[a, -g] (alpha, gamma)^T = (0, 0, H) + s b`` solved by a QR factorisation (Gram-Schmidt
-    on the two columns, as well conditioned as the problem: the rays are at least 1e-4 rad
-    apart), in plain floats.
+    ``[a, -g] (alpha, gamma)^T = (0, 0, H) + s b`` (``b`` the horizontal unit of ``g``) solved
+    by a QR factorisation (Gram-Schmidt on the two columns, as well conditioned as the
+    problem: the rays are at least 1e-4 rad apart); ``p_w = c + gamma g + s b``. Shared with
+    ``vnav.covariance``, whose Jacobian differentiates this solve. Inputs are not checked.
+    Lecture form: ``_solve_known_height_reference`` (``np.linalg.lstsq``).
+
+    Parameters
+    ----------
+    c_w : tuple of 3 floats
+        The camera centre in the world, metres.
+    a_w, g_w : tuple of 3 floats
+        World rays through the apex and the bottom pixel (unit length; only their directions
+        matter to ``p_w``).
+    height_m : float
+        The cone's height ``H``, metres.
+    s : float
+        The distance from the base centre to the plate's near edge along ``b``, metres.
+
+    Returns
+    -------
+    (p_w, alpha, gamma, residual) or None
+        ``p_w`` a tuple of 3 floats, metres; ``alpha``, ``gamma`` the ray lengths to the apex
+        and the edge point; ``residual`` the least-squares residual's norm, metres. None when
+        ``g_w`` is vertical or the two rays are within 1e-4 rad of each other.
     """
     ax, ay, az = a_w
     gx, gy, gz = g_w
@@ -479,7 +522,7 @@ def _solve_known_height(
 def _solve_known_height_reference(
     c_w: np.ndarray, a_w: np.ndarray, g_w: np.ndarray, height_m: float, s: float
 ) -> tuple[np.ndarray, float, float, float]:
-    """Lecture form of ``_solve_known_height``: ``np.linalg.lstsq`` on the 3x2 system."""
+    """Lecture form of ``solve_known_height``: ``np.linalg.lstsq`` on the 3x2 system."""
     b = np.array([g_w[0], g_w[1], 0.0]) / math.hypot(g_w[0], g_w[1])
     A = np.column_stack([a_w, -np.asarray(g_w)])
     rhs = np.array([0.0, 0.0, height_m]) + s * b
@@ -524,13 +567,19 @@ def estimate_from_known_height(
         comes out non-positive or the equations are inconsistent (residual above 25% of H).
     """
     view = _view_clear_of_border(detection, camera, T_w_c)
-    return None if view is None else _or_none(known_height_on_view(view, cone))
+    return None if view is None else _or_none(known_height_from_view(view, cone))
 
 
-def known_height_on_view(view: SilhouetteView, cone: ConeModel) -> np.ndarray | NoEstimate:
-    """``estimate_from_known_height`` after validation, on the view of a detection clear of the
-    border; the reason there is no estimate, instead of None. The ``known_height`` method's
-    estimate (``vnav.single_image``)."""
+def known_height_from_view(view: SilhouetteView, cone: ConeModel) -> np.ndarray | NoEstimate:
+    """``estimate_from_known_height``'s method on a view its caller has validated (a
+    detection clear of the image border): the estimate, or why there is none instead of None.
+
+    Returns
+    -------
+    p_w : ndarray, shape (3,), or NoEstimate
+        The base centre in the world, metres, or the reason: ``NADIR``, ``STEEP``,
+        ``NO_APEX``, ``INCONSISTENT`` or ``SMALL`` (``NoEstimate``).
+    """
     vertical = view.vertical_at_blob()
     if vertical is None:
         logger.debug("known height: camera looks straight down at the cone")
@@ -555,7 +604,7 @@ def known_height_on_view(view: SilhouetteView, cone: ConeModel) -> np.ndarray | 
     d0, d1 = float(d[0]), float(d[1])
     a_w, g_w = view.ray(au, av), view.ray(bu, bv)
 
-    solution = _solve_known_height(c_w, a_w, g_w, H, s)
+    solution = solve_known_height(c_w, a_w, g_w, H, s)
     if solution is None:
         logger.debug("known height: degenerate rays")
         return NoEstimate.INCONSISTENT
@@ -567,8 +616,8 @@ def known_height_on_view(view: SilhouetteView, cone: ConeModel) -> np.ndarray | 
         return NoEstimate.INCONSISTENT
     range_m = math.dist(p_w, c_w)
     for moved in (
-        _solve_known_height(c_w, view.ray(au + d0, av + d1), g_w, H, s),
-        _solve_known_height(c_w, a_w, view.ray(bu + d0, bv + d1), H, s),
+        solve_known_height(c_w, view.ray(au + d0, av + d1), g_w, H, s),
+        solve_known_height(c_w, a_w, view.ray(bu + d0, bv + d1), H, s),
     ):
         shift = math.inf if moved is None else math.dist(moved[0], p_w)
         if shift > MAX_RANGE_ERROR_PER_PX * range_m:

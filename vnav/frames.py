@@ -31,6 +31,7 @@ from numpy.typing import ArrayLike
 
 from vnav import quat, se3, so3
 from vnav._validate import FloatArray
+from vnav.se3 import compose_xyzw_xyz, invert_xyzw_xyz
 
 __all__ = [
     "R_ENU_NED",
@@ -203,16 +204,6 @@ def _frozen(T: ArrayLike, parent: str, child: str) -> FloatArray:
     return T
 
 
-def _inverse(T: FloatArray) -> FloatArray:
-    """``[[R^T, -R^T t], [0, 1]]`` of a valid transform or stack (no validation)."""
-    out = np.zeros_like(T)
-    Rt = np.swapaxes(T[..., :3, :3], -1, -2)
-    out[..., :3, :3] = Rt
-    out[..., :3, 3] = -np.einsum("...ij,...j->...i", Rt, T[..., :3, 3])
-    out[..., 3, 3] = 1.0
-    return out
-
-
 class FrameTree(_Graph):
     """Named frames linked by ``T_parent_child`` edges; ``lookup`` composes ``T_a_b``.
 
@@ -303,7 +294,7 @@ class FrameTree(_Graph):
             If a frame is unknown, or the two frames are in different trees (not connected).
         """
         path_a, path_b = self._paths(a, b)
-        return _inverse(self._from_ancestor(path_a)) @ self._from_ancestor(path_b)
+        return se3.invert(self._from_ancestor(path_a)) @ self._from_ancestor(path_b)
 
 
 class ExtrapolationError(ValueError):
@@ -321,43 +312,10 @@ DEFAULT_CACHE_S = 10.0
 
 # A pose as components (qx, qy, qz, qw, px, py, pz): floats for one time, (N,) arrays for many.
 # The same arithmetic serves both, so one lookup (pure Python, a few microseconds) and 1e5
-# lookups (numpy, columns not (N, 4, 4) stacks) run the same formulas.
+# lookups (numpy, columns not (N, 4, 4) stacks) run the same formulas: se3.compose_xyzw_xyz
+# and se3.invert_xyzw_xyz, bound here by name (a module attribute lookup per call would cost
+# the single lookup's hot path).
 _IDENTITY = (0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0)
-
-
-def _rotate(qx, qy, qz, qw, vx, vy, vz):
-    """``R(q) v``: ``v + w t + u x t`` with ``t = 2 u x v``, u the vector part."""
-    tx = 2.0 * (qy * vz - qz * vy)
-    ty = 2.0 * (qz * vx - qx * vz)
-    tz = 2.0 * (qx * vy - qy * vx)
-    return (
-        vx + qw * tx + (qy * tz - qz * ty),
-        vy + qw * ty + (qz * tx - qx * tz),
-        vz + qw * tz + (qx * ty - qy * tx),
-    )
-
-
-def _compose(a, b):
-    """``T_a T_b`` of two poses as components (Hamilton product, x y z w)."""
-    ax, ay, az, aw, apx, apy, apz = a
-    bx, by, bz, bw, bpx, bpy, bpz = b
-    px, py, pz = _rotate(ax, ay, az, aw, bpx, bpy, bpz)
-    return (
-        aw * bx + ax * bw + ay * bz - az * by,
-        aw * by - ax * bz + ay * bw + az * bx,
-        aw * bz + ax * by - ay * bx + az * bw,
-        aw * bw - ax * bx - ay * by - az * bz,
-        apx + px,
-        apy + py,
-        apz + pz,
-    )
-
-
-def _invert(a):
-    """``T^-1``: the conjugate rotation and ``-R^T p``."""
-    qx, qy, qz, qw, px, py, pz = a
-    ix, iy, iz = _rotate(-qx, -qy, -qz, qw, px, py, pz)
-    return (-qx, -qy, -qz, qw, -ix, -iy, -iz)
 
 
 def _matrix(a, shape: tuple[int, ...]) -> FloatArray:
@@ -701,7 +659,9 @@ class FrameBuffer(_Graph):
         )
         if t_target.ndim == 0:
             t_target, t_source = float(t_target), float(t_source)
-        pose = _compose(self._pose(target, fixed, t_target), self._pose(fixed, source, t_source))
+        pose = compose_xyzw_xyz(
+            self._pose(target, fixed, t_target), self._pose(fixed, source, t_source)
+        )
         return _matrix(pose, np.shape(t_target))
 
     def can_lookup(
@@ -742,8 +702,9 @@ class FrameBuffer(_Graph):
                     f"lookup({target!r}, {source!r}) needs t_s: edge "
                     f"{self._parents[stamped[0]]!r} -> {stamped[0]!r} is time-stamped"
                 )
-        return _compose(
-            _invert(self._from_ancestor(path_target, t)), self._from_ancestor(path_source, t)
+        return compose_xyzw_xyz(
+            invert_xyzw_xyz(self._from_ancestor(path_target, t)),
+            self._from_ancestor(path_source, t),
         )
 
     def _from_ancestor(self, path: list[str], t: float | FloatArray | None):
@@ -753,7 +714,7 @@ class FrameBuffer(_Graph):
             edge = self._static.get(frame)
             if edge is None:
                 edge = self._at(frame, t)
-            pose = edge if pose is _IDENTITY else _compose(pose, edge)
+            pose = edge if pose is _IDENTITY else compose_xyzw_xyz(pose, edge)
         return pose
 
     def _at(self, child: str, t: float | FloatArray):

@@ -5,6 +5,15 @@ b-coordinates into a, ``p_a = R_a_b @ p_b + t_a_b`` (``apply``). Composition is 
 the inner letters cancel, ``T_a_c = T_a_b @ T_b_c``; the inverse has the closed form
 ``T_b_a = [[R^T, -R^T t], [0, 1]]`` (``invert``). Arrays are the interchange format: (4, 4)
 float64, or (..., 4, 4) stacks where a function says so. Conventions: docs/CONVENTIONS.md.
+
+The exponential map and its inverse, ``exp`` and ``log``, and the adjoint ``adjoint`` follow
+Barfoot & Furgale, "Associating uncertainty with three-dimensional poses for use in estimation
+problems", IEEE T-RO 30(3), 2014 (here "B&F"): ``xi = [rho, phi]``, translation first, and
+``xi^ = [[phi^, rho], [0, 0]]``.
+
+``compose_xyzw_xyz`` and ``invert_xyzw_xyz`` are the group's product and inverse on a pose's
+seven components, a unit quaternion ``[x, y, z, w]`` then the translation: the kernels of
+``vnav.frames.FrameBuffer``'s lookups.
 """
 
 from __future__ import annotations
@@ -18,7 +27,18 @@ from vnav import _validate as _v
 from vnav import so3
 from vnav._validate import FloatArray
 
-__all__ = ["apply", "check_pose", "check_transform", "invert", "make"]
+__all__ = [
+    "adjoint",
+    "apply",
+    "check_pose",
+    "check_transform",
+    "compose_xyzw_xyz",
+    "exp",
+    "invert",
+    "invert_xyzw_xyz",
+    "log",
+    "make",
+]
 
 _BOTTOM = np.array([0.0, 0.0, 0.0, 1.0])
 # `_apply_blas` adds the translation to blocks of this many points at once: broadcasting a
@@ -31,6 +51,8 @@ _CHUNK = 16384
 # Rows per call of cv2.transform (its row count is a C int).
 _CV2_ROWS = 1 << 24
 _DBL_EPSILON = float(np.finfo(np.float64).eps)
+_SMALL_ANGLE = 1e-6
+"""Below this rotation angle (rad) the left Jacobian and its inverse use their Taylor series."""
 
 
 def make(R: ArrayLike, t: ArrayLike) -> FloatArray:
@@ -290,3 +312,216 @@ def check_pose(T: ArrayLike, name: str = "T") -> FloatArray:
     if T.shape != (4, 4):
         raise ValueError(f"{name} must be a single 4x4 transform, got shape {T.shape}")
     return T
+
+
+# ---------------------------------------------------------------- exponential map (B&F)
+
+
+def exp(xi: ArrayLike) -> FloatArray:
+    """The exponential map of se(3): ``exp(xi^) = [[C, J rho], [0, 1]]`` (B&F eq. 7).
+
+    ``C = so3.exp(phi)`` is Rodrigues' formula (lecture chapter 5) and ``J`` the left Jacobian
+    of SO(3) (B&F eq. 8), so the result is a transform as lecture chapter 7 writes it. A pose
+    with covariance is ``exp(xi^) @ T_mean`` (docs/CONVENTIONS.md, "Uncertainty").
+
+    Parameters
+    ----------
+    xi : array_like, shape (6,)
+        ``[rho, phi]``: ``rho`` the translation part, metres; ``phi`` the rotation vector,
+        radians (any angle).
+
+    Returns
+    -------
+    T : ndarray, shape (4, 4)
+
+    Raises
+    ------
+    ValueError
+        If ``xi`` is not of shape (6,) or holds NaN or inf.
+
+    Notes
+    -----
+    Below ``|phi| = 1e-6`` rad ``J`` is its series; above, ``(1 - cos t) / t^2`` loses about
+    ``eps / t^2`` to cancellation, so the translation is exact to about ``eps |rho| / |phi|``
+    (2e-10 ``|rho|`` just above the branch, 2e-12 ``|rho|`` at 1e-4 rad; tests/test_se3.py
+    holds it to that bound against the matrix exponential).
+    """
+    xi = _v.vector(xi, "xi", 6, batched=False)
+    T = np.eye(4)
+    T[:3, :3] = so3.exp(xi[3:])
+    T[:3, 3] = _left_jacobian(xi[3:]) @ xi[:3]
+    return T
+
+
+def log(T: ArrayLike) -> FloatArray:
+    """The inverse of ``exp``: ``xi = [J(phi)^-1 t, phi]`` with ``phi = so3.log(C)``.
+
+    The rotation vector comes from ``so3.log`` (angle in [0, pi], accurate at 0 and pi); the
+    translation part inverts ``t = J(phi) rho`` (B&F eq. 7) with ``J^-1`` in closed form
+    (Barfoot, "State Estimation for Robotics", 2017, sec. 7.1.5). ``exp(log(T)) == T`` to
+    rounding.
+
+    Parameters
+    ----------
+    T : array_like, shape (4, 4)
+        A rigid transform.
+
+    Returns
+    -------
+    xi : ndarray, shape (6,)
+        ``[rho, phi]``, the rotation angle ``|phi|`` in [0, pi].
+
+    Raises
+    ------
+    ValueError
+        If ``T`` is not one rigid transform (see ``check_pose``).
+    """
+    T = check_pose(T, "T")
+    phi = so3.log(T[:3, :3])
+    return np.concatenate([_left_jacobian_inverse(phi) @ T[:3, 3], phi])
+
+
+def adjoint(T: ArrayLike) -> FloatArray:
+    """The adjoint of a transform, ``Ad(T) = [[C, t^ C], [0, C]]`` (B&F eq. 12).
+
+    It moves a perturbation across the pose: ``T exp(xi^) = exp((Ad(T) xi)^) T``, so a left
+    perturbation ``xi`` of ``T_b_c`` becomes ``Ad(T_a_b) xi`` on ``T_a_c = T_a_b @ T_b_c``.
+
+    Parameters
+    ----------
+    T : array_like, shape (4, 4)
+        A rigid transform ``[[C, t], [0, 1]]``.
+
+    Returns
+    -------
+    Ad : ndarray, shape (6, 6)
+        Acting on ``xi = [rho, phi]``.
+
+    Raises
+    ------
+    ValueError
+        If ``T`` is not one rigid transform (see ``check_pose``).
+    """
+    T = check_pose(T, "T")
+    C, t = T[:3, :3], T[:3, 3]
+    out = np.zeros((6, 6))
+    out[:3, :3] = C
+    out[3:, 3:] = C
+    out[:3, 3:] = so3.skew(t) @ C
+    return out
+
+
+def _left_jacobian(phi: FloatArray) -> FloatArray:
+    """SO(3)'s left Jacobian, (3, 3) (B&F eq. 8): ``I + (1 - cos t) / t^2 phi^ + (t - sin t) /
+    t^3 phi^2`` with ``t = |phi|``; its series to second order below ``_SMALL_ANGLE``."""
+    theta = float(np.linalg.norm(phi))
+    S = so3.skew(phi)
+    if theta < _SMALL_ANGLE:
+        return np.eye(3) + 0.5 * S + S @ S / 6.0
+    t2 = theta * theta
+    return (
+        np.eye(3)
+        + (1.0 - math.cos(theta)) / t2 * S
+        + (theta - math.sin(theta)) / (t2 * theta) * (S @ S)
+    )
+
+
+def _left_jacobian_inverse(phi: FloatArray) -> FloatArray:
+    """``J(phi)^-1`` in closed form, (3, 3) (Barfoot, "State Estimation for Robotics", 2017,
+    sec. 7.1.5): ``I - phi^ / 2 + (1 - (t / 2) cot(t / 2)) / t^2 phi^2``; finite for
+    ``t = |phi|`` in [0, pi], as ``so3.log`` returns it."""
+    theta = float(np.linalg.norm(phi))
+    S = so3.skew(phi)
+    if theta < _SMALL_ANGLE:
+        return np.eye(3) - 0.5 * S + S @ S / 12.0
+    half = 0.5 * theta
+    return np.eye(3) - 0.5 * S + (1.0 - half / math.tan(half)) / (theta * theta) * (S @ S)
+
+
+# ------------------------------------------------ seven components: quaternion, translation
+
+# A pose as its components ``(qx, qy, qz, qw, x, y, z)``: the unit quaternion scalar last
+# (docs/CONVENTIONS.md, "Quaternions"), then the translation, metres (jaxlie's ``wxyz_xyz``
+# layout with vnav's quaternion order). Each component is a float, or an (N,) array for N
+# poses at once: the same arithmetic serves one pose (plain Python, no numpy call) and many
+# (numpy columns, not (N, 4, 4) stacks).
+_Component = float | FloatArray
+XyzwXyz = tuple[_Component, ...]
+
+
+def _rotate(
+    qx: _Component,
+    qy: _Component,
+    qz: _Component,
+    qw: _Component,
+    vx: _Component,
+    vy: _Component,
+    vz: _Component,
+) -> tuple[_Component, _Component, _Component]:
+    """``R(q) v`` as ``v + w t + u x t`` with ``t = 2 u x v``, ``u`` the vector part of ``q``:
+    ``q v q*`` expanded for a unit quaternion (lecture chapter 6's ``R(q)`` applied to ``v``)."""
+    tx = 2.0 * (qy * vz - qz * vy)
+    ty = 2.0 * (qz * vx - qx * vz)
+    tz = 2.0 * (qx * vy - qy * vx)
+    return (
+        vx + qw * tx + (qy * tz - qz * ty),
+        vy + qw * ty + (qz * tx - qx * tz),
+        vz + qw * tz + (qx * ty - qy * tx),
+    )
+
+
+def compose_xyzw_xyz(pose_a_b: XyzwXyz, pose_b_c: XyzwXyz) -> XyzwXyz:
+    """``T_a_c = T_a_b @ T_b_c`` of two poses given as components ``(qx, qy, qz, qw, x, y, z)``.
+
+    The rotation is the Hamilton product ``q_a_b q_b_c`` (lecture chapter 6, as
+    ``quat.multiply``), the translation ``t_a_b + R(q_a_b) t_b_c`` (lecture chapter 7): as 4x4
+    matrices, the result is ``T_a_b @ T_b_c`` to rounding, the inner letters cancelling.
+
+    No check of any kind: this is ``vnav.frames.FrameBuffer``'s inner loop (several calls per
+    lookup, a few microseconds each), where a check would cost more than the arithmetic. The
+    caller passes unit quaternions.
+
+    Parameters
+    ----------
+    pose_a_b, pose_b_c : tuple of 7 floats, or of 7 arrays of shape (N,)
+        ``(qx, qy, qz, qw, x, y, z)``, translations in metres; arrays broadcast against each
+        other and against floats.
+
+    Returns
+    -------
+    pose_a_c : tuple of 7 floats, or of 7 arrays of shape (N,)
+        In the same order.
+    """
+    ax, ay, az, aw, apx, apy, apz = pose_a_b
+    bx, by, bz, bw, bpx, bpy, bpz = pose_b_c
+    px, py, pz = _rotate(ax, ay, az, aw, bpx, bpy, bpz)
+    return (
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
+        aw * bw - ax * bx - ay * by - az * bz,
+        apx + px,
+        apy + py,
+        apz + pz,
+    )
+
+
+def invert_xyzw_xyz(pose_a_b: XyzwXyz) -> XyzwXyz:
+    """``T_b_a = T_a_b^-1`` of a pose given as components ``(qx, qy, qz, qw, x, y, z)``.
+
+    The conjugate quaternion (lecture chapter 6) and ``-R^T t`` (lecture chapter 7, as
+    ``invert``). Unchecked, as ``compose_xyzw_xyz``: the caller passes a unit quaternion.
+
+    Parameters
+    ----------
+    pose_a_b : tuple of 7 floats, or of 7 arrays of shape (N,)
+        ``(qx, qy, qz, qw, x, y, z)``, translation in metres.
+
+    Returns
+    -------
+    pose_b_a : tuple of 7 floats, or of 7 arrays of shape (N,)
+        In the same order.
+    """
+    qx, qy, qz, qw, px, py, pz = pose_a_b
+    ix, iy, iz = _rotate(-qx, -qy, -qz, qw, px, py, pz)
+    return (-qx, -qy, -qz, qw, -ix, -iy, -iz)

@@ -24,8 +24,8 @@ import math
 
 import numpy as np
 
+from vnav import se3
 from vnav.noise_model import NoiseModel
-from vnav.uncertainty import adjoint
 
 __all__ = [
     "KEYPOINT_STD_PX",
@@ -138,7 +138,7 @@ def body_pose_covariance(T_w_b: np.ndarray, noise: NoiseModel) -> np.ndarray:
     ndarray, shape (6, 6)
     """
     eta = np.diag([noise.position_std_m**2] * 3 + [noise.attitude_std_rad**2] * 3)
-    Ad = adjoint(T_w_b)
+    Ad = se3.adjoint(T_w_b)
     return Ad @ eta @ Ad.T
 
 

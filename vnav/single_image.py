@@ -15,9 +15,9 @@ import numpy as np
 from vnav import covariance
 from vnav.estimators import (
     NoEstimate,
-    depth_image_on_view,
-    ground_plane_on_view,
-    known_height_on_view,
+    depth_image_from_view,
+    ground_plane_from_view,
+    known_height_from_view,
     naive,
 )
 from vnav.observation import Observation
@@ -32,7 +32,7 @@ class _DepthImage:
         if obs.depth_under_mask_m is None:
             return NoEstimate.NO_DEPTH
         e = obs.exposure
-        return depth_image_on_view(obs.view, obs.depth_under_mask_m, e.cone, e.far_m)
+        return depth_image_from_view(obs.view, obs.depth_under_mask_m, e.cone, e.far_m)
 
     def covariance(self, obs: Observation, p_w: np.ndarray) -> np.ndarray:
         e = obs.exposure
@@ -43,7 +43,7 @@ class _GroundPlane:
     """``ground_plane``: the ray through the cone's base meets z = 0."""
 
     def estimate(self, obs: Observation) -> np.ndarray | NoEstimate:
-        return ground_plane_on_view(obs.view, obs.exposure.cone)
+        return ground_plane_from_view(obs.view, obs.exposure.cone)
 
     def covariance(self, obs: Observation, p_w: np.ndarray) -> np.ndarray:
         e = obs.exposure
@@ -56,7 +56,7 @@ class _KnownHeight:
     """``known_height``: the cone's height in pixels (similar triangles)."""
 
     def estimate(self, obs: Observation) -> np.ndarray | NoEstimate:
-        return known_height_on_view(obs.view, obs.exposure.cone)
+        return known_height_from_view(obs.view, obs.exposure.cone)
 
     def covariance(self, obs: Observation, p_w: np.ndarray) -> np.ndarray:
         e = obs.exposure

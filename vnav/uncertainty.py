@@ -6,11 +6,10 @@ IEEE T-RO 30(3), 2014 (here "B&F"): a pose with covariance is
 
     T = exp(xi^) T_mean,     xi = [rho, phi] ~ N(0, Sigma),  Sigma 6x6,
 
-a *left* perturbation, translation part first. ``xi^ = [[phi^, rho], [0, 0]]`` and
-``exp(xi^) = [[C, J rho], [0, 1]]`` with ``C = so3.exp(phi)`` and ``J`` the left Jacobian of
-SO(3) (B&F eq. 7-8); ``Ad(T) = [[C, t^ C], [0, C]]`` moves a perturbation across a pose,
-``T exp(xi^) = exp((Ad(T) xi)^) T`` (B&F eq. 12). A point with covariance is ``p = p_mean +
-dp``, ``dp ~ N(0, Sigma_p)`` (3x3) in the point's own frame.
+a *left* perturbation, translation part first. ``exp(xi^) = [[C, J rho], [0, 1]]`` is
+``vnav.se3.exp`` (B&F eq. 7-8), and ``Ad(T) = vnav.se3.adjoint(T)`` moves a perturbation
+across a pose, ``T exp(xi^) = exp((Ad(T) xi)^) T`` (B&F eq. 12). A point with covariance is
+``p = p_mean + dp``, ``dp ~ N(0, Sigma_p)`` (3x3) in the point's own frame.
 
 Everything here is first order (a linearisation about the mean) except ``compose(order=4)``,
 which adds B&F's fourth-order terms (eq. 55). The tests check every Jacobian against central
@@ -25,29 +24,24 @@ from statistics import NormalDist
 
 import numpy as np
 
-from vnav import se3, so3
+from vnav import _validate as _v
+from vnav import se3
 from vnav.camera import PinholeCamera
 
 __all__ = [
-    "adjoint",
     "check_covariance",
     "compose",
     "compose_covariance",
-    "curly_hat",
     "invert",
     "nees",
     "nees_band",
     "nees_p_value",
     "point_from_depth",
     "point_from_ground",
-    "se3_exp",
-    "se3_log",
+    "point_from_ground_unchecked",
+    "point_jacobian",
     "transform_point",
 ]
-
-_SMALL_ANGLE = 1e-6
-"""Below this rotation angle (rad) the Jacobians use their Taylor series."""
-
 
 # ------------------------------------------------------------------------ validation
 
@@ -62,11 +56,7 @@ def check_covariance(cov: object, shape: tuple[int, int], name: str = "cov") -> 
         entry) or one not positive semidefinite (an eigenvalue below -1e-9 of the largest),
         naming ``name`` and the problem.
     """
-    a = np.asarray(cov, dtype=np.float64)
-    if a.shape != shape:
-        raise ValueError(f"{name} must have shape {shape}, got {a.shape}")
-    if not np.isfinite(a).all():
-        raise ValueError(f"{name} must be finite; it holds NaN or inf")
+    a = _v.check_finite(_v.check_shape(_v.as_float(cov, name), name, shape, batched=False), name)
     scale = float(np.max(np.abs(a))) if a.size else 0.0
     if scale == 0.0:
         return a
@@ -79,86 +69,6 @@ def check_covariance(cov: object, shape: tuple[int, int], name: str = "cov") -> 
             f"{name} must be positive semidefinite; its smallest eigenvalue is {lowest:.3g}"
         )
     return a
-
-
-def _vector(x: object, n: int, name: str) -> np.ndarray:
-    a = np.asarray(x, dtype=np.float64)
-    if a.shape != (n,):
-        raise ValueError(f"{name} must have shape ({n},), got {a.shape}")
-    if not np.isfinite(a).all():
-        raise ValueError(f"{name} must be finite, got {a}")
-    return a
-
-
-# ------------------------------------------------------------------------ SE(3) tools
-
-
-def _skew(v: object) -> np.ndarray:
-    """``so3.skew`` of one 3-vector (a sequence of floats), unvalidated: for the hot paths."""
-    x, y, z = (float(c) for c in v)  # type: ignore[attr-defined]
-    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-
-
-def _left_jacobian(phi: np.ndarray) -> np.ndarray:
-    """SO(3)'s left Jacobian ``J(phi)`` (B&F eq. 8), (3, 3)."""
-    theta = float(np.linalg.norm(phi))
-    S = so3.skew(phi)
-    if theta < _SMALL_ANGLE:
-        return np.eye(3) + 0.5 * S + S @ S / 6.0
-    t2 = theta * theta
-    return (
-        np.eye(3)
-        + (1.0 - math.cos(theta)) / t2 * S
-        + (theta - math.sin(theta)) / (t2 * theta) * (S @ S)
-    )
-
-
-def _left_jacobian_inverse(phi: np.ndarray) -> np.ndarray:
-    """``J(phi)^-1`` in closed form, (3, 3) (Barfoot, State Estimation for Robotics, 7.1.5)."""
-    theta = float(np.linalg.norm(phi))
-    S = so3.skew(phi)
-    if theta < _SMALL_ANGLE:
-        return np.eye(3) - 0.5 * S + S @ S / 12.0
-    half = 0.5 * theta
-    return np.eye(3) - 0.5 * S + (1.0 - half / math.tan(half)) / (theta * theta) * (S @ S)
-
-
-def se3_exp(xi: object) -> np.ndarray:
-    """``exp(xi^)`` for ``xi = [rho, phi]``, (4, 4) (B&F eq. 7)."""
-    xi = _vector(xi, 6, "xi")
-    T = np.eye(4)
-    T[:3, :3] = so3.exp(xi[3:])
-    T[:3, 3] = _left_jacobian(xi[3:]) @ xi[:3]
-    return T
-
-
-def se3_log(T: object) -> np.ndarray:
-    """``xi = [rho, phi]`` with ``se3_exp(xi) == T``, (6,), rotation angle in [0, pi]."""
-    T = se3.check_transform(T, "T")
-    phi = so3.log(T[:3, :3])
-    return np.concatenate([_left_jacobian_inverse(phi) @ T[:3, 3], phi])
-
-
-def adjoint(T: object) -> np.ndarray:
-    """``Ad(T) = [[C, t^ C], [0, C]]``, (6, 6): ``T exp(xi^) T^-1 = exp((Ad(T) xi)^)``."""
-    T = np.asarray(T, dtype=np.float64)
-    C, t = T[:3, :3], T[:3, 3]
-    out = np.zeros((6, 6))
-    out[:3, :3] = C
-    out[3:, 3:] = C
-    out[:3, 3:] = _skew(t) @ C
-    return out
-
-
-def curly_hat(xi: object) -> np.ndarray:
-    """B&F's ``xi^curlywedge = [[phi^, rho^], [0, phi^]]``, (6, 6) (the adjoint of se(3))."""
-    xi = _vector(xi, 6, "xi")
-    out = np.zeros((6, 6))
-    P = so3.skew(xi[3:])
-    out[:3, :3] = P
-    out[3:, 3:] = P
-    out[:3, 3:] = so3.skew(xi[:3])
-    return out
 
 
 # ------------------------------------------------------------------------ poses
@@ -213,7 +123,7 @@ def compose(
     S2 = check_covariance(cov_b_c, (6, 6), "cov_b_c")
     if order == 2:
         return T1 @ T2, compose_covariance(T1, S1, S2)
-    Ad = adjoint(T1)
+    Ad = se3.adjoint(T1)
     S2p = Ad @ S2 @ Ad.T
     cov = S1 + S2p
     if order == 4:
@@ -233,11 +143,31 @@ def compose(
     return T1 @ T2, 0.5 * (cov + cov.T)
 
 
-def compose_covariance(T1: np.ndarray, S1: np.ndarray, S2: np.ndarray) -> np.ndarray:
-    """``compose``'s second-order covariance ``S1 + Ad(T1) S2 Ad(T1)^T`` (B&F eq. 38), (6, 6),
-    without validating: ``T1`` (4, 4) and ``S1``, ``S2`` (6, 6) as ``compose`` checks them."""
-    Ad = adjoint(T1)
-    cov = S1 + Ad @ S2 @ Ad.T
+def compose_covariance(T_a_b: np.ndarray, cov_a_b: np.ndarray, cov_b_c: np.ndarray) -> np.ndarray:
+    """The covariance of ``T_a_b @ T_b_c`` to second order, as ``compose`` gives it, but on
+    inputs the caller has validated (``vnav.localize`` checks its poses and covariances once
+    per detection; this adds no second check).
+
+    ``cov_a_c = cov_a_b + Ad(T_a_b) cov_b_c Ad(T_a_b)^T`` (B&F eq. 38), symmetrised.
+
+    Parameters
+    ----------
+    T_a_b : ndarray, shape (4, 4)
+        A rigid transform (``se3.check_pose``); ``T_b_c`` itself does not enter.
+    cov_a_b, cov_b_c : ndarray, shape (6, 6)
+        Left-perturbation covariances (``check_covariance``) of the two independent poses.
+
+    Returns
+    -------
+    cov_a_c : ndarray, shape (6, 6)
+
+    Raises
+    ------
+    ValueError
+        If ``T_a_b`` is not one rigid transform; the covariances are not checked.
+    """
+    Ad = se3.adjoint(T_a_b)
+    cov = cov_a_b + Ad @ cov_b_c @ Ad.T
     return 0.5 * (cov + cov.T)
 
 
@@ -253,7 +183,7 @@ def invert(T: object, cov: object) -> tuple[np.ndarray, np.ndarray]:
     T = se3.check_transform(T, "T")
     S = check_covariance(cov, (6, 6), "cov")
     T_inv = se3.invert(T)
-    Ad = adjoint(T_inv)
+    Ad = se3.adjoint(T_inv)
     out = Ad @ S @ Ad.T
     return T_inv, 0.5 * (out + out.T)
 
@@ -261,9 +191,26 @@ def invert(T: object, cov: object) -> tuple[np.ndarray, np.ndarray]:
 # ------------------------------------------------------------------------ points
 
 
-def _point_jacobian(p: Sequence[float]) -> np.ndarray:
-    """``d(exp(xi^) p) / d xi`` at ``xi = 0``: ``[I, -p^]``, (3, 6) (B&F's ``p^odot``)."""
-    x, y, z = p
+def point_jacobian(p_a: Sequence[float]) -> np.ndarray:
+    """``d(exp(xi^) p_a) / d xi`` at ``xi = 0``: ``[I, -p_a^]``, the first three rows of B&F's
+    ``p^odot`` for the homogeneous point ``[p_a, 1]`` (the Jacobian in B&F eq. 30).
+
+    A left perturbation ``xi`` of a pose ``T_a_b`` moves the point ``p_a = T_a_b p_b`` by
+    ``point_jacobian(p_a) @ xi`` to first order; ``G cov_a_b G^T`` is that part of the point's
+    covariance (``transform_point``, ``vnav.covariance``).
+
+    Parameters
+    ----------
+    p_a : sequence of 3 floats, or ndarray, shape (3,)
+        The point in the pose's left (reference) frame, metres. Not checked: the callers run
+        it per estimate on points they computed.
+
+    Returns
+    -------
+    G : ndarray, shape (3, 6)
+        Acting on ``xi = [rho, phi]``.
+    """
+    x, y, z = p_a
     return np.array(
         [[1.0, 0.0, 0.0, 0.0, z, -y], [0.0, 1.0, 0.0, -z, 0.0, x], [0.0, 0.0, 1.0, y, -x, 0.0]]
     )
@@ -274,7 +221,7 @@ def _transform_point(
 ) -> tuple[np.ndarray, np.ndarray]:
     R = T[:3, :3]
     p_a = R @ p_b + T[:3, 3]
-    G = _point_jacobian(p_a)
+    G = point_jacobian(p_a)
     cov = G @ cov_T @ G.T + R @ cov_p_b @ R.T
     return p_a, 0.5 * (cov + cov.T)
 
@@ -294,7 +241,7 @@ def transform_point(
     """
     T = se3.check_transform(T_a_b, "T_a_b")
     S = check_covariance(cov_a_b, (6, 6), "cov_a_b")
-    p = _vector(p_b, 3, "p_b")
+    p = _v.vector(p_b, "p_b", 3, batched=False)
     Sp = check_covariance(cov_p_b, (3, 3), "cov_p_b")
     return _transform_point(T, S, p, Sp)
 
@@ -336,7 +283,7 @@ def point_from_depth(
     cov_p_w : ndarray, shape (3, 3)
     """
     T = se3.check_transform(T_w_c, "T_w_c")
-    u, v = _vector(uv, 2, "uv")
+    u, v = _v.vector(uv, "uv", 2, batched=False)
     if not (math.isfinite(z_m) and z_m > 0.0):
         raise ValueError(f"z_m must be a positive depth, got {z_m!r}")
     if not (math.isfinite(var_z) and var_z >= 0.0):
@@ -389,25 +336,48 @@ def point_from_ground(
         If the camera is not above the ground or the ray does not point down to it.
     """
     T = se3.check_transform(T_w_c, "T_w_c")
-    u, v = _vector(uv, 2, "uv")
+    u, v = _v.vector(uv, "uv", 2, batched=False)
     S_uv = check_covariance(cov_uv, (2, 2), "cov_uv")
     S_T = check_covariance(cov_T_w_c, (6, 6), "cov_T_w_c")
-    p_w, cov = _point_from_ground(camera, T, float(u), float(v), S_uv, S_T)
+    p_w, cov = point_from_ground_unchecked(camera, T, float(u), float(v), S_uv, S_T)
     return p_w, 0.5 * (cov + cov.T)
 
 
-def _point_from_ground(
+def point_from_ground_unchecked(
     camera: PinholeCamera,
-    T: np.ndarray,
+    T_w_c: np.ndarray,
     u: float,
     v: float,
-    S_uv: np.ndarray,
-    S_T: np.ndarray,
+    cov_uv: np.ndarray,
+    cov_T_w_c: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``point_from_ground`` on validated inputs, in plain floats where numpy's per-call cost
-    would dominate (``localize`` runs it for every detection); the covariance is symmetric
-    to rounding, not symmetrised."""
-    (r00, r01, r02, tx), (r10, r11, r12, ty), (r20, r21, r22, tz), _ = T.tolist()
+    """``point_from_ground`` on inputs the caller has validated, in plain floats where numpy's
+    per-call cost would dominate (``vnav.covariance.ground_plane_cov`` runs it for every
+    detection). The same formulas; the covariance is symmetric to rounding, not symmetrised.
+
+    Parameters
+    ----------
+    camera : PinholeCamera
+    T_w_c : ndarray, shape (4, 4)
+        A rigid transform (``se3.check_pose``), not checked here.
+    u, v : float
+        The pixel, OpenCV convention.
+    cov_uv : ndarray, shape (2, 2)
+        Pixel covariance, px^2 (``check_covariance``), not checked here.
+    cov_T_w_c : ndarray, shape (6, 6)
+        Left-perturbation covariance of ``T_w_c``, not checked here.
+
+    Returns
+    -------
+    p_w : ndarray, shape (3,)
+    cov_p_w : ndarray, shape (3, 3)
+
+    Raises
+    ------
+    ValueError
+        If the camera is not above the ground or the ray does not point down to it.
+    """
+    (r00, r01, r02, tx), (r10, r11, r12, ty), (r20, r21, r22, tz), _ = T_w_c.tolist()
     x, y = (u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy
     dx, dy, dz = r00 * x + r01 * y + r02, r10 * x + r11 * y + r12, r20 * x + r21 * y + r22
     if not tz > 0.0:
@@ -434,7 +404,7 @@ def _point_from_ground(
         ]
     )
     J_uv, J_xi = J[:, :2], J[:, 2:]
-    return np.array([px, py, 0.0]), J_uv @ S_uv @ J_uv.T + J_xi @ S_T @ J_xi.T
+    return np.array([px, py, 0.0]), J_uv @ cov_uv @ J_uv.T + J_xi @ cov_T_w_c @ J_xi.T
 
 
 # ------------------------------------------------------------------------ consistency
