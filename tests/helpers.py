@@ -162,6 +162,44 @@ def mujoco_T_w_c(world: World) -> np.ndarray:
     return T
 
 
+# ------------------------------------------------------------- SE(3) exp and log, stacked
+
+
+def se3_exp_stack(xi: np.ndarray) -> np.ndarray:
+    """``vnav.uncertainty.se3_exp`` of each row of ``xi`` (n, 6) ``[rho, phi]``: (n, 4, 4).
+
+    For Monte Carlo draws by the thousand. B&F eq. 7 and 8 written out for stacks: the
+    rotation ``so3.exp(phi)``, the translation ``J(phi) rho`` with SO(3)'s left Jacobian
+    ``J = I + (1 - cos t) / t^2 phi^ + (t - sin t) / t^3 phi^2`` (its Taylor series below
+    1e-6 rad, as vnav). ``test_uncertainty`` holds it equal to ``se3_exp`` row by row."""
+    xi = np.asarray(xi, dtype=np.float64).reshape(-1, 6)
+    rho, phi = xi[:, :3], xi[:, 3:]
+    theta = np.linalg.norm(phi, axis=1)
+    small = theta < 1e-6
+    t = np.where(small, 1.0, theta)
+    a = np.where(small, 0.5, (1.0 - np.cos(t)) / t**2)
+    b = np.where(small, 1.0 / 6.0, (t - np.sin(t)) / t**3)
+    S = so3.skew(phi)
+    J = np.eye(3) + a[:, None, None] * S + b[:, None, None] * (S @ S)
+    return se3.make(so3.exp(phi), np.einsum("nij,nj->ni", J, rho))
+
+
+def se3_log_stack(T: np.ndarray) -> np.ndarray:
+    """``vnav.uncertainty.se3_log`` of each of ``T`` (n, 4, 4): (n, 6) ``[rho, phi]``, the
+    rotation angle in [0, pi]: ``phi = so3.log(R)``, ``rho = J(phi)^-1 t`` with
+    ``J^-1 = I - phi^ / 2 + (1 - (t / 2) / tan(t / 2)) / t^2 phi^2`` (Taylor below 1e-6 rad,
+    as vnav). ``test_uncertainty`` holds it equal to ``se3_log`` one by one."""
+    T = np.asarray(T, dtype=np.float64).reshape(-1, 4, 4)
+    phi = so3.log(T[:, :3, :3])
+    theta = np.linalg.norm(phi, axis=1)
+    small = theta < 1e-6
+    t = np.where(small, 1.0, theta)
+    c = np.where(small, 1.0 / 12.0, (1.0 - 0.5 * t / np.tan(0.5 * t)) / t**2)
+    S = so3.skew(phi)
+    J_inv = np.eye(3) - 0.5 * S + c[:, None, None] * (S @ S)
+    return np.concatenate([np.einsum("nij,nj->ni", J_inv, T[:, :3, 3]), phi], axis=1)
+
+
 # ------------------------------------------------------------------------------------ cones
 
 
