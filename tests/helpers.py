@@ -19,6 +19,8 @@ MuJoCo renders off-screen through EGL: ``conftest.py`` sets ``MUJOCO_GL`` before
 from __future__ import annotations
 
 import dataclasses
+import os
+from collections import OrderedDict
 from pathlib import Path
 
 import numpy as np
@@ -277,17 +279,51 @@ def blank() -> np.ndarray:
 # ------------------------------------------------------------------------- Rerun recordings
 
 
+_RECORDINGS: OrderedDict[tuple, list[tuple[str, pa.Table]]] = OrderedDict()
+"""The last recordings read: (entity path, chunk as an Arrow table) in file order."""
+
+
+def _chunks(path: Path) -> list[tuple[str, pa.Table]]:
+    """Every chunk of the recording at ``path`` with its entity path, in file order; the file
+    read once while it is unchanged (a test reads a recording's entities one by one, and each
+    filtered read is a pass over the whole file, images included). Arrow tables are
+    immutable: ``read_rows`` builds new rows from them at every call."""
+    stat = os.stat(path)
+    key = (os.path.realpath(path), stat.st_ino, stat.st_size, stat.st_mtime_ns)
+    if key not in _RECORDINGS:
+        _RECORDINGS[key] = [
+            (chunk.entity_path, pa.Table.from_batches([chunk.to_record_batch()]))
+            for chunk in RrdReader(str(path)).stream().to_chunks()
+        ]
+        while len(_RECORDINGS) > 16:  # the built-in runs' 10, and a few more
+            _RECORDINGS.popitem(last=False)
+    _RECORDINGS.move_to_end(key)
+    return _RECORDINGS[key]
+
+
 def read_rows(path: Path, entity: str) -> list[dict]:
     """Every row logged to ``entity`` as a dict {column name: value}, in file order.
 
-    Columns are named like ``Transform3D:translation`` (each value a list of instances);
-    timeline columns ``tick`` and ``sim_time`` become ints (``sim_time`` in nanoseconds).
-    Static rows have no timeline columns.
+    ``entity`` is an entity path, or a subtree ``path/**`` (Rerun's entity path filter; any
+    other filter expression is handed to Rerun's own). Columns are named like
+    ``Transform3D:translation`` (each value a list of instances); timeline columns ``tick``
+    and ``sim_time`` become ints (``sim_time`` in nanoseconds). Static rows have no timeline
+    columns.
     """
     entity = "/" + entity.lstrip("/")
+    base = entity.removesuffix("/**")
+    if not base or any(c in base for c in "*+- "):  # ("/**" leaves out /__properties)
+        reader = RrdReader(str(path)).stream().filter(content=entity).to_chunks()
+        tables = [pa.Table.from_batches([chunk.to_record_batch()]) for chunk in reader]
+    else:
+        subtree = base != entity
+        tables = [
+            table
+            for path_, table in _chunks(path)
+            if path_ == base or (subtree and path_.startswith(base.rstrip("/") + "/"))
+        ]
     rows: list[dict] = []
-    for chunk in RrdReader(str(path)).stream().filter(content=entity).to_chunks():
-        table = pa.Table.from_batches([chunk.to_record_batch()])
+    for table in tables:
         columns = {}
         for name in table.column_names:
             column = table.column(name)
