@@ -19,6 +19,8 @@ MuJoCo renders off-screen through EGL: ``conftest.py`` sets ``MUJOCO_GL`` before
 from __future__ import annotations
 
 import dataclasses
+import os
+from collections import OrderedDict
 from pathlib import Path
 
 import numpy as np
@@ -162,6 +164,44 @@ def mujoco_T_w_c(world: World) -> np.ndarray:
     return T
 
 
+# ------------------------------------------------------------- SE(3) exp and log, stacked
+
+
+def se3_exp_stack(xi: np.ndarray) -> np.ndarray:
+    """``vnav.se3.exp`` of each row of ``xi`` (n, 6) ``[rho, phi]``: (n, 4, 4).
+
+    For Monte Carlo draws by the thousand. B&F eq. 7 and 8 written out for stacks: the
+    rotation ``so3.exp(phi)``, the translation ``J(phi) rho`` with SO(3)'s left Jacobian
+    ``J = I + (1 - cos t) / t^2 phi^ + (t - sin t) / t^3 phi^2`` (its Taylor series below
+    1e-6 rad, as vnav). ``test_uncertainty`` holds it equal to ``se3.exp`` row by row."""
+    xi = np.asarray(xi, dtype=np.float64).reshape(-1, 6)
+    rho, phi = xi[:, :3], xi[:, 3:]
+    theta = np.linalg.norm(phi, axis=1)
+    small = theta < 1e-6
+    t = np.where(small, 1.0, theta)
+    a = np.where(small, 0.5, (1.0 - np.cos(t)) / t**2)
+    b = np.where(small, 1.0 / 6.0, (t - np.sin(t)) / t**3)
+    S = so3.skew(phi)
+    J = np.eye(3) + a[:, None, None] * S + b[:, None, None] * (S @ S)
+    return se3.make(so3.exp(phi), np.einsum("nij,nj->ni", J, rho))
+
+
+def se3_log_stack(T: np.ndarray) -> np.ndarray:
+    """``vnav.se3.log`` of each of ``T`` (n, 4, 4): (n, 6) ``[rho, phi]``, the
+    rotation angle in [0, pi]: ``phi = so3.log(R)``, ``rho = J(phi)^-1 t`` with
+    ``J^-1 = I - phi^ / 2 + (1 - (t / 2) / tan(t / 2)) / t^2 phi^2`` (Taylor below 1e-6 rad,
+    as vnav). ``test_uncertainty`` holds it equal to ``se3.log`` one by one."""
+    T = np.asarray(T, dtype=np.float64).reshape(-1, 4, 4)
+    phi = so3.log(T[:, :3, :3])
+    theta = np.linalg.norm(phi, axis=1)
+    small = theta < 1e-6
+    t = np.where(small, 1.0, theta)
+    c = np.where(small, 1.0 / 12.0, (1.0 - 0.5 * t / np.tan(0.5 * t)) / t**2)
+    S = so3.skew(phi)
+    J_inv = np.eye(3) - 0.5 * S + c[:, None, None] * (S @ S)
+    return np.concatenate([np.einsum("nij,nj->ni", J_inv, T[:, :3, 3]), phi], axis=1)
+
+
 # ------------------------------------------------------------------------------------ cones
 
 
@@ -239,17 +279,51 @@ def blank() -> np.ndarray:
 # ------------------------------------------------------------------------- Rerun recordings
 
 
+_RECORDINGS: OrderedDict[tuple, list[tuple[str, pa.Table]]] = OrderedDict()
+"""The last recordings read: (entity path, chunk as an Arrow table) in file order."""
+
+
+def _chunks(path: Path) -> list[tuple[str, pa.Table]]:
+    """Every chunk of the recording at ``path`` with its entity path, in file order; the file
+    read once while it is unchanged (a test reads a recording's entities one by one, and each
+    filtered read is a pass over the whole file, images included). Arrow tables are
+    immutable: ``read_rows`` builds new rows from them at every call."""
+    stat = os.stat(path)
+    key = (os.path.realpath(path), stat.st_ino, stat.st_size, stat.st_mtime_ns)
+    if key not in _RECORDINGS:
+        _RECORDINGS[key] = [
+            (chunk.entity_path, pa.Table.from_batches([chunk.to_record_batch()]))
+            for chunk in RrdReader(str(path)).stream().to_chunks()
+        ]
+        while len(_RECORDINGS) > 16:  # the built-in runs' 10, and a few more
+            _RECORDINGS.popitem(last=False)
+    _RECORDINGS.move_to_end(key)
+    return _RECORDINGS[key]
+
+
 def read_rows(path: Path, entity: str) -> list[dict]:
     """Every row logged to ``entity`` as a dict {column name: value}, in file order.
 
-    Columns are named like ``Transform3D:translation`` (each value a list of instances);
-    timeline columns ``tick`` and ``sim_time`` become ints (``sim_time`` in nanoseconds).
-    Static rows have no timeline columns.
+    ``entity`` is an entity path, or a subtree ``path/**`` (Rerun's entity path filter; any
+    other filter expression is handed to Rerun's own). Columns are named like
+    ``Transform3D:translation`` (each value a list of instances); timeline columns ``tick``
+    and ``sim_time`` become ints (``sim_time`` in nanoseconds). Static rows have no timeline
+    columns.
     """
     entity = "/" + entity.lstrip("/")
+    base = entity.removesuffix("/**")
+    if not base or any(c in base for c in "*+- "):  # ("/**" leaves out /__properties)
+        reader = RrdReader(str(path)).stream().filter(content=entity).to_chunks()
+        tables = [pa.Table.from_batches([chunk.to_record_batch()]) for chunk in reader]
+    else:
+        subtree = base != entity
+        tables = [
+            table
+            for path_, table in _chunks(path)
+            if path_ == base or (subtree and path_.startswith(base.rstrip("/") + "/"))
+        ]
     rows: list[dict] = []
-    for chunk in RrdReader(str(path)).stream().filter(content=entity).to_chunks():
-        table = pa.Table.from_batches([chunk.to_record_batch()])
+    for table in tables:
         columns = {}
         for name in table.column_names:
             column = table.column(name)

@@ -406,14 +406,25 @@ def _files(directory: Path) -> dict[str, bytes]:
     return {p.name: p.read_bytes() for p in sorted(directory.iterdir()) if p.is_file()}
 
 
-def _first_pair(out: Path) -> dict[str, bytes]:
+@pytest.fixture(scope="session")  # once per test process: this module's tests are spread
+def first_pair(tmp_path_factory) -> dict[str, bytes]:
     """frame-problem cut at 0.5 s, before its yaw: its yaw check has no data (exit status 1),
-    and the pair is written all the same."""
+    and the pair is written all the same (and nothing printed: ``--quiet``)."""
+    out = tmp_path_factory.mktemp("first-pair")
     assert main(["run", "frame-problem", "--out", str(out), "--quiet", "--duration", "0.5"]) == 1
     return {k: v for k, v in _files(out).items() if not k.startswith(".")}
 
 
-def test_disk_full_on_a_small_filesystem_exits_3_and_keeps_the_previous_pair(tmp_path, capsys):
+def _first_pair(out: Path, pair: dict[str, bytes]) -> dict[str, bytes]:
+    """The ``first_pair`` run's files in ``out``, byte for byte: a previous run's pair."""
+    for name, data in pair.items():
+        (out / name).write_bytes(data)
+    return pair
+
+
+def test_disk_full_on_a_small_filesystem_exits_3_and_keeps_the_previous_pair(
+    tmp_path, capsys, first_pair
+):
     out = tmp_path / "small"
     out.mkdir()
     try:
@@ -431,7 +442,7 @@ def test_disk_full_on_a_small_filesystem_exits_3_and_keeps_the_previous_pair(tmp
             "test_injected_short_recording covers the same path"
         )
     try:
-        before = _first_pair(out)  # about 650 KB: fits once, not twice
+        before = _first_pair(out, first_pair)  # about 800 KB: fits once, not twice
         status = main(["run", "frame-problem", "--out", str(out), "--quiet", "--seed", "2"])
         err = capsys.readouterr().err
         assert status == 3
@@ -444,13 +455,13 @@ def test_disk_full_on_a_small_filesystem_exits_3_and_keeps_the_previous_pair(tmp
 
 
 def test_injected_short_recording_exits_3_and_keeps_the_previous_pair(
-    tmp_path, capsys, monkeypatch
+    tmp_path, capsys, monkeypatch, first_pair
 ):
     """What the Rerun file sink leaves on a full disk (it only logs the error): a file that
     stops short. Injected by cutting the finished file in half."""
     from scenarios.record.recording import Recording
 
-    before = _first_pair(tmp_path)
+    before = _first_pair(tmp_path, first_pair)
     real_finish = Recording.finish
 
     def finish_short(self, result, judged):
@@ -466,10 +477,12 @@ def test_injected_short_recording_exits_3_and_keeps_the_previous_pair(
 
 
 @pytest.mark.parametrize("fail", [KeyboardInterrupt, RuntimeError])
-def test_failure_while_judging_keeps_the_previous_pair(tmp_path, capsys, monkeypatch, fail):
+def test_failure_while_judging_keeps_the_previous_pair(
+    tmp_path, capsys, monkeypatch, fail, first_pair
+):
     """No new .rrd beside the previous run's .json: a pair is never from two runs."""
 
-    before = _first_pair(tmp_path)
+    before = _first_pair(tmp_path, first_pair)
 
     def judge(check, run):
         raise fail("injected")
@@ -522,13 +535,13 @@ def test_a_signal_turned_into_another_error_still_ends_as_the_signal(tmp_path, c
 
 
 @pytest.mark.parametrize("signame", ["SIGTERM", "SIGHUP"])
-def test_sigterm_and_sighup_end_the_run_like_ctrl_c(tmp_path, signame):
+def test_sigterm_and_sighup_end_the_run_like_ctrl_c(tmp_path, signame, first_pair):
     """A signal mid-run: exit 128 + N, nothing partial kept, the previous pair untouched."""
     import signal
     import time
 
     signum = getattr(signal, signame)
-    before = _first_pair(tmp_path)
+    before = _first_pair(tmp_path, first_pair)
     proc = subprocess.Popen(
         [sys.executable, "-m", "scenarios.cli", "run", "orbit", "--out", str(tmp_path)],
         stdout=subprocess.PIPE,

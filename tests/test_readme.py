@@ -230,18 +230,30 @@ def _toml_block(kind: str) -> str:
     return block
 
 
-def test_toml_example_runs_and_passes_with_the_cone_well_inside_the_image(tmp_path: Path):
+def test_toml_example_runs_and_passes_with_the_cone_well_inside_the_image(
+    tmp_path: Path, monkeypatch
+):
     block = _toml_block("scenario")
     spec = from_dict(tomllib.loads(block), where="README.md")
     path = tmp_path / "example.toml"
     path.write_text(block)
+    outcomes = []  # the run the command makes, kept to look into its ticks
+    run = pipeline.run
+
+    def run_and_keep(*args, **kwargs):
+        outcomes.append(run(*args, **kwargs))
+        return outcomes[-1]
+
+    monkeypatch.setattr(pipeline, "run", run_and_keep)
     assert main(["run", str(path), "--out", str(tmp_path / "out"), "--quiet"]) == 0
     report = json.loads((tmp_path / "out" / f"{spec.name}.json").read_text())
     assert report["passed"]
     assert report["detections"] == report["matched_detections"] == report["camera_ticks"]
     # At every camera tick the cone is fully in view (its extreme points inside the image,
     # vnav.cone), and no detection touches the border.
-    result = pipeline.run(spec).result
+    (outcome,) = outcomes
+    assert outcome.result.spec == spec
+    result = outcome.result
     assert all(t.cones_in_view == [0] for t in result.ticks)
     assert not any(d.detection.touches_border for t in result.ticks for d in t.detections)
 

@@ -46,14 +46,16 @@ def sweep_cli(*args: str, cwd: Path, timeout: float = 300) -> subprocess.Complet
     )
 
 
-@pytest.fixture(scope="module")
+# Session-scoped (one per test process, never torn down midway): under pytest-xdist this
+# module's tests are spread over both processes, between other modules' tests.
+@pytest.fixture(scope="session")
 def work(tmp_path_factory) -> Path:
     root = tmp_path_factory.mktemp("sweep")
     (root / "small.toml").write_text(SWEEP)
     return root
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def serial(work) -> Path:
     proc = sweep_cli("small.toml", "--out", "serial", "--workers", "0", cwd=work)
     assert proc.returncode == 1, proc.stderr  # the noisy point fails frame-problem's checks
