@@ -83,7 +83,7 @@ def one_view() -> dict:
 # The longest units start first (``LONGEST_FIRST``, measured with ``--durations``), the rest
 # in collection order (``--no-loadscope-reorder``), so that neither process is left with a long
 # test at the end. pytest-xdist's own ``--dist loadgroup`` would do the grouping from marks,
-# but cannot with pytest 9.2 (pytest-xdist issue #1386: the groups are silently dropped).
+# but cannot with pytest 9.2 (pytest-xdist #1386 on GitHub: the groups are silently dropped).
 
 SHARED = {
     "builtin_runs": (
@@ -92,6 +92,7 @@ SHARED = {
             "tests/test_builtin.py::",
             "tests/test_recording.py::",
             "tests/test_report.py::",
+            "tests/test_recording_outcome.py::",
             "tests/test_calibrate_command.py::test_calibrate_a_recording_recovers_",
             "tests/test_calibrate_command.py::test_recording_inputs_are_the_runs",
             "tests/test_calibrate_command.py::test_in_run_calibration_meets_",
