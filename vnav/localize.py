@@ -359,16 +359,7 @@ class Localizer:
         ValueError
             As ``localize``, or for a time earlier than the previous image's.
         """
-        exposure = _exposure(
-            self.camera,
-            T_w_b,
-            T_b_c,
-            self.cone,
-            self.far_m,
-            noise=self.noise,
-            cov_T_w_b=cov_T_w_b,
-            cov_T_b_c=cov_T_b_c,
-        )
+        exposure = self._exposure(T_w_b, T_b_c, cov_T_w_b, cov_T_b_c)
         observations = [_observation(exposure, d, depth) for d in detections]
         estimates = [
             _localize(o, d, with_covariance=True)
@@ -378,6 +369,24 @@ class Localizer:
             for i, result in track.update(t_s, exposure, observations).items():
                 estimates[i] = estimates[i].with_result(name, result)
         return estimates
+
+    def _exposure(
+        self,
+        T_w_b: np.ndarray,
+        T_b_c: np.ndarray,
+        cov_T_w_b: np.ndarray | None,
+        cov_T_b_c: np.ndarray | None,
+    ) -> Exposure:
+        return _exposure(
+            self.camera,
+            T_w_b,
+            T_b_c,
+            self.cone,
+            self.far_m,
+            noise=self.noise,
+            cov_T_w_b=cov_T_w_b,
+            cov_T_b_c=cov_T_b_c,
+        )
 
     def estimate_with_pose(
         self,
@@ -398,16 +407,6 @@ class Localizer:
         m = method(method_name)
         if m.images != "one":
             raise ValueError(f"{method_name} does not estimate from one image ({m.images!r})")
-        exposure = _exposure(
-            self.camera,
-            T_w_b,
-            T_b_c,
-            self.cone,
-            self.far_m,
-            noise=self.noise,
-            cov_T_w_b=None,
-            cov_T_b_c=None,
-        )
-        obs = _observation(exposure, detection, depth)
+        obs = _observation(self._exposure(T_w_b, T_b_c, None, None), detection, depth)
         p_w = None if obs is None else m.estimator.estimate(obs)
         return None if p_w is None or isinstance(p_w, NoEstimate) else p_w
