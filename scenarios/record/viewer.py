@@ -270,21 +270,7 @@ def blueprint(
     """
     if view not in VIEWS:
         raise ValueError(f"view must be one of {list(VIEWS)}, got {view!r}")
-    eye = None
-    if eye_w is not None and look_target_w is not None:
-        eye = rrb.EyeControls3D(position=eye_w, look_target=look_target_w, eye_up=[0, 0, 1])
-    world = rrb.Spatial3DView(
-        name="world",
-        origin=entity.WORLD,
-        # The depth image would also be drawn back-projected in 3D; the world-frame cloud
-        # computed by vnav (world/depth_cloud) is the one to look at here. The mounts are
-        # centimetres apart: seen from metres away they are one frame with three labels.
-        contents=["+ $origin/**", f"- /{entity.DEPTH}", *_NO_MOUNTS],
-        eye_controls=eye,
-        # Seen from metres away the camera's label would sit on the body's (they are 15 cm
-        # apart): the close-up names both.
-        overrides={entity.CAMERA: rr.TransformAxes3D.from_fields(show_frame=False)},
-    )
+    world = _world_view(eye_w, look_target_w)
     if mounts_T_w_c is not None:
         close_up = mounts_close_up(mounts_T_w_c)
     elif close_up_cone_w is not None:
@@ -299,19 +285,8 @@ def blueprint(
                 _lower_tabs(view, error_top_m or {}, cone0_top_m, latency),
                 row_shares=[4, 6] if latency else [3, 5],
             ),
-            rrb.Vertical(
-                # A calibrated run's lesson is in the mounts close-up: it gets half the width.
-                rrb.Horizontal(
-                    world, close_up, column_shares=[3, 2] if mounts_T_w_c is None else [1, 1]
-                ),
-                rrb.Tabs(
-                    rrb.TextDocumentView(name="state at the time cursor", origin=entity.STATE),
-                    rrb.TextDocumentView(
-                        name="scenario" if verdict is None else f"scenario, checks: {verdict}",
-                        origin=entity.DESCRIPTION,
-                    ),
-                ),
-                row_shares=[1, 1] if latency or mounts_T_w_c is not None else [3, 2],
+            _right_column(
+                world, close_up, verdict, latency=latency, mounts=mounts_T_w_c is not None
             ),
             column_shares=[2, 3],
         ),
@@ -321,6 +296,50 @@ def blueprint(
             timeline="sim_time" if latency else "tick",
         ),
         collapse_panels=True,
+    )
+
+
+def _world_view(eye_w, look_target_w) -> rrb.Spatial3DView:
+    """The world in 3D, its eye at ``eye_w`` looking at ``look_target_w`` (world frame)."""
+    eye = None
+    if eye_w is not None and look_target_w is not None:
+        eye = rrb.EyeControls3D(position=eye_w, look_target=look_target_w, eye_up=[0, 0, 1])
+    return rrb.Spatial3DView(
+        name="world",
+        origin=entity.WORLD,
+        # The depth image would also be drawn back-projected in 3D; the world-frame cloud
+        # computed by vnav (world/depth_cloud) is the one to look at here. The mounts are
+        # centimetres apart: seen from metres away they are one frame with three labels.
+        contents=["+ $origin/**", f"- /{entity.DEPTH}", *_NO_MOUNTS],
+        eye_controls=eye,
+        # Seen from metres away the camera's label would sit on the body's (they are 15 cm
+        # apart): the close-up names both.
+        overrides={entity.CAMERA: rr.TransformAxes3D.from_fields(show_frame=False)},
+    )
+
+
+def _right_column(
+    world: rrb.Spatial3DView,
+    close_up: rrb.Spatial3DView,
+    verdict: str | None,
+    *,
+    latency: bool,
+    mounts: bool,
+) -> rrb.Vertical:
+    """The world and the close-up above, the state panel and the scenario document below.
+    With latency (the time block) or a calibrated run's mounts the panel gets half the
+    height."""
+    return rrb.Vertical(
+        # A calibrated run's lesson is in the mounts close-up: it gets half the width.
+        rrb.Horizontal(world, close_up, column_shares=[1, 1] if mounts else [3, 2]),
+        rrb.Tabs(
+            rrb.TextDocumentView(name="state at the time cursor", origin=entity.STATE),
+            rrb.TextDocumentView(
+                name="scenario" if verdict is None else f"scenario, checks: {verdict}",
+                origin=entity.DESCRIPTION,
+            ),
+        ),
+        row_shares=[1, 1] if latency or mounts else [3, 2],
     )
 
 
