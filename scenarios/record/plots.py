@@ -54,8 +54,19 @@ def error_against_range_png(result: RunResult) -> bytes:
     """
     columns = 2
     rows = -(-len(METHODS) // columns)
-    fig = _figure(7.2, 2.8 * rows)
-    axes = fig.subplots(rows, columns).ravel()
+    width_in, height_in = 7.2, 2.8 * rows
+    fig = _figure(width_in, height_in)
+    # Fixed margins in inches, not tight_layout: measuring every label costs an extra draw,
+    # a third of the plot's time, paid by every run.
+    margins = {
+        "left": 0.7 / width_in,
+        "right": 1.0 - 0.45 / width_in,
+        "bottom": 0.5 / height_in,
+        "top": 1.0 - 0.62 / height_in,
+        "wspace": 0.45,
+        "hspace": 0.5,
+    }
+    axes = fig.subplots(rows, columns, gridspec_kw=margins).ravel()
     for ax in axes[len(METHODS) :]:
         ax.set_visible(False)
     for ax, m in zip(axes, METHODS, strict=False):
@@ -92,8 +103,9 @@ def error_against_range_png(result: RunResult) -> bytes:
         "error against range (filled: inside the contract's domain; grey: the bound)",
         color=_FOREGROUND,
         fontsize=9.5,
+        y=1.0 - 0.12 / height_in,
+        va="top",
     )
-    fig.tight_layout()
     return _png(fig)
 
 
