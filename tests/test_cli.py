@@ -726,3 +726,30 @@ def test_a_second_run_into_the_same_directory_is_refused(tmp_path, capsys):
     with outputs.directory_lock(tmp_path):  # another run holds it (flock is per open file)
         assert main(["run", "frame-problem", "--out", str(tmp_path), "--duration", "0.5"]) == 2
     assert "another vnav-demo command is writing into" in capsys.readouterr().err
+
+
+def test_a_lock_file_taken_by_a_directory_is_one_line_exit_2(tmp_path):
+    """The directory's lock name taken by a directory: no run can lock it; said in one line."""
+    from scenarios.record import outputs
+
+    (tmp_path / outputs.LOCK_NAME).mkdir()
+    proc = subprocess.run(
+        [sys.executable, "-m", "scenarios.cli", "run", "frame-problem", "--out", str(tmp_path)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr
+    assert outputs.LOCK_NAME in proc.stderr and "is a directory" in proc.stderr.lower()
+    assert [p.name for p in tmp_path.iterdir()] == [outputs.LOCK_NAME]
+
+
+@pytest.mark.parametrize("which", ["truth", "pnp"])
+def test_export_name_taken_by_a_directory_is_refused_before_running(tmp_path, capsys, which):
+    (tmp_path / f"frame-problem.{which}.tum").mkdir()
+    args = ["run", "frame-problem", "--export", "tum", "--out", str(tmp_path), "--quiet"]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "is a directory" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == [f"frame-problem.{which}.tum"]
