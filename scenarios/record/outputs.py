@@ -69,8 +69,8 @@ class OutputError(OSError):
 
 
 class LockError(OutputError):
-    """A directory's lock file cannot be opened (its name is taken by a directory, the
-    directory cannot be written...); the message names it and says why."""
+    """A directory's lock file cannot be opened (its name is taken by a directory...); the
+    message (``str``) names it and says why."""
 
 
 def temp_path(final: Path, kind: str = "partial", pid: int | None = None) -> Path:
@@ -522,9 +522,12 @@ def directory_lock(out_dir: Path) -> Iterator[None]:
         fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
     except OSError as exc:
         reason = (
-            "is a directory" if exc.errno == errno.EISDIR else f"cannot be opened: {exc.strerror}"
+            "is a directory" if exc.errno == errno.EISDIR else f"cannot be opened ({exc.strerror})"
         )
-        raise LockError(exc.errno, f"{lock} {reason}; it is the directory's lock file") from None
+        raise LockError(
+            f"{lock} {reason}: vnav-demo locks the output directory with a file of that name; "
+            "remove or rename it"
+        ) from None
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         try:
