@@ -94,6 +94,26 @@ def test_a_failed_move_puts_the_old_pair_back(tmp_path, good_rrd, monkeypatch):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["s.json", "s.rrd"]
 
 
+def test_an_interrupt_mid_swap_puts_the_old_pair_back(tmp_path, good_rrd, monkeypatch):
+    """SIGTERM and Ctrl-C raise in the main thread between any two renames of the swap."""
+    _old_pair(tmp_path)
+    pair = _pair(tmp_path, good_rrd)
+    real_replace = os.replace
+
+    def replace(src, dst):
+        if Path(src) == pair.json_tmp:  # the recording is in place, its report not yet
+            raise KeyboardInterrupt
+        real_replace(src, dst)
+
+    monkeypatch.setattr(outputs.os, "replace", replace)
+    with pytest.raises(KeyboardInterrupt):
+        pair.commit()
+    monkeypatch.undo()
+    assert (tmp_path / "s.rrd").read_bytes() == b"old recording"
+    assert (tmp_path / "s.json").read_text() == "old report"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.json", "s.rrd"]
+
+
 def test_json_write_error_is_an_output_error(tmp_path, monkeypatch):
     pair = outputs.OutputPair(tmp_path / "s.rrd", tmp_path / "s.json")
 

@@ -3,8 +3,9 @@ whatever instant the run is stopped (SIGKILL included).
 
 Every file is first written under a hidden temporary name beside its final one, made by
 ``temp_path`` alone: ``.vnav-demo.<pid>.<name>.partial`` for the new file, ``.old`` for the
-previous one while a pair is swapped and ``.journal`` for the swap's journal. These are the
-only names this program removes: a user's file never matches them.
+previous one while a pair is swapped and ``.journal`` for the swap's journal. Apart from a
+new file it put in place itself (a swap undone), these are the only files this program
+removes: a user's file never has such a name, whatever its suffix.
 
 ``write_atomic`` writes one file: the temporary file is flushed to the disk (``fsync``) and
 renamed over the final name. ``OutputPair.commit`` puts a recording and its report in place
@@ -38,6 +39,7 @@ from pathlib import Path
 
 __all__ = [
     "LOCK_NAME",
+    "TEMP_PREFIX",
     "LockError",
     "OutputError",
     "OutputPair",
@@ -463,7 +465,9 @@ def _stale(path: Path) -> bool:
 def remove_stale_partials(out_dir: Path) -> list[Path]:
     """End the work of runs into ``out_dir`` whose process no longer exists: finish or roll
     back their interrupted commits (``OutputPair``'s journals), then delete their temporary
-    files. Only names made by ``temp_path`` are touched.
+    files. Only names made by ``temp_path`` are touched (and the final names of an undone
+    swap). A ``.old`` file with no journal beside it is left alone (a swap deletes its
+    journal last), as are the files of a run whose journal is not one this program wrote.
 
     Returns
     -------
