@@ -548,10 +548,13 @@ def test_sigterm_and_sighup_end_the_run_like_ctrl_c(tmp_path, signame, first_pai
         stderr=subprocess.PIPE,
         text=True,
     )
+    from scenarios.record import outputs
+
+    writing = outputs.temp_path(tmp_path / "orbit.rrd", pid=proc.pid)
     deadline = time.monotonic() + 60
-    while not list(tmp_path.glob(".orbit.rrd.*.partial")) and time.monotonic() < deadline:
+    while not writing.exists() and time.monotonic() < deadline:
         time.sleep(0.05)
-    assert list(tmp_path.glob(".orbit.rrd.*.partial")), "the run never started writing"
+    assert writing.exists(), "the run never started writing"
     proc.send_signal(signum)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 128 + signum, err
@@ -726,3 +729,47 @@ def test_a_second_run_into_the_same_directory_is_refused(tmp_path, capsys):
     with outputs.directory_lock(tmp_path):  # another run holds it (flock is per open file)
         assert main(["run", "frame-problem", "--out", str(tmp_path), "--duration", "0.5"]) == 2
     assert "another vnav-demo command is writing into" in capsys.readouterr().err
+
+
+def test_a_lock_file_taken_by_a_directory_is_one_line_exit_2(tmp_path):
+    """The directory's lock name taken by a directory: no run can lock it; said in one line."""
+    from scenarios.record import outputs
+
+    (tmp_path / outputs.LOCK_NAME).mkdir()
+    proc = subprocess.run(
+        [sys.executable, "-m", "scenarios.cli", "run", "frame-problem", "--out", str(tmp_path)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr
+    assert outputs.LOCK_NAME in proc.stderr and "is a directory" in proc.stderr.lower()
+    assert [p.name for p in tmp_path.iterdir()] == [outputs.LOCK_NAME]
+
+
+@pytest.mark.parametrize("which", ["truth", "pnp"])
+def test_export_name_taken_by_a_directory_is_refused_before_running(tmp_path, capsys, which):
+    (tmp_path / f"frame-problem.{which}.tum").mkdir()
+    args = ["run", "frame-problem", "--export", "tum", "--out", str(tmp_path), "--quiet"]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "is a directory" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == [f"frame-problem.{which}.tum"]
+
+
+def test_a_dead_runs_commit_that_cannot_be_ended_stops_the_run(tmp_path, capsys, monkeypatch):
+    """Writing over a pair whose killed commit is not ended could bring the dead run's files
+    back later: the run stops first (one line, exit 3, nothing written)."""
+    import errno
+
+    from scenarios.record import outputs
+
+    def cannot(out_dir):
+        raise PermissionError(errno.EACCES, "Permission denied", str(out_dir / "x"))
+
+    monkeypatch.setattr(outputs, "remove_stale_partials", cannot)
+    assert main(["run", "frame-problem", "--out", str(tmp_path), "--duration", "0.5"]) == 3
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "cannot end a dead run's work" in err
+    assert [p.name for p in tmp_path.iterdir()] == [outputs.LOCK_NAME]

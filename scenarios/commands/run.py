@@ -36,6 +36,7 @@ from scenarios.commands.common import (
 )
 from scenarios.commands.console import WIDTH, say
 from scenarios.commands.console import error as _error
+from scenarios.record import outputs
 from scenarios.run.evaluate import MATCH_GATE_M
 from scenarios.scenario import builtin
 from scenarios.scenario.spec import MAX_SEED, ScenarioError, ScenarioSpec, load_toml
@@ -74,10 +75,16 @@ def resolve(targets: list[str], run_all: bool) -> list[ScenarioSpec]:
     return specs
 
 
-def check_outputs(specs: list[ScenarioSpec], out_dir: Path) -> None:
-    """Refuse outputs that could not be written: an existing directory under a file's name."""
+def check_outputs(specs: list[ScenarioSpec], out_dir: Path, export: str | None = None) -> None:
+    """Refuse outputs that could not be written: an existing directory under a file's name
+    (the recording, the report and, with ``export="tum"``, the TUM files)."""
+    from scenarios.judge import tum
+
     for spec in specs:
-        for path in pipeline.output_paths(spec, out_dir):
+        paths = pipeline.output_paths(spec, out_dir)
+        if export == "tum":
+            paths = (*paths, *tum.output_paths(spec.name, out_dir))
+        for path in paths:
             if path.is_dir():
                 raise InputError(f"{path} is a directory; the run would write a file there")
 
@@ -311,13 +318,17 @@ def run_one(spec: ScenarioSpec, args: argparse.Namespace, out_dir: Path) -> tupl
 
 
 def _export_tum(spec: ScenarioSpec, outcome: pipeline.Outcome, out_dir: Path) -> list[Path]:
-    """``NAME.truth.tum`` and ``NAME.pnp.tum`` (``scenarios.judge.tum``)."""
+    """Write ``NAME.truth.tum`` and ``NAME.pnp.tum`` (``scenarios.judge.tum``), each complete
+    or not at all (``scenarios.record.outputs.write_atomic``); return their paths."""
     from scenarios.judge import tum
     from vnav.camera import PinholeCamera
 
     cam = spec.scene.camera
     camera = PinholeCamera.from_fovy(cam.fovy_deg, cam.width, cam.height)
-    return tum.write_tum_files(outcome.result, camera, out_dir)
+    files = tum.tum_files(outcome.result, camera, out_dir)
+    for path, text in files.items():
+        outputs.write_atomic(path, lambda tmp, text=text: tmp.write_text(text, encoding="utf-8"))
+    return list(files)
 
 
 def _validate(args: argparse.Namespace) -> tuple[list[ScenarioSpec], Path]:
@@ -335,7 +346,7 @@ def _validate(args: argparse.Namespace) -> tuple[list[ScenarioSpec], Path]:
         specs = [dataclasses.replace(s, duration_s=min(args.duration, s.end_s)) for s in specs]
     check_lengths(specs, args.max_ticks)
     out_dir = prepare_out_dir(args.out)
-    check_outputs(specs, out_dir)
+    check_outputs(specs, out_dir, getattr(args, "export", None))
     return specs, out_dir
 
 
