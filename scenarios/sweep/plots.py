@@ -56,7 +56,7 @@ MEDIAN_STYLE = {"linestyle": "-", "marker": "o", "markersize": 4.0, "linewidth":
 P90_STYLE = {
     "linestyle": "--",
     "marker": "o",
-    "markersize": 4.0,
+    "markersize": 6.5,  # larger than the median's dot: where the two agree, a ring round it
     "markerfacecolor": "none",  # open: a point whose neighbours are missing still shows
     "linewidth": 1.0,
 }
@@ -158,27 +158,33 @@ def key_curves(plan: SweepPlan, episodes: list[Episode], key: str) -> list[Curve
 # ------------------------------------------------------------------ figures
 @dataclass(frozen=True)
 class _Layout:
-    """Panels in a grid of ``nrows`` x ``ncols``; sizes in inches."""
+    """Panels in a grid of ``nrows`` x ``ncols``, titles of ``title_lines``; sizes in inches."""
 
     n: int
     ncols: int
     nrows: int
     panel_w: float
     panel_h: float
+    title_lines: int
     gap_w: float = 0.25
     left: float = 0.75
     right: float = 1.9  # the legend
     top: float = 0.45
 
     @classmethod
-    def of(cls, n: int) -> _Layout:
-        ncols = 1 if n == 1 else 2 if n <= 4 else 3 if n <= 9 else 4
+    def of(cls, n: int, title_lines: int) -> _Layout:
+        ncols = n if n <= 3 else 2 if n == 4 else 3 if n <= 9 else 4
         size = (4.5, 3.1) if n == 1 else (3.0, 2.1)
-        return cls(n, ncols, math.ceil(n / ncols), *size)
+        return cls(n, ncols, math.ceil(n / ncols), *size, title_lines)
+
+    @property
+    def titles_h(self) -> float:
+        """Height of a panel's title."""
+        return 0.14 * self.title_lines + (0.08 if self.title_lines else 0.0)
 
     @property
     def gap_h(self) -> float:
-        return 0.45 if self.n > 1 else 0.0  # room for the panels' titles
+        return 0.3 + self.titles_h if self.n > 1 else 0.0
 
     @property
     def width(self) -> float:
@@ -195,10 +201,11 @@ def _figure(title: str, xlabel: str, panel_titles: list[str], note: list[str]):
     it is empty), a legend column on the right and ``note`` (wrapped) below."""
     from matplotlib.figure import Figure  # no pyplot: no global state, no GUI backend
 
-    lay = _Layout.of(len(panel_titles))
+    title_lines = max((t.count("\n") + 1 for t in panel_titles if t), default=0)
+    lay = _Layout.of(len(panel_titles), title_lines)
     lines = [line for part in note for line in textwrap.wrap(part, lay.note_chars)]
     bottom = 0.55 + 0.13 * len(lines)
-    top = lay.top + (0.2 if lay.n > 1 else 0.0)
+    top = lay.top + lay.titles_h
     height = bottom + lay.nrows * lay.panel_h + (lay.nrows - 1) * lay.gap_h + top
     fig = Figure(figsize=(lay.width, height), dpi=100)
     grid = fig.add_gridspec(
@@ -249,7 +256,7 @@ def _finish(fig, axes: list, shown: list[float]) -> None:
             ax.set_ylim(bottom=0.0)
         if not ax.lines:
             ax.text(0.5, 0.5, "no estimate", transform=ax.transAxes, ha="center", fontsize=8)
-    drawn = {line.get_gid().split(":")[0] for ax in axes for line in ax.lines}
+    drawn = {line.get_label().split()[0] for ax in axes for line in ax.lines}
     handles = [
         Line2D([], [], color=np.array(m.color_rgb) / 255.0, **MEDIAN_STYLE, label=m.name)
         for m in METHODS
@@ -294,15 +301,20 @@ def _per_point(plan: SweepPlan, episodes: list[Episode]) -> str:
     return f"{lo} to {hi} episodes (of its {len(plan.seeds)} seeds: the sweep is not complete)"
 
 
-def _panels_note(plan: SweepPlan, varied: list[str], episodes: list[Episode]) -> str:
-    """What the panels are, what is fixed, how many episodes in all."""
+def _panels_note(plan: SweepPlan, panels: str, episodes: list[Episode]) -> str:
+    """``panels`` (what a panel is, or empty), what is fixed, how many episodes in all."""
     swept = set(swept_keys(plan))
     fixed = {k: plan.points[0].values[k] for k in plan.keys if k not in swept}
-    parts = [f"one panel per value of {', '.join(varied)}"] if varied else []
+    parts = [panels] if panels else []
     parts += [f"fixed: {label(fixed)}"] if fixed else []
     parts += [f"{len(episodes)} episodes in {len(plan.points)} grid points"]
     text = "; ".join(parts)
     return text[0].upper() + text[1:] + "."
+
+
+def _panel_title(values: dict[str, Any]) -> str:
+    """A panel's title: ``key = value``, one line per key (none for no key)."""
+    return "\n".join(label({k: v}) for k, v in values.items())
 
 
 def _too_many(title: str, n: int, what: str):
@@ -327,7 +339,7 @@ def _too_many(title: str, n: int, what: str):
 def error_vs_key_figure(plan: SweepPlan, episodes: list[Episode], key: str):
     """The figure of ``error_vs_key_png`` (a matplotlib ``Figure``): one panel per combination
     of the other swept keys (its title their values), each method's ``key_curves`` in it; a
-    line's gid is ``<method>:median`` or ``<method>:p90``."""
+    line's label is ``<method> median`` or ``<method> p90``."""
     title = f"{plan.scenario}: error against {key}"
     others = [k for k in swept_keys(plan) if k != key]
     curves = key_curves(plan, episodes, key)
@@ -338,9 +350,11 @@ def error_vs_key_figure(plan: SweepPlan, episodes: list[Episode], key: str):
         f"Each point: one grid point's {_per_point(plan, episodes)}: the median (solid, "
         "filled) and 90th percentile (dashed, open) of the episodes' own median errors; an "
         "episode where a method gave no estimate is left out of that method's point.",
-        _panels_note(plan, others, episodes),
+        _panels_note(
+            plan, f"one panel per value of {', '.join(others)}" if others else "", episodes
+        ),
     ]
-    fig, axes = _figure(title, key, [label(c) if c else "" for c in combos], note)
+    fig, axes = _figure(title, key, [_panel_title(c) for c in combos], note)
     x, labels = _positions(_distinct(plan, key))
     colors = {m.name: np.array(m.color_rgb) / 255.0 for m in METHODS}
     shown: list[float] = []
@@ -352,9 +366,13 @@ def error_vs_key_figure(plan: SweepPlan, episodes: list[Episode], key: str):
         for c in curves:
             if c.others == combo and np.isfinite(c.median_m).any():
                 ax.plot(
-                    x, c.median_m, color=colors[c.method], gid=f"{c.method}:median", **MEDIAN_STYLE
+                    x,
+                    c.median_m,
+                    color=colors[c.method],
+                    label=f"{c.method} median",
+                    **MEDIAN_STYLE,
                 )
-                ax.plot(x, c.p90_m, color=colors[c.method], gid=f"{c.method}:p90", **P90_STYLE)
+                ax.plot(x, c.p90_m, color=colors[c.method], label=f"{c.method} p90", **P90_STYLE)
                 shown += [*c.median_m[np.isfinite(c.median_m)], *c.p90_m[np.isfinite(c.p90_m)]]
     _finish(fig, axes, shown)
     return fig
@@ -368,7 +386,7 @@ def error_vs_key_png(plan: SweepPlan, episodes: list[Episode], key: str) -> byte
 def error_vs_range_figure(plan: SweepPlan, episodes: list[Episode]):
     """Every estimate's error against its range, binned, per method: one panel per
     combination of the swept keys (a grid point, its seeds' estimates pooled), the same range
-    bins in each; a line's gid is ``<method>:median`` or ``<method>:p90``."""
+    bins in each; a line's label is ``<method> median`` or ``<method> p90``."""
     title = f"{plan.scenario}: error against range"
     swept = swept_keys(plan)
     groups = _groups(plan, swept)
@@ -381,9 +399,11 @@ def error_vs_range_figure(plan: SweepPlan, episodes: list[Episode]):
         f"(the same in every panel; bins with fewer than {MIN_PER_BIN} estimates left out): "
         "the median (solid, filled) and 90th percentile (dashed, open) of the errors in each "
         "bin.",
-        _panels_note(plan, swept, episodes).replace("per value of", "per grid point: values of"),
+        _panels_note(
+            plan, f"one panel per grid point ({', '.join(swept)})" if swept else "", episodes
+        ),
     ]
-    fig, axes = _figure(title, "range (m)", [label(c) if c else "" for c, _ in groups], note)
+    fig, axes = _figure(title, "range (m)", [_panel_title(c) for c, _ in groups], note)
     shown: list[float] = []
     if ranges.size:
         edges = np.linspace(ranges.min(), ranges.max() + 1e-9, RANGE_BINS + 1)
@@ -397,8 +417,8 @@ def error_vs_range_figure(plan: SweepPlan, episodes: list[Episode]):
                 median, p90 = _binned(r[method == m.name], err[method == m.name], edges)
                 if np.isfinite(median).any():
                     color = np.array(m.color_rgb) / 255.0
-                    ax.plot(centres, median, color=color, gid=f"{m.name}:median", **MEDIAN_STYLE)
-                    ax.plot(centres, p90, color=color, gid=f"{m.name}:p90", **P90_STYLE)
+                    ax.plot(centres, median, color=color, label=f"{m.name} median", **MEDIAN_STYLE)
+                    ax.plot(centres, p90, color=color, label=f"{m.name} p90", **P90_STYLE)
                     shown += [*median[np.isfinite(median)], *p90[np.isfinite(p90)]]
     _finish(fig, axes, shown)
     return fig
