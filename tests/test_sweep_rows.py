@@ -171,6 +171,14 @@ def test_error_vs_key_has_a_curve_per_value_of_the_other_key(figures, rng, skip)
                     assert (math.isnan(y) and expected is None) or y == expected, (m, stat, x)
                     compared += 1
     assert compared == 2 * len(METHOD_NAMES) * len(sweep.points)
+    for curve in plots.key_curves(sweep, episodes, "camera.pitch_down_deg"):
+        for x, n in zip(curve.x, curve.episodes, strict=True):
+            (point,) = [
+                p
+                for p in doc["points"]
+                if p["values"] == {"camera.pitch_down_deg": x, **curve.others}
+            ]
+            assert n == point["methods"][curve.method]["episodes_with_estimates"]
     caption = _caption(fig)
     per_point = "5 episodes" if not skip else "3 to 5 episodes"
     assert f"one grid point's {per_point}" in caption
