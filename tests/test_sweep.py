@@ -19,11 +19,12 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
 from scenarios.sweep import engine as engines
-from scenarios.sweep.rows import row_columns
+from scenarios.sweep.rows import TABLES_VERSION, row_columns
 from vnav import metrics
 from vnav.methods import METHOD_NAMES
 
@@ -87,18 +88,47 @@ def test_serial_rows(serial):
     assert table.column_names == [
         "point",
         "seed",
-        "noise.attitude_std_deg",
+        "noise__attitude_std_deg",
         "duration_s",
         *row_columns(),
     ]
     got = rows(serial)
     assert [(r["point"], r["seed"]) for r in got] == [(p, s) for p in (0, 1) for s in (1, 2, 3)]
-    noiseless = [r["depth_image.median_m"] for r in got if r["point"] == 0]
-    noisy = [r["depth_image.median_m"] for r in got if r["point"] == 1]
+    noiseless = [r["depth_image__median_m"] for r in got if r["point"] == 0]
+    noisy = [r["depth_image__median_m"] for r in got if r["point"] == 1]
     assert len(set(noiseless)) == 1  # no noise: the seed changes nothing
     assert len(set(noisy)) == 3  # 1 deg of attitude noise: each seed its own
     assert all(r["status"] == "passed" for r in got if r["point"] == 0)
     assert all(r["status"] == "failed" and r["failed_checks"] for r in got if r["point"] == 1)
+
+
+def test_tables_read_without_quoting(serial):
+    """Both tables' column names are plain identifiers (SQL needs no quotes, pandas'
+    attribute access works); the metadata maps each grid key to its column; failed_checks is
+    a list of check names, as the journal and summary.json hold them."""
+    results = pq.read_table(serial / "results.parquet")
+    estimates = pq.read_table(serial / "estimates.parquet")
+    for name in [*results.column_names, *estimates.column_names]:
+        assert name.isidentifier() and name.isascii() and "." not in name, name
+    for table in (results, estimates):
+        held = json.loads(table.schema.metadata[b"vnav.sweep"])
+        assert held["tables_version"] == TABLES_VERSION
+        assert held["grid_columns"] == {
+            "noise.attitude_std_deg": "noise__attitude_std_deg",
+            "duration_s": "duration_s",
+        }
+    failed_checks = results.schema.field("failed_checks").type
+    assert pa.types.is_list(failed_checks) and failed_checks.value_type == pa.string()
+    summary = json.loads((serial / "summary.json").read_text())
+    for r in rows(serial):
+        journal = json.loads((serial / "episodes" / f"p{r['point']}-s{r['seed']}.json").read_text())
+        assert r["failed_checks"] == journal["row"]["failed_checks"]
+        assert all(isinstance(c, str) and c for c in r["failed_checks"])
+        assert (r["status"] == "failed") == bool(r["failed_checks"])
+    worst = summary["worst"][0]
+    (row,) = [r for r in rows(serial) if (r["point"], r["seed"]) == (worst["point"], worst["seed"])]
+    assert worst["failed_checks"] == row["failed_checks"]
+    assert worst["depth_image__median_m"] == row["depth_image__median_m"]
 
 
 @pytest.mark.parametrize("workers", ["1", "2"])
@@ -297,7 +327,7 @@ def test_summary_agrees_with_the_tables(serial):
         for m in METHOD_NAMES:
             got = point["methods"][m]
             for stat in ("median", "rmse"):
-                per_episode = np.array([r[f"{m}.{stat}_m"] for r in mine])
+                per_episode = np.array([r[f"{m}__{stat}_m"] for r in mine])
                 per_episode = per_episode[np.isfinite(per_episode)]
                 if per_episode.size:
                     across = got[f"{stat}_m"]
@@ -311,11 +341,11 @@ def test_summary_agrees_with_the_tables(serial):
                 e["error_m"] for e in estimates if e["point"] == point["index"] and e["method"] == m
             ]
             pooled = metrics.error_stats(np.array(errors, dtype=float))
-            assert got["pooled"]["count"] == len(errors) == sum(r[f"{m}.count"] for r in mine)
+            assert got["pooled"]["count"] == len(errors) == sum(r[f"{m}__count"] for r in mine)
             if errors:
                 for stat in ("median", "rmse", "mean", "max"):
                     assert got["pooled"][stat] == pytest.approx(pooled[stat], rel=1e-12)
-        worst = max(mine, key=lambda r: (not r["passed"], r["depth_image.median_m"]))
+        worst = max(mine, key=lambda r: (not r["passed"], r["depth_image__median_m"]))
         assert point["worst"]["seed"] == worst["seed"]
 
 
@@ -339,7 +369,7 @@ def test_worst_seed_replays_to_the_same_numbers(work, serial):
     for m in METHOD_NAMES:
         for stat, value in report["methods"][m]["position_error_m"].items():
             if stat in ("count", "mean", "median", "rmse", "max"):
-                column = f"{m}.{stat}" if stat == "count" else f"{m}.{stat}_m"
+                column = f"{m}__{stat}" if stat == "count" else f"{m}__{stat}_m"
                 assert same(row[column], math.nan if value is None else value), column
     assert row["detections"] == report["detections"]
 
@@ -421,7 +451,7 @@ def test_record_worst(work, serial):
     (row,) = [r for r in rows(serial) if (r["point"], r["seed"]) == (1, worst["seed"])]
     assert (
         report["methods"]["depth_image"]["position_error_m"]["median"]
-        == row["depth_image.median_m"]
+        == row["depth_image__median_m"]
     )
 
 

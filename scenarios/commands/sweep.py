@@ -36,7 +36,7 @@ from scenarios.record import outputs
 from scenarios.sweep import engine as engines
 from scenarios.sweep import plots, summary
 from scenarios.sweep.plan import SweepError, SweepPlan, load
-from scenarios.sweep.rows import Episode, method_column
+from scenarios.sweep.rows import method_column
 from scenarios.sweep.store import SweepStore, pyarrow_missing
 
 __all__ = ["command"]
@@ -244,14 +244,12 @@ def _write_summary(
     """``plots/*.png`` and then ``summary.json``, from every finished episode."""
     import json
 
-    import numpy as np
-
     episodes = store.sorted_episodes()
     plots_dir = out_dir / "plots"
     plots_dir.mkdir(exist_ok=True)
     for name, key in plots.plot_names(store.plan).items():
         if key is None:
-            png = plots.error_vs_range_png(store.plan, _estimate_arrays(episodes, np))
+            png = plots.error_vs_range_png(store.plan, episodes)
         else:
             png = plots.error_vs_key_png(store.plan, episodes, key)
         outputs.write_atomic(plots_dir / name, lambda tmp, png=png: tmp.write_bytes(png))
@@ -265,14 +263,6 @@ def _write_summary(
     )
     text = json.dumps(doc, indent=1, allow_nan=False) + "\n"
     outputs.write_atomic(out_dir / "summary.json", lambda tmp: tmp.write_text(text))
-
-
-def _estimate_arrays(episodes: list[Episode], np) -> dict:
-    return {
-        "method": np.array([m for e in episodes for m in e.estimates["method"]], dtype=str),
-        "range_m": np.array([r for e in episodes for r in e.estimates["range_m"]], dtype=float),
-        "error_m": np.array([r for e in episodes for r in e.estimates["error_m"]], dtype=float),
-    }
 
 
 def _final(

@@ -8,6 +8,10 @@
     DIR/results.parquet      one row per finished episode (point, seed, grid values, numbers)
     DIR/estimates.parquet    one row per estimate (episode, tick, cone, method, range, error)
 
+The tables' column names are plain identifiers (``scenarios.sweep.rows``: a grid key's dots
+become ``__``); each table's schema metadata ``vnav.sweep`` holds the sweep's fingerprint, the
+tables' version and the grid key of each grid column.
+
 Every file is written whole or not at all (``scenarios.record.outputs.write_atomic``). The journal
 is the record: an episode is finished once its file is there, so an interrupted sweep loses
 at most the episodes that were running, and ``--resume`` runs only the missing ones. The two
@@ -26,16 +30,22 @@ from typing import Any
 
 from scenarios.record.outputs import OutputError, write_atomic
 from scenarios.sweep.plan import SweepError, SweepPlan
-from scenarios.sweep.rows import ESTIMATE_COLUMNS, Episode, row_columns
+from scenarios.sweep.rows import (
+    ESTIMATE_COLUMNS,
+    TABLES_VERSION,
+    Episode,
+    grid_column,
+    row_columns,
+)
 
-__all__ = ["DERIVED", "MANIFEST", "SweepStore", "pyarrow_missing"]
+__all__ = ["DERIVED", "MANIFEST", "SweepStore", "pyarrow_missing", "table_metadata"]
 
 MANIFEST = "sweep.json"
 RESULTS, ESTIMATES = "results.parquet", "estimates.parquet"
 DERIVED = ("summary.json", "plots")
 """Files made from the whole journal at the end; removed when a sweep (re)starts, so that
 what is there always describes the tables beside it."""
-MANIFEST_VERSION = 1
+MANIFEST_VERSION = 2  # 2: journal rows with the tables' column names (rows.TABLES_VERSION)
 FLUSH_EVERY_S = 5.0
 
 
@@ -192,7 +202,7 @@ class SweepStore:
 
         start = time.monotonic()
         episodes = self.sorted_episodes()
-        meta = {"vnav.sweep": json.dumps({"fingerprint": self.plan.fingerprint})}
+        meta = {"vnav.sweep": json.dumps(table_metadata(self.plan))}
         results = results_table(self.plan, episodes).replace_schema_metadata(meta)
         estimates = estimates_table(episodes).replace_schema_metadata(meta)
         write_atomic(self.dir / RESULTS, lambda tmp: pq.write_table(results, tmp))
@@ -229,8 +239,19 @@ def _column(values: list[Any]):
         return pa.array([json.dumps(v) for v in values])
 
 
+def table_metadata(plan: SweepPlan) -> dict[str, Any]:
+    """What each table's schema metadata ``vnav.sweep`` holds (as JSON): the sweep's
+    ``fingerprint``, ``tables_version`` and ``grid_columns``, each grid key to its column."""
+    return {
+        "fingerprint": plan.fingerprint,
+        "tables_version": TABLES_VERSION,
+        "grid_columns": {key: grid_column(key) for key in plan.keys},
+    }
+
+
 def results_table(plan: SweepPlan, episodes: list[Episode]):
-    """One row per episode: ``point``, ``seed``, each grid key, then ``row_columns()``."""
+    """One row per episode: ``point``, ``seed``, each grid key's column (``grid_column``), then
+    ``row_columns()``; ``failed_checks`` is a list of strings."""
     import pyarrow as pa
 
     columns: dict[str, Any] = {
@@ -238,13 +259,15 @@ def results_table(plan: SweepPlan, episodes: list[Episode]):
         "seed": pa.array([e.seed for e in episodes], pa.int64()),
     }
     for key in plan.keys:
-        columns[key] = _column([plan.points[e.point].values[key] for e in episodes])
+        columns[grid_column(key)] = _column([plan.points[e.point].values[key] for e in episodes])
     for name in row_columns():
         values = [e.row[name] for e in episodes]
-        if name.endswith(".count") or name in _INT_COLUMNS:
+        if name.endswith("__count") or name in _INT_COLUMNS:
             columns[name] = pa.array(values, pa.int64())
         elif name in _TEXT_COLUMNS:
             columns[name] = pa.array(values, pa.string())
+        elif name in _LIST_COLUMNS:
+            columns[name] = pa.array(values, pa.list_(pa.string()))
         elif name == "passed":
             columns[name] = pa.array(values, pa.bool_())
         else:
@@ -254,7 +277,8 @@ def results_table(plan: SweepPlan, episodes: list[Episode]):
 
 _INT_COLUMNS = {"camera_ticks", "detections", "matched_detections", "cones_in_view"}
 _INT_COLUMNS |= {"cones_detected"}
-_TEXT_COLUMNS = {"status", "failed_checks", "message"}
+_TEXT_COLUMNS = {"status", "message"}
+_LIST_COLUMNS = {"failed_checks"}
 
 
 def estimates_table(episodes: list[Episode]):

@@ -23,7 +23,8 @@ from vnav.methods import METHOD_NAMES
 
 __all__ = ["SUMMARY_VERSION", "build", "rank_key", "replay_command", "worst"]
 
-SUMMARY_VERSION = 1
+SUMMARY_VERSION = 2
+"""2: ``failed_checks`` a list, the rank figure named as its column (``depth_image__median_m``)."""
 _STATUS_ORDER = {"diverged": 0, "failed": 1, "passed": 2}
 
 
@@ -116,7 +117,7 @@ def _worst_entry(plan: SweepPlan, e: Episode, out_dir: str, point_file: str) -> 
         "seed": e.seed,
         "status": e.row["status"],
         "failed_checks": e.row["failed_checks"],
-        f"{plan.rank_by}.median_m": _num(e.row[method_column(plan.rank_by, "median")]),
+        method_column(plan.rank_by, "median"): _num(e.row[method_column(plan.rank_by, "median")]),
         "replay": replay_command(out_dir, point_file, e.seed),
     }
 
