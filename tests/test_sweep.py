@@ -180,7 +180,9 @@ def test_a_killed_worker_costs_no_episode(work, serial):
             break
     assert done_before < 6  # killed mid-sweep
     assert proc.returncode == 1, err  # as the serial sweep: the noisy point fails its checks
-    assert "6 of 6 episodes" in out
+    assert "6 of 6 episodes" in out and "raylet" not in out  # Ray's paragraphs kept off
+    # Said in one line (twice if both its episodes' losses came in after its restart).
+    assert set(err.splitlines()) == {"a Ray worker's process died: its episodes run again"}
     assert_same_rows(rows(out_dir), rows(serial))
     assert_same_rows(
         pq.read_table(out_dir / "estimates.parquet").to_pylist(),

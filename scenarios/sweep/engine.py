@@ -23,11 +23,12 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import re
 import signal
 import socket
 import time
 from collections import deque
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -195,6 +196,7 @@ class RayEngine:
         self._ray = ray
         self._actors: list[Any] = []
         self._owns_ray = address is None
+        self._unquiet = _quiet_lost_worker_messages()
         start = time.perf_counter()
         try:
             if address is None:
@@ -292,6 +294,7 @@ class RayEngine:
                     logger.debug("could not kill a worker", exc_info=True)
         self._actors = []
         self._ray.shutdown()
+        self._unquiet()
 
 
 @dataclass(frozen=True)
@@ -385,6 +388,48 @@ def join_cluster(address: str, workers: int | None) -> int:
             "each) would wait for more; ask for fewer with --workers"
         )
     return workers or max(1, cpus)
+
+
+_LOST_WORKER_MESSAGE = re.compile(
+    r"A worker died or was killed while executing a task"
+    r"|Task \S+ failed\. There are \S+ retries remaining"
+)
+"""What Ray's driver prints on stdout when a worker's process dies (a paragraph each, with
+advice on the OOM killer), whatever ``log_to_driver`` says; the engine handles that and says
+so in one line."""
+
+
+def _quiet_lost_worker_messages() -> Callable[[], None]:
+    """Send Ray's messages about a lost worker (``_LOST_WORKER_MESSAGE``) to this module's
+    debug log instead of stdout, where the sweep's own output goes; Ray's other messages are
+    printed as before. Returns what undoes it.
+
+    Ray's driver prints the errors its raylets publish through the private
+    ``ray._private.worker.print_to_stdstream``; where a Ray version has no such function,
+    nothing is changed (the messages are printed).
+    """
+    try:
+        from ray._private import worker as ray_worker
+    except ImportError:
+        return lambda: None
+    printer = getattr(ray_worker, "print_to_stdstream", None)
+    if printer is None:
+        return lambda: None
+
+    def print_others(data: dict[str, Any], *args: Any, **kwargs: Any) -> None:
+        lines = data.get("lines") or []
+        if data.get("pid") == "raylet" and all(_LOST_WORKER_MESSAGE.match(s) for s in lines):
+            for line in lines:
+                logger.debug("Ray: %s", line)
+        else:
+            printer(data, *args, **kwargs)
+
+    ray_worker.print_to_stdstream = print_others
+
+    def undo() -> None:
+        ray_worker.print_to_stdstream = printer
+
+    return undo
 
 
 @contextlib.contextmanager
