@@ -4,8 +4,8 @@ Everything that can be checked before running is checked first (the extra is ins
 sweep file and every grid point parse, the options, the output directory and what it holds),
 so bad input exits with status 2 and runs nothing. Exit statuses: 0 every episode passed its
 checks, 1 some failed or diverged, 2 bad input, 3 some episode could not run (an internal
-error or a lost worker: ``--resume`` runs it again), 128 + N on signal N (what finished is
-kept: ``--resume`` goes on from there).
+error, or its worker lost on every try: ``--resume`` runs it again), 128 + N on signal N
+(what finished is kept: ``--resume`` goes on from there).
 """
 
 from __future__ import annotations

@@ -88,8 +88,8 @@ class Task:
 
 @dataclass(frozen=True)
 class Failure:
-    """An episode that could not run (an internal error or a lost worker): not a result;
-    ``--resume`` runs it again."""
+    """An episode that could not run (an internal error, or its worker lost on every try):
+    not a result; ``--resume`` runs it again."""
 
     point: int
     seed: int
