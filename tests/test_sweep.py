@@ -361,14 +361,18 @@ def test_ray_engine_reuses_each_workers_scene(work, serial):
 def test_on_ray_an_episode_that_raises_or_kills_its_worker_costs_itself_only(
     monkeypatch, tmp_path, work, serial
 ):
-    """On one Ray worker: an episode that raises is not run again (a real error, its actor
-    lives on); one that kills its worker's process every time is run 1 + EPISODE_RETRIES
-    times, alone after the first (the worker restarted each time), then given up; the four
-    others give the serial rows."""
+    """On one Ray worker: an episode that raises is not run again (a real error: its actor
+    lives on); one that kills its worker's process every time runs 1 + EPISODE_RETRIES times
+    (the worker restarted each time), alone after the first, so that it costs no other
+    episode more than the one try they shared; the others give the serial rows. Once Ray's
+    restarts are used up, the worker is gone and the episodes left come back as failures."""
+    from collections import Counter
+
     from scenarios.sweep.episode import EpisodeRunner
     from scenarios.sweep.plan import load
 
-    raised, crashed = tmp_path / "raised", tmp_path / "crashed"
+    started = tmp_path / "started"
+    raiser, crasher = (0, 1), (0, 2)
 
     # The engine's worker class with two faults added (a subclass of EpisodeRunner, not of
     # the patched name, which the workers could no longer import).
@@ -377,42 +381,49 @@ def test_on_ray_an_episode_that_raises_or_kills_its_worker_costs_itself_only(
             return os.getpid()
 
         def run(self, scenario_toml, point, seed):
-            if (point, seed) == (0, 1):
-                with raised.open("a") as f:
-                    f.write(f"{os.getpid()}\n")
+            with started.open("a") as f:
+                f.write(f"{point} {seed} {os.getpid()}\n")
+            if (point, seed) == raiser:
                 raise RuntimeError("a bug")
-            if (point, seed) == (1, 2):
-                with crashed.open("a") as f:
-                    f.write(f"{os.getpid()}\n")
+            if (point, seed) == crasher:
                 os._exit(1)
             return super().run(scenario_toml, point, seed)
 
     monkeypatch.setattr(engines, "_Worker", Faulty)
     plan = load(work / "small.toml")
+    tasks = {(p, s): engines.Task(p, s, plan.points[p].scenario_toml) for p, s in plan.episodes}
     engine = engines.RayEngine(workers=1)
     try:
         import ray
 
         (actor,) = engine._actors
-        tasks = [engines.Task(p, s, plan.points[p].scenario_toml) for p, s in plan.episodes]
-        results = list(engine.run(tasks))
+        results = list(engine.run(tasks.values()))
         pid_after = ray.get(actor.ready.options(max_task_retries=-1).remote())  # restarted
+        runs = [tuple(map(int, line.split())) for line in started.read_text().splitlines()]
+        # Its restarts used up (MAX_RESTARTS, all by the crasher), the worker dies for good.
+        assert engines.MAX_RESTARTS == 1 + engines.EPISODE_RETRIES
+        later = list(engine.run([tasks[crasher], tasks[0, 3]]))
     finally:
         engine.close()
     failures = {(r.point, r.seed): r.error for r in results if isinstance(r, engines.Failure)}
-    assert failures.keys() == {(0, 1), (1, 2)}
-    assert failures[0, 1] == "RuntimeError: a bug"
-    assert "lost its Ray worker 3 times" in failures[1, 2]
-    assert len(raised.read_text().split()) == 1  # not run again
-    crash_pids = crashed.read_text().split()
-    assert len(crash_pids) == 1 + engines.EPISODE_RETRIES == 3
-    assert len(set(crash_pids)) == 3 and str(pid_after) not in crash_pids  # restarted each time
+    assert failures.keys() == {raiser, crasher}
+    assert failures[raiser] == "RuntimeError: a bug"
+    assert "lost its Ray worker 3 times" in failures[crasher]
+    starts = Counter((p, s) for p, s, _ in runs)
+    assert starts[raiser] == 1  # not run again
+    assert starts[crasher] == 1 + engines.EPISODE_RETRIES == 3
+    crash_pids = {pid for p, s, pid in runs if (p, s) == crasher}
+    assert len(crash_pids) == 3 and pid_after not in crash_pids  # restarted each time
+    others = [n for key, n in starts.items() if key not in (raiser, crasher)]
+    assert len(others) == 4 and sum(others) <= 4 + engines.IN_FLIGHT_PER_WORKER - 1
     episodes = {(r.point, r.seed): r.row for r in results if not isinstance(r, engines.Failure)}
-    assert sorted(episodes) == [(0, 2), (0, 3), (1, 1), (1, 3)]
+    assert sorted(episodes) == [(0, 3), (1, 1), (1, 2), (1, 3)]
     for r in rows(serial):
         if (r["point"], r["seed"]) in episodes:
             got = episodes[r["point"], r["seed"]]
             assert [k for k in got if k != "wall_s" and not same(got[k], r[k])] == []
+    assert sorted((r.point, r.seed) for r in later) == [crasher, (0, 3)]
+    assert all("every Ray worker was lost" in r.error for r in later)
 
 
 def test_summary_agrees_with_the_tables(serial):
