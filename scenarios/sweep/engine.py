@@ -265,7 +265,8 @@ class RayEngine:
                 if attempt.lost < EPISODE_RETRIES:
                     queue.appendleft(_Attempt(task, attempt.lost + 1))
                     continue
-                why = f"lost its Ray worker {attempt.lost + 1} times ({_one_line(exc)})"
+                # Ray's own text is a paragraph on the OOM killer: the name says enough here
+                why = f"lost its Ray worker {attempt.lost + 1} times ({type(exc).__name__})"
                 result = Failure(task.point, task.seed, why)
             except ray.exceptions.RayError as exc:  # the episode raised: its own error
                 result = Failure(task.point, task.seed, _one_line(exc))
