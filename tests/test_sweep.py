@@ -144,6 +144,82 @@ def test_ray_workers_give_the_serial_rows(work, serial, workers):
     )
 
 
+def _descendants(pid: int) -> list[int]:
+    """The processes below ``pid`` (read from /proc: children, their children, ...)."""
+    parent_of = {}
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            # "pid (comm) state ppid ...": comm may hold spaces and parentheses.
+            fields = stat.read_text().rpartition(")")[2].split()
+        except OSError:  # gone meanwhile
+            continue
+        parent_of[int(stat.parent.name)] = int(fields[1])
+    found, frontier = [], [pid]
+    while frontier:
+        kids = [child for child, parent in parent_of.items() if parent in frontier]
+        found += kids
+        frontier = kids
+    return found
+
+
+def _ray_workers(pid: int) -> list[int]:
+    """The Ray actor processes (``ray::_Worker...``, Ray's process titles) started by the
+    command ``pid``: its own local instance's, never another's on this machine."""
+    workers = []
+    for child in _descendants(pid):
+        try:
+            title = Path(f"/proc/{child}/cmdline").read_bytes()
+        except OSError:
+            continue
+        if title.startswith(b"ray::_Worker"):
+            workers.append(child)
+    return workers
+
+
+def test_a_killed_worker_costs_no_episode(work, serial):
+    """SIGKILL of a Ray worker's process once the first episode is journalled (episodes in
+    flight on both workers): Ray restarts it, the episodes it lost run again, and the rows are
+    the serial sweep's."""
+    # As in the SIGTERM test below: on a starved machine the sweep can finish before the
+    # signal lands; that run tested nothing and is made again (at most three times).
+    for attempt in range(3):
+        out_dir = work / f"killed-{attempt}"
+        command = [sys.executable, "-m", "scenarios", "sweep", "small.toml", "--out", out_dir]
+        proc = subprocess.Popen(
+            [*command, "--workers", "2"],
+            cwd=work,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        try:
+            journal = out_dir / "episodes"
+            deadline = time.monotonic() + 180
+            while not (journal.is_dir() and any(journal.glob("*.json"))):
+                assert time.monotonic() < deadline and proc.poll() is None
+                time.sleep(0.05)
+            workers = _ray_workers(proc.pid)
+            assert len(workers) == 2, workers
+            os.kill(workers[0], signal.SIGKILL)
+            done_before = len(list(journal.glob("*.json")))
+            out, err = proc.communicate(timeout=300)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+        if done_before < 6:
+            break
+    assert done_before < 6  # killed mid-sweep
+    assert proc.returncode == 1, err  # as the serial sweep: the noisy point fails its checks
+    assert "6 of 6 episodes" in out and "raylet" not in out  # Ray's paragraphs kept off
+    # Said in one line (twice if both its episodes' losses came in after its restart).
+    assert set(err.splitlines()) == {"a Ray worker's process died: its episodes run again"}
+    assert_same_rows(rows(out_dir), rows(serial))
+    assert_same_rows(
+        pq.read_table(out_dir / "estimates.parquet").to_pylist(),
+        pq.read_table(serial / "estimates.parquet").to_pylist(),
+    )
+
+
 def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -222,7 +298,7 @@ def test_an_existing_cluster_gives_the_serial_rows(work, serial, ray_cluster):
         timeout=300,
     )
     assert proc.returncode == 2 and "has 2 CPUs: 3 workers" in proc.stderr
-    assert not (work / "more" / "sweep.json").exists()
+    assert not (work / "more").exists()
 
 
 def test_an_address_where_nothing_answers_is_refused_at_once(work):
@@ -238,7 +314,7 @@ def test_an_address_where_nothing_answers_is_refused_at_once(work):
     )
     assert proc.returncode == 2 and "cannot reach the Ray cluster" in proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1 and time.monotonic() - start < 30
-    assert not (work / "none" / "sweep.json").exists()
+    assert not (work / "none").exists()  # nothing written before the cluster is reached
 
 
 def test_an_address_that_is_not_rays_is_refused_at_once(work):
@@ -255,7 +331,7 @@ def test_an_address_that_is_not_rays_is_refused_at_once(work):
             proc = sweep_cli("small.toml", "--out", "web", "--address", given, cwd=work, timeout=60)
             assert proc.returncode == 2 and "answers, but not as a Ray cluster" in proc.stderr
             assert len(proc.stderr.strip().splitlines()) == 1 and time.monotonic() - start < 30
-            assert not (work / "web" / "sweep.json").exists()
+            assert not (work / "web").exists()
     finally:
         server.shutdown()
         server.server_close()
@@ -310,6 +386,74 @@ def test_ray_engine_reuses_each_workers_scene(work, serial):
         engine.close()
     assert len({p.spec.scene for p in plan.points}) == 1
     assert len(results) == 6 and built == 1
+
+
+def test_on_ray_an_episode_that_raises_or_kills_its_worker_costs_itself_only(
+    monkeypatch, tmp_path, work, serial
+):
+    """On one Ray worker: an episode that raises is not run again (a real error: its actor
+    lives on); one that kills its worker's process every time runs 1 + EPISODE_RETRIES times
+    (the worker restarted each time), alone after the first, so that it costs no other
+    episode more than the one try they shared; the others give the serial rows. Once Ray's
+    restarts are used up, the worker is gone and the episodes left come back as failures."""
+    from collections import Counter
+
+    from scenarios.sweep.episode import EpisodeRunner
+    from scenarios.sweep.plan import load
+
+    started = tmp_path / "started"
+    raiser, crasher = (0, 1), (0, 2)
+
+    # The engine's worker class with two faults added (a subclass of EpisodeRunner, not of
+    # the patched name, which the workers could no longer import).
+    class Faulty(EpisodeRunner):
+        def ready(self):
+            return os.getpid()
+
+        def run(self, scenario_toml, point, seed):
+            with started.open("a") as f:
+                f.write(f"{point} {seed} {os.getpid()}\n")
+            if (point, seed) == raiser:
+                raise RuntimeError("a bug")
+            if (point, seed) == crasher:
+                os._exit(1)
+            return super().run(scenario_toml, point, seed)
+
+    monkeypatch.setattr(engines, "_Worker", Faulty)
+    plan = load(work / "small.toml")
+    tasks = {(p, s): engines.Task(p, s, plan.points[p].scenario_toml) for p, s in plan.episodes}
+    engine = engines.RayEngine(workers=1)
+    try:
+        import ray
+
+        (actor,) = engine._actors
+        results = list(engine.run(tasks.values()))
+        pid_after = ray.get(actor.ready.options(max_task_retries=-1).remote())  # restarted
+        runs = [tuple(map(int, line.split())) for line in started.read_text().splitlines()]
+        # Its restarts used up (MAX_RESTARTS, all by the crasher), the worker dies for good.
+        assert engines.MAX_RESTARTS == 1 + engines.EPISODE_RETRIES
+        later = list(engine.run([tasks[crasher], tasks[0, 3]]))
+    finally:
+        engine.close()
+    failures = {(r.point, r.seed): r.error for r in results if isinstance(r, engines.Failure)}
+    assert failures.keys() == {raiser, crasher}
+    assert failures[raiser] == "RuntimeError: a bug"
+    assert "lost its Ray worker 3 times" in failures[crasher]
+    starts = Counter((p, s) for p, s, _ in runs)
+    assert starts[raiser] == 1  # not run again
+    assert starts[crasher] == 1 + engines.EPISODE_RETRIES == 3
+    crash_pids = {pid for p, s, pid in runs if (p, s) == crasher}
+    assert len(crash_pids) == 3 and pid_after not in crash_pids  # restarted each time
+    others = [n for key, n in starts.items() if key not in (raiser, crasher)]
+    assert len(others) == 4 and sum(others) <= 4 + engines.IN_FLIGHT_PER_WORKER - 1
+    episodes = {(r.point, r.seed): r.row for r in results if not isinstance(r, engines.Failure)}
+    assert sorted(episodes) == [(0, 3), (1, 1), (1, 2), (1, 3)]
+    for r in rows(serial):
+        if (r["point"], r["seed"]) in episodes:
+            got = episodes[r["point"], r["seed"]]
+            assert [k for k in got if k != "wall_s" and not same(got[k], r[k])] == []
+    assert sorted((r.point, r.seed) for r in later) == [crasher, (0, 3)]
+    assert all("every Ray worker was lost" in r.error for r in later)
 
 
 def test_summary_agrees_with_the_tables(serial):
@@ -475,6 +619,20 @@ def test_bad_input_exits_2_with_one_line(tmp_path, text, args, message):
     assert proc.returncode == 2
     assert message in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "o" / "sweep.json").exists()
+
+
+@pytest.mark.parametrize("more", [1, 1000])
+def test_more_workers_than_cpus_is_refused(tmp_path, more):
+    """Each worker takes a CPU: more would only wait (and hold memory), so more than this
+    process may use is refused, in one line, before anything is written."""
+    cpus = len(os.sched_getaffinity(0))
+    (tmp_path / "s.toml").write_text(SWEEP)
+    workers = str(cpus + more)
+    proc = sweep_cli("s.toml", "--out", "o", "--workers", workers, cwd=tmp_path, timeout=60)
+    assert proc.returncode == 2
+    assert f"--workers {workers}: this process may use {cpus} CPUs" in proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "o").exists()
 
 
 def test_another_sweep_in_the_same_directory_is_refused(work, serial):

@@ -4,8 +4,8 @@ Everything that can be checked before running is checked first (the extra is ins
 sweep file and every grid point parse, the options, the output directory and what it holds),
 so bad input exits with status 2 and runs nothing. Exit statuses: 0 every episode passed its
 checks, 1 some failed or diverged, 2 bad input, 3 some episode could not run (an internal
-error or a lost worker: ``--resume`` runs it again), 128 + N on signal N (what finished is
-kept: ``--resume`` goes on from there).
+error, or its worker lost on every try: ``--resume`` runs it again), 128 + N on signal N
+(what finished is kept: ``--resume`` goes on from there).
 """
 
 from __future__ import annotations
@@ -64,6 +64,13 @@ def _validate(args: argparse.Namespace) -> tuple[SweepPlan, Path]:
         raise InputError(f"--workers must be 0 (this process) or more, got {args.workers}")
     if args.workers == 0 and args.address:
         raise InputError("--workers 0 runs in this process; it cannot go with --address")
+    if args.workers and not args.address:
+        cpus, source = engines.usable_cpus()
+        if args.workers > cpus:  # each worker takes a CPU: more would wait, holding memory
+            raise InputError(
+                f"--workers {args.workers}: this process may use {cpus} CPUs ({source}) and "
+                f"a worker takes one: ask for at most {cpus}"
+            )
     if args.address:
         try:
             engines.check_address(args.address)
@@ -75,6 +82,11 @@ def _validate(args: argparse.Namespace) -> tuple[SweepPlan, Path]:
         plan = load(args.file)
     except SweepError as exc:
         raise InputError(str(exc)) from None
+    if args.address:  # reached before anything is written (the engine keeps the connection)
+        try:
+            engines.join_cluster(args.address, args.workers)
+        except engines.EngineError as exc:
+            raise InputError(str(exc)) from None
     out = args.out if args.out is not None else str(Path("sweeps") / Path(args.file).stem)
     return plan, prepare_out_dir(out)
 
