@@ -11,7 +11,10 @@ from typing import Any
 
 from vnav.methods import METHOD_NAMES
 
-__all__ = ["ESTIMATE_COLUMNS", "STATS", "Episode", "method_column", "row_columns"]
+__all__ = ["ESTIMATE_COLUMNS", "STATS", "STATUSES", "Episode", "method_column", "row_columns"]
+
+STATUSES = ("passed", "failed", "diverged")
+"""An episode's ``status``: every check passed, one failed or had no data, the flight diverged."""
 
 STATS = ("count", "mean", "median", "rmse", "max")
 """Per-method error statistics in each row (``scenarios.judge.report``'s, metres but ``count``)."""
