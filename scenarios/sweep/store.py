@@ -267,6 +267,8 @@ class SweepStore:
         """
         if not isinstance(entry, dict):
             raise _BadEntryError(f"{_kind(entry)}, expected a table")
+        if set(entry) == {"point", "seed", "row", "estimates"}:
+            raise _BadEntryError("written by an older vnav-demo, without the sweep's identity")
         for key in _ENTRY_KEYS:
             if key not in entry:
                 raise _BadEntryError(f"{key}: missing")
