@@ -739,3 +739,96 @@ def test_a_grid_point_is_judged_as_its_scenario(tmp_path, checkless):
     if checkless:
         outcomes = {c["name"]: c["outcome"] for c in report["checks"]}
         assert outcomes["known_height median <= 5% of range"] == "skipped"
+
+
+def _entry_edits():
+    """Ways a journal entry can be wrong, each with the reason the store gives."""
+
+    def row(**changes):
+        return lambda e: {**e, "row": {**e["row"], **changes}}
+
+    def estimates(**changes):
+        return lambda e: {**e, "estimates": {**e["estimates"], **changes}}
+
+    return [
+        (row(passed="yes"), "row.passed: str 'yes', expected a boolean"),
+        (row(status="lost"), "row.status: 'lost', expected one of"),
+        (row(camera_ticks=6.0), "row.camera_ticks: float 6.0, expected an integer"),
+        (row(extra=1), "row.extra: unknown column"),
+        (estimates(tick=[]), "estimates: columns of different lengths"),
+        (estimates(method=["magic"] * 30), "estimates.method: a value of the wrong type"),
+        (lambda e: {**e, "seed": 2}, "holds point 0 seed 2, not the episode of its name"),
+        (lambda e: {**e, "values": {"noise.attitude_std_deg": 5.0}}, "grid point 0 there is"),
+        (lambda e: [e], "list, expected a table"),
+        (lambda e: {k: v for k, v in e.items() if k != "estimates"}, "estimates: missing"),
+    ]
+
+
+@pytest.mark.parametrize(("edit", "reason"), _entry_edits())
+def test_a_journal_entry_of_the_wrong_shape_is_set_aside(tiny, tmp_path, edit, reason):
+    from scenarios.sweep.plan import load
+    from scenarios.sweep.store import SweepStore
+
+    out = copy_of_tiny(tiny, tmp_path)
+    path = out / "episodes" / "p0-s1.json"
+    path.write_text(json.dumps(edit(json.loads(path.read_text()))))
+    store = SweepStore.open(out, load(tmp_path / "tiny.toml"), resume=True)
+    assert len(store.bad_entries) == 1 and store.bad_entries[0].startswith("episodes/p0-s1.json: ")
+    assert reason in store.bad_entries[0]
+    assert store.pending() == [(0, 1)]
+
+
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda p: p.mkdir(),
+        lambda p: p.write_bytes(b"\xff\xfe not text"),
+        lambda p: p.write_text("[" * 100_000 + "]" * 100_000),
+        lambda p: p.symlink_to("/dev/zero"),
+        lambda p: p.write_text('{"point": 0, "seed": 1, "row": {}, "estimates": {}}'),
+    ],
+    ids=["directory", "not-utf8", "nested", "device", "version-1"],
+)
+def test_a_journal_entry_that_does_not_read_is_set_aside(tiny, tmp_path, make):
+    from scenarios.sweep.plan import load
+    from scenarios.sweep.store import SweepStore
+
+    out = copy_of_tiny(tiny, tmp_path)
+    path = out / "episodes" / "p1-s2.json"
+    path.unlink()
+    make(path)
+    (out / "episodes" / "notes.json").write_text("not an entry's name: not read")
+    store = SweepStore.open(out, load(tmp_path / "tiny.toml"), resume=True)
+    assert len(store.bad_entries) == 1 and store.bad_entries[0].startswith("episodes/p1-s2.json")
+    assert store.pending() == [(1, 2)]
+
+
+def test_an_entry_of_another_sweeps_seed_is_refused(tiny, tmp_path):
+    """An entry of a sweep with other seeds, named as one: refused, naming the seed."""
+    from scenarios.sweep.plan import SweepError, load
+    from scenarios.sweep.store import SweepStore
+
+    out = copy_of_tiny(tiny, tmp_path)
+    entry = json.loads((out / "episodes" / "p0-s1.json").read_text())
+    foreign = {**entry, "sweep": "0123456789abcdef", "seed": 7}
+    (out / "episodes" / "p0-s7.json").write_text(json.dumps(foreign))
+    with pytest.raises(SweepError) as info:
+        SweepStore.open(out, load(tmp_path / "tiny.toml"), resume=True)
+    assert "1 episodes of another sweep (episodes/p0-s7.json: seed 7 there is not one of" in str(
+        info.value
+    )
+
+
+def test_a_journal_without_its_manifest_is_resumed_not_overwritten(tiny, tmp_path):
+    from scenarios.sweep.plan import SweepError, load
+    from scenarios.sweep.store import SweepStore
+
+    out = copy_of_tiny(tiny, tmp_path)
+    (out / "sweep.json").unlink()
+    plan = load(tmp_path / "tiny.toml")
+    with pytest.raises(SweepError, match=r"holds the journal of this sweep .* add --resume"):
+        SweepStore.open(out, plan, resume=False)
+    store = SweepStore.open(out, plan, resume=True)
+    assert store.pending() == [] and not store.bad_entries
+    store.begin()
+    assert json.loads((out / "sweep.json").read_text())["fingerprint"] == plan.fingerprint

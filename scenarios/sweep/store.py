@@ -101,6 +101,7 @@ class SweepStore:
         self.plan = plan
         self.episodes: dict[tuple[int, int], Episode] = {}
         self.bad_entries: list[str] = []
+        self._seeds = frozenset(plan.seeds)
         self._flushed_at = 0.0
         self._flush_cost_s = 0.0
         self._new = True
@@ -276,7 +277,8 @@ class SweepStore:
         if unknown:
             raise _BadEntryError(f"{unknown[0]}: unknown key")
         if entry["journal_version"] != JOURNAL_VERSION:
-            raise _BadEntryError(f"journal_version: {entry['journal_version']!r}, expected 2")
+            version = entry["journal_version"]
+            raise _BadEntryError(f"journal_version: {version!r}, expected {JOURNAL_VERSION}")
         for key, kind in (("sweep", str), ("point", int), ("seed", int)):
             _expect(entry[key], kind, key)
         _expect(entry["scenario_sha256"], str, "scenario_sha256")
@@ -288,7 +290,7 @@ class SweepStore:
             raise _BadEntryError(f"holds point {point} seed {seed}, not the episode of its name")
         if entry["sweep"] != self.plan.fingerprint:
             raise _ForeignEntry(*self._difference(entry))
-        if point >= len(self.plan.points) or seed not in self.plan.seeds:
+        if point >= len(self.plan.points) or seed not in self._seeds:
             raise _BadEntryError(f"point {point} seed {seed} is not an episode of this sweep")
         differs = _point_difference(entry, self.plan.points[point], self.point_file(point))
         if differs:
@@ -304,7 +306,7 @@ class SweepStore:
         differs = _point_difference(entry, self.plan.points[point], self.point_file(point))
         if differs:
             return differs, True
-        if seed not in self.plan.seeds:
+        if seed not in self._seeds:
             return f"seed {seed} there is not one of this sweep's seeds", True
         return (
             f"the same episode, of a sweep of other grid points or seeds (fingerprint "
@@ -436,7 +438,7 @@ def _kind(value: Any) -> str:
 def _expect(value: Any, kind: type, where: str) -> None:
     """Raise ``_BadEntryError`` unless ``value`` is a ``kind`` (a bool is no number)."""
     if (isinstance(value, bool) and kind is not bool) or not isinstance(value, kind):
-        names = {int: "an integer", float: "a number", str: "a string", dict: "a table"}
+        names = {int: "an integer", bool: "a boolean", str: "a string", dict: "a table"}
         raise _BadEntryError(f"{where}: {_kind(value)}, expected {names.get(kind, kind.__name__)}")
 
 
