@@ -551,6 +551,7 @@ def files_of(out: Path) -> dict[str, bytes]:
             "scenario than points/frame-problem-p0.toml",
         ),
     ],
+    ids=["other-values", "other-scenario"],
 )
 def test_resume_refuses_another_sweeps_journal(tiny, tmp_path, other, named):
     """episodes/ of another sweep of the same size, put in this sweep's directory: --resume
@@ -764,7 +765,11 @@ def _entry_edits():
     ]
 
 
-@pytest.mark.parametrize(("edit", "reason"), _entry_edits())
+@pytest.mark.parametrize(
+    ("edit", "reason"),
+    _entry_edits(),
+    ids=["bool", "status", "int", "column", "lengths", "method", "name", "values", "list", "key"],
+)
 def test_a_journal_entry_of_the_wrong_shape_is_set_aside(tiny, tmp_path, edit, reason):
     from scenarios.sweep.plan import load
     from scenarios.sweep.store import SweepStore
