@@ -33,13 +33,15 @@ _INNER = r"""
 import pickle, sys
 root, frame_path, calls, with_cov = sys.argv[1], sys.argv[2], int(sys.argv[3]), sys.argv[4] == "1"
 sys.path.insert(0, root)
-from benchmarks.perception import _uncertainty_noise
+import benchmarks.perception as perception
 from vnav.detect import detect_cones
 from vnav.localize import localize
 with open(frame_path, "rb") as f:
     frame = pickle.load(f)
 det = detect_cones(frame["rgb"])[0]
-noise, cov_T_w_b = _uncertainty_noise(frame["T_w_b"])
+# Older revisions name it with a leading underscore.
+noise_of = getattr(perception, "uncertainty_noise", None) or perception._uncertainty_noise
+noise, cov_T_w_b = noise_of(frame["T_w_b"])
 def call():
     return localize(det, frame["camera"], frame["T_w_b"], frame["T_b_c"], frame["depth"],
                     far_m=frame["far_m"], noise=noise, cov_T_w_b=cov_T_w_b,
@@ -91,12 +93,12 @@ def _per_call(root: Path, frame_path: Path, calls: int, with_cov: bool) -> float
 def run(args: argparse.Namespace) -> dict:
     if shutil.which("valgrind") is None:
         raise SystemExit("benchmarks instructions: valgrind is not installed (apt-get install)")
-    from benchmarks.perception import _frame
+    from benchmarks.perception import benchmark_frame
 
     calls = getattr(args, "calls", 100)
     against = getattr(args, "against", None)
     with tempfile.TemporaryDirectory(prefix="vnav-bench-ins-") as tmp:
-        f = _frame()
+        f = benchmark_frame()
         world = f["world"]
         frame_path = Path(tmp) / "frame.pkl"
         with open(frame_path, "wb") as out:

@@ -11,10 +11,13 @@ from __future__ import annotations
 import json
 import math
 import os
+import shlex
+import shutil
 import signal
 import socket
 import subprocess
 import sys
+import textwrap
 import time
 from pathlib import Path
 
@@ -678,3 +681,347 @@ def test_an_internal_error_costs_its_episode_only(monkeypatch, tmp_path, capsys)
     assert [(r["point"], r["seed"]) for r in rows(out)] == [
         (p, s) for p in (0, 1) for s in (1, 2, 3)
     ]
+
+
+# ------------------------------------------------------------------ the journal, --resume
+# A sweep of 4 episodes of half a second, run in this process, into a directory whose name has
+# a space (the replay command must quote it). Point 0 has no noise, point 1 attitude noise.
+
+TINY = """\
+scenario = "frame-problem"
+seeds = 2
+[grid]
+"noise.attitude_std_deg" = [0.0, 1.0]
+"duration_s" = [0.5]
+"""
+TINY_OUT = "tiny done"
+
+
+@pytest.fixture(scope="session")
+def tiny(tmp_path_factory) -> tuple[Path, subprocess.CompletedProcess]:
+    """The finished tiny sweep's directory (``DIR/tiny done``) and the command's output."""
+    root = tmp_path_factory.mktemp("tiny")
+    (root / "tiny.toml").write_text(TINY)
+    proc = sweep_cli("tiny.toml", "--out", TINY_OUT, "--workers", "0", cwd=root)
+    # Half a second of frame-problem is too short for its yaw: a check fails in every episode.
+    assert proc.returncode == 1, proc.stderr
+    return root / TINY_OUT, proc
+
+
+def copy_of_tiny(tiny, tmp_path: Path) -> Path:
+    """A copy of the tiny sweep's directory in ``tmp_path/out``, its sweep file beside it."""
+    done, _ = tiny
+    (tmp_path / "tiny.toml").write_text(TINY)
+    shutil.copytree(done, tmp_path / "out")
+    return tmp_path / "out"
+
+
+def files_of(out: Path) -> dict[str, bytes]:
+    """Every file under ``out`` (but the lock) and its bytes."""
+    return {
+        str(p.relative_to(out)): p.read_bytes()
+        for p in sorted(out.rglob("*"))
+        if p.is_file() and p.name != ".vnav-demo.lock"
+    }
+
+
+@pytest.mark.parametrize(
+    ("other", "named"),
+    [
+        (
+            TINY.replace("[0.0, 1.0]", "[0.0, 2.0]"),
+            "grid point 1 there is noise.attitude_std_deg = 2.0, duration_s = 0.5; here "
+            "noise.attitude_std_deg = 1.0, duration_s = 0.5",
+        ),
+        (
+            TINY.replace('"frame-problem"', '"yaw-sweep"'),
+            "grid point 0 (noise.attitude_std_deg = 0.0, duration_s = 0.5) there runs another "
+            "scenario than points/frame-problem-p0.toml",
+        ),
+    ],
+    ids=["other-values", "other-scenario"],
+)
+def test_resume_refuses_another_sweeps_journal(tiny, tmp_path, other, named):
+    """episodes/ of another sweep of the same size, put in this sweep's directory: --resume
+    says what differs and changes nothing."""
+    out = copy_of_tiny(tiny, tmp_path)
+    (tmp_path / "other.toml").write_text(other)
+    theirs = sweep_cli("other.toml", "--out", "theirs", "--workers", "0", cwd=tmp_path)
+    assert theirs.returncode in (0, 1), theirs.stderr
+    shutil.rmtree(out / "episodes")
+    shutil.copytree(tmp_path / "theirs" / "episodes", out / "episodes")
+    before = files_of(out)
+    proc = sweep_cli("tiny.toml", "--out", "out", "--workers", "0", "--resume", cwd=tmp_path)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1 and "another sweep" in proc.stderr
+    assert named in proc.stderr
+    assert files_of(out) == before
+
+
+def test_bad_journal_entries_are_reported_and_run_again(tiny, tmp_path):
+    """Valid JSON of the wrong shape, and a FIFO named like an entry: each is said, its
+    episode runs again, and the tables equal the clean sweep's."""
+    out = copy_of_tiny(tiny, tmp_path)
+    journal = out / "episodes"
+    entry = json.loads((journal / "p0-s1.json").read_text())
+    no_status = json.loads(json.dumps(entry))
+    del no_status["row"]["status"]
+    (journal / "p0-s1.json").write_text(json.dumps(no_status))
+    (journal / "p0-s2.json").write_text(json.dumps({**entry, "seed": 2, "point": [0]}))
+    (journal / "p1-s1.json").write_text(json.dumps({**entry, "point": 1, "row": None}))
+    (journal / "p1-s2.json").unlink()
+    os.mkfifo(journal / "p1-s2.json")
+    proc = sweep_cli("tiny.toml", "--out", "out", "--workers", "0", "--resume", cwd=tmp_path)
+    assert proc.returncode == 1, proc.stderr
+    assert "Traceback" not in proc.stderr and not proc.stderr.strip()
+    said = [line for line in proc.stdout.splitlines() if "journal entries" in line]
+    assert len(said) == 1 and said[0].startswith("4 journal entries")
+    assert "(first: episodes/p0-s1.json: row.status: missing)" in said[0]
+    assert "4 to run" in proc.stdout
+    assert all(p.is_file() for p in journal.iterdir())
+    done, _ = tiny
+    assert_same_rows(rows(out), rows(done))
+
+
+def _die_writing(kind: str, path: Path) -> None:
+    """A process killed while writing ``path`` (``file``: one journal entry; ``pair``: a
+    recording and its report), leaving its temporary files behind, named as the program
+    names them."""
+    script = textwrap.dedent(
+        """
+        import os, sys
+        from pathlib import Path
+        from scenarios.record import outputs
+
+        kind, path = sys.argv[1], Path(sys.argv[2])
+        if kind == "file":
+            def write(tmp):
+                tmp.write_text("half an entry")
+                os._exit(9)
+
+            outputs.write_atomic(path, write)
+        pair = outputs.OutputPair(path.with_suffix(".rrd"), path.with_suffix(".json"))
+        pair.write_json("{}")
+        os._exit(9)
+        """
+    )
+    proc = subprocess.run([sys.executable, "-c", script, kind, str(path)], timeout=60)
+    assert proc.returncode == 9
+
+
+def test_resume_recovers_a_removed_journal_and_clears_dead_temporaries(tiny, tmp_path):
+    out = copy_of_tiny(tiny, tmp_path)
+    shutil.rmtree(out / "episodes")
+    resume = ("tiny.toml", "--out", "out", "--workers", "0", "--resume")
+    proc = sweep_cli(*resume, cwd=tmp_path)
+    assert proc.returncode == 1, proc.stderr
+    assert "4 to run" in proc.stdout
+    done, _ = tiny
+    assert_same_rows(rows(out), rows(done))
+
+    (out / "worst").mkdir()
+    _die_writing("file", out / "episodes" / "p0-s1.json")
+    _die_writing("pair", out / "worst" / "frame-problem-p1-s2")
+    (out / "worst" / "notes.txt").write_text("mine")
+    dead = [p for d in ("episodes", "worst") for p in (out / d).iterdir() if p.name[0] == "."]
+    assert len(dead) == 2
+    proc = sweep_cli(*resume, cwd=tmp_path)
+    assert proc.returncode == 1, proc.stderr
+    assert not any(p.exists() for p in dead)
+    assert (out / "worst" / "notes.txt").read_text() == "mine"
+    assert_same_rows(rows(out), rows(done))
+
+
+def test_replay_command_is_shell_quoted(tiny, tmp_path):
+    """The worst episode's command, run by a shell, replays it where the sweep's directory
+    has a space in its name."""
+    done, proc = tiny
+    worst = json.loads((done / "summary.json").read_text())["worst"][0]
+    assert f"worst: {worst['replay']}" in proc.stdout.splitlines()
+    words = shlex.split(worst["replay"])
+    assert words[2] == f"{TINY_OUT}/points/frame-problem-p{worst['point']}.toml"
+    replay_dir = tmp_path / "re play"
+    command = (
+        f'vnav-demo() {{ {shlex.quote(sys.executable)} -m scenarios "$@"; }}; '
+        f"cd {shlex.quote(str(done.parent))} && "
+        f"{worst['replay']} --out {shlex.quote(str(replay_dir))} --quiet"
+    )
+    ran = subprocess.run(["bash", "-c", command], capture_output=True, text=True, timeout=120)
+    assert ran.returncode == 1, ran.stderr
+    (report_path,) = replay_dir.glob("*.json")
+    report = json.loads(report_path.read_text())
+    (row,) = [r for r in rows(done) if (r["point"], r["seed"]) == (worst["point"], worst["seed"])]
+    for m in METHOD_NAMES:
+        for stat, value in report["methods"][m]["position_error_m"].items():
+            if stat in ("count", "mean", "median", "rmse", "max"):
+                column = f"{m}.{stat}" if stat == "count" else f"{m}.{stat}_m"
+                assert same(row[column], math.nan if value is None else value), column
+
+
+def test_seeds_that_change_nothing_are_said(tiny, tmp_path):
+    """Where no draw depends on the seed, the seeds' rows are identical, and the sweep says
+    so when it starts: for some grid points, or for all."""
+    done, proc = tiny
+    got = rows(done)
+    for point in (0, 1):
+        mine = [{k: v for k, v in r.items() if k != "seed"} for r in got if r["point"] == point]
+        identical = all(
+            all(same(r[k], mine[0][k]) for k in r) for r in mine
+        )  # point 0 has no noise, point 1 attitude noise
+        assert identical == (point == 0)
+    assert (
+        "no draw depends on the seed at 1 of 2 grid points (p0): 2 seeds give one result there"
+        in proc.stdout
+    )
+    assert "no draw depends on the seed:" not in proc.stdout
+    (tmp_path / "quiet.toml").write_text(TINY.replace("[0.0, 1.0]", "[0.0]"))
+    quiet = sweep_cli("quiet.toml", "--out", "q", "--workers", "0", cwd=tmp_path)
+    assert quiet.returncode == 1, quiet.stderr
+    assert "no draw depends on the seed: 2 seeds give one result" in quiet.stdout
+    (r1, r2) = rows(tmp_path / "q")
+    assert all(same(r1[k], r2[k]) for k in r1 if k != "seed")
+
+
+def _verdicts(report: dict) -> tuple[bool, list[str]]:
+    """A report's verdict and the checks that fail the run (failed or no data), in order."""
+    failing = [c["name"] for c in report["checks"] if c["outcome"] in ("failed", "no data")]
+    return report["passed"], failing
+
+
+@pytest.mark.parametrize("checkless", [False, True], ids=["builtin", "file-without-checks"])
+def test_a_grid_point_is_judged_as_its_scenario(tmp_path, checkless):
+    """A grid point's verdicts equal `vnav-demo run` of the same scenario with the same values
+    and seed: a built-in with its own checks, and a file without [[checks]] whose default
+    checks skip the methods that cannot apply (known_height, from straight above)."""
+    from scenarios.scenario import builtin, toml_out
+
+    scenario = builtin.REGISTRY["frame-problem"]()
+    source = '"frame-problem"'
+    if checkless:
+        del scenario["checks"]
+        (tmp_path / "mine.toml").write_text(toml_out.dumps(scenario, exact=True))
+        source = '"mine.toml"'
+    (tmp_path / "s.toml").write_text(
+        f'scenario = {source}\nseeds = [3]\n[grid]\n"noise.attitude_std_deg" = [1.0]\n'
+        '"duration_s" = [2.0]\n'
+    )
+    proc = sweep_cli("s.toml", "--out", "sweep", "--workers", "0", cwd=tmp_path)
+    assert proc.returncode in (0, 1), proc.stderr
+    (row,) = rows(tmp_path / "sweep")
+    scenario.update(name="same", duration_s=2.0, noise={"attitude_std_deg": 1.0})
+    (tmp_path / "same.toml").write_text(toml_out.dumps(scenario, exact=True))
+    run = subprocess.run(
+        [sys.executable, "-m", "scenarios", "run", "same.toml", "--seed", "3", "--out", "run"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert run.returncode == proc.returncode, run.stderr
+    report = json.loads((tmp_path / "run" / "same.json").read_text())
+    passed, failing = _verdicts(report)
+    assert (row["passed"], row["failed_checks"]) == (passed, "; ".join(failing))
+    assert (
+        row["depth_image.median_m"]
+        == report["methods"]["depth_image"]["position_error_m"]["median"]
+    )
+    if checkless:
+        outcomes = {c["name"]: c["outcome"] for c in report["checks"]}
+        assert outcomes["known_height median <= 5% of range"] == "skipped"
+
+
+def _entry_edits():
+    """Ways a journal entry can be wrong, each with the reason the store gives."""
+
+    def row(**changes):
+        return lambda e: {**e, "row": {**e["row"], **changes}}
+
+    def estimates(**changes):
+        return lambda e: {**e, "estimates": {**e["estimates"], **changes}}
+
+    return [
+        (row(passed="yes"), "row.passed: str 'yes', expected a boolean"),
+        (row(status="lost"), "row.status: 'lost', expected one of"),
+        (row(camera_ticks=6.0), "row.camera_ticks: float 6.0, expected an integer"),
+        (row(extra=1), "row.extra: unknown column"),
+        (estimates(tick=[]), "estimates: columns of different lengths"),
+        (estimates(method=["magic"] * 30), "estimates.method: a value of the wrong type"),
+        (lambda e: {**e, "seed": 2}, "holds point 0 seed 2, not the episode of its name"),
+        (lambda e: {**e, "values": {"noise.attitude_std_deg": 5.0}}, "grid point 0 there is"),
+        (lambda e: [e], "list, expected a table"),
+        (lambda e: {k: v for k, v in e.items() if k != "estimates"}, "estimates: missing"),
+    ]
+
+
+@pytest.mark.parametrize(
+    ("edit", "reason"),
+    _entry_edits(),
+    ids=["bool", "status", "int", "column", "lengths", "method", "name", "values", "list", "key"],
+)
+def test_a_journal_entry_of_the_wrong_shape_is_set_aside(tiny, tmp_path, edit, reason):
+    from scenarios.sweep.plan import load
+    from scenarios.sweep.store import SweepStore
+
+    out = copy_of_tiny(tiny, tmp_path)
+    path = out / "episodes" / "p0-s1.json"
+    path.write_text(json.dumps(edit(json.loads(path.read_text()))))
+    store = SweepStore.open(out, load(tmp_path / "tiny.toml"), resume=True)
+    assert len(store.bad_entries) == 1 and store.bad_entries[0].startswith("episodes/p0-s1.json: ")
+    assert reason in store.bad_entries[0]
+    assert store.pending() == [(0, 1)]
+
+
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda p: p.mkdir(),
+        lambda p: p.write_bytes(b"\xff\xfe not text"),
+        lambda p: p.write_text("[" * 100_000 + "]" * 100_000),
+        lambda p: p.symlink_to("/dev/zero"),
+        lambda p: p.write_text('{"point": 0, "seed": 1, "row": {}, "estimates": {}}'),
+    ],
+    ids=["directory", "not-utf8", "nested", "device", "version-1"],
+)
+def test_a_journal_entry_that_does_not_read_is_set_aside(tiny, tmp_path, make):
+    from scenarios.sweep.plan import load
+    from scenarios.sweep.store import SweepStore
+
+    out = copy_of_tiny(tiny, tmp_path)
+    path = out / "episodes" / "p1-s2.json"
+    path.unlink()
+    make(path)
+    (out / "episodes" / "notes.json").write_text("not an entry's name: not read")
+    store = SweepStore.open(out, load(tmp_path / "tiny.toml"), resume=True)
+    assert len(store.bad_entries) == 1 and store.bad_entries[0].startswith("episodes/p1-s2.json")
+    assert store.pending() == [(1, 2)]
+
+
+def test_an_entry_of_another_sweeps_seed_is_refused(tiny, tmp_path):
+    """An entry of a sweep with other seeds, named as one: refused, naming the seed."""
+    from scenarios.sweep.plan import SweepError, load
+    from scenarios.sweep.store import SweepStore
+
+    out = copy_of_tiny(tiny, tmp_path)
+    entry = json.loads((out / "episodes" / "p0-s1.json").read_text())
+    foreign = {**entry, "sweep": "0123456789abcdef", "seed": 7}
+    (out / "episodes" / "p0-s7.json").write_text(json.dumps(foreign))
+    with pytest.raises(SweepError) as info:
+        SweepStore.open(out, load(tmp_path / "tiny.toml"), resume=True)
+    assert "1 episodes of another sweep (episodes/p0-s7.json: seed 7 there is not one of" in str(
+        info.value
+    )
+
+
+def test_a_journal_without_its_manifest_is_resumed_not_overwritten(tiny, tmp_path):
+    from scenarios.sweep.plan import SweepError, load
+    from scenarios.sweep.store import SweepStore
+
+    out = copy_of_tiny(tiny, tmp_path)
+    (out / "sweep.json").unlink()
+    plan = load(tmp_path / "tiny.toml")
+    with pytest.raises(SweepError, match=r"holds the journal of this sweep .* add --resume"):
+        SweepStore.open(out, plan, resume=False)
+    store = SweepStore.open(out, plan, resume=True)
+    assert store.pending() == [] and not store.bad_entries
+    store.begin()
+    assert json.loads((out / "sweep.json").read_text())["fingerprint"] == plan.fingerprint

@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
+import shlex
 import signal
 import statistics
 import sys
@@ -35,7 +36,7 @@ from scenarios.commands.console import error as _error
 from scenarios.record import outputs
 from scenarios.sweep import engine as engines
 from scenarios.sweep import plots, summary
-from scenarios.sweep.plan import SweepError, SweepPlan, load
+from scenarios.sweep.plan import SweepError, SweepPlan, draws_from_seed, load
 from scenarios.sweep.rows import method_column
 from scenarios.sweep.store import SweepStore, pyarrow_missing
 
@@ -115,6 +116,9 @@ def _sweep(plan: SweepPlan, out_dir: Path, args: argparse.Namespace) -> int:
     pending = store.pending()
     if not args.quiet:
         say(_header(plan, store, pending, args))
+        for line in (_bad_entries(store), _seedless(plan)):
+            if line:
+                say(line)
     engine = _start_engine(args) if pending else None
     if engine is None and pending:
         return EXIT_BAD_INPUT  # said by _start_engine; nothing was written
@@ -132,9 +136,10 @@ def _sweep(plan: SweepPlan, out_dir: Path, args: argparse.Namespace) -> int:
         say(_final(store, out_dir, outcome, args, recordings))
     if outcome.stopped_by is not None:
         name = signal.Signals(outcome.stopped_by).name
+        finish = shlex.join(["vnav-demo", "sweep", args.file, "--out", str(out_dir), "--resume"])
         _error(
             f"stopped by {name}: {len(store.episodes)} of {len(plan.episodes)} episodes done; "
-            f"finish with: vnav-demo sweep {args.file} --out {out_dir} --resume"
+            f"finish with: {finish}"
         )
         return 128 + outcome.stopped_by
     if outcome.failures:
@@ -164,6 +169,37 @@ def _header(plan: SweepPlan, store: SweepStore, pending: list, args: argparse.Na
     )
 
 
+def _bad_entries(store: SweepStore) -> str | None:
+    """One line on the journal entries set aside (they run again), or None."""
+    bad = store.bad_entries
+    if not bad:
+        return None
+    return (
+        f"{len(bad)} journal entries do not read as this sweep's episodes and run again "
+        f"(first: {bad[0]})"
+    )
+
+
+def _seedless(plan: SweepPlan) -> str | None:
+    """One line where some grid points' seeds all give the same result, or None."""
+    if len(plan.seeds) < 2:
+        return None
+    idle = [p.index for p in plan.points if not draws_from_seed(p.spec)]
+    n = len(plan.seeds)
+    if len(idle) == len(plan.points):
+        return (
+            f"no draw depends on the seed: {n} seeds give one result (every [noise] figure "
+            "and timing.jitter_s are zero)"
+        )
+    if not idle:
+        return None
+    shown = ", ".join(f"p{i}" for i in idle[:5]) + (", ..." if len(idle) > 5 else "")
+    return (
+        f"no draw depends on the seed at {len(idle)} of {len(plan.points)} grid points "
+        f"({shown}): {n} seeds give one result there"
+    )
+
+
 def _start_engine(args: argparse.Namespace):
     """The engine the options ask for, or None (said in one line) if Ray cannot be joined."""
     if args.workers == 0:
@@ -183,8 +219,9 @@ def _run_pending(store: SweepStore, pending: list, engine, args: argparse.Namesp
     out = _Run()
     if not pending:
         return out
-    tasks = [engines.Task(p, s, store.plan.points[p].scenario_toml) for p, s in pending]
-    bar = _Progress(len(tasks), enabled=not args.quiet)
+    # Made as the engine takes them: a million tasks made up front take seconds.
+    tasks = (engines.Task(p, s, store.plan.points[p].scenario_toml) for p, s in pending)
+    bar = _Progress(len(pending), enabled=not args.quiet)
     start = time.perf_counter()
     bar(0, 0.0)
     try:
@@ -316,9 +353,10 @@ def _final(
             "worst: " + summary.replay_command(str(out_dir), store.point_file(w.point), w.seed)
         )
     if recordings:
+        first = shlex.join(["rerun", f"{out_dir}/{next(iter(recordings.values()))}"])
         lines.append(
             f"recorded the {len(recordings)} worst episodes in {out_dir}/worst/ "
-            f"(open one with: rerun {out_dir}/{next(iter(recordings.values()))})"
+            f"(open one with: {first})"
         )
     elif args.record_worst and store.pending():
         lines.append("--record-worst waits for a complete sweep: finish it with --resume")

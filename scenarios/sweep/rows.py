@@ -25,6 +25,7 @@ from vnav.methods import METHOD_NAMES
 __all__ = [
     "ESTIMATE_COLUMNS",
     "STATS",
+    "STATUSES",
     "TABLES_VERSION",
     "Episode",
     "grid_column",
@@ -35,6 +36,9 @@ __all__ = [
 TABLES_VERSION = 2
 """Version of the tables' columns (2: names with ``__``, ``failed_checks`` a list; 1 had dots
 and one joined string)."""
+
+STATUSES = ("passed", "failed", "diverged")
+"""An episode's ``status``: every check passed, one failed or had no data, the flight diverged."""
 
 STATS = ("count", "mean", "median", "rmse", "max")
 """Per-method error statistics in each row (``scenarios.judge.report``'s, metres but ``count``)."""

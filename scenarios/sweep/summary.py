@@ -12,6 +12,7 @@ beside it (the tests recompute them from the files).
 from __future__ import annotations
 
 import math
+import shlex
 from typing import Any
 
 import numpy as np
@@ -49,8 +50,10 @@ def worst(episodes: list[Episode], rank_by: str, k: int) -> list[Episode]:
 
 
 def replay_command(out_dir: str, point_file: str, seed: int) -> str:
-    """The command that runs an episode again, with its recording."""
-    return f"vnav-demo run {out_dir.rstrip('/')}/{point_file} --seed {seed}"
+    """The command that runs an episode again, with its recording: shell words, each quoted
+    where it needs to be (a space in the directory's name)."""
+    path = f"{out_dir.rstrip('/')}/{point_file}"
+    return shlex.join(["vnav-demo", "run", path, "--seed", str(seed)])
 
 
 def _spread(values: list[float]) -> dict[str, float | None]:
