@@ -4,14 +4,17 @@ The command line (``vnav-demo run``), the benchmarks and the tests all call ``ru
 scenario is run, judged and written the same way everywhere::
 
     run        scenarios.run.runner.run_scenario        (MuJoCo; the recording observes every tick)
-    calibrate  scenarios.judge.calibration.calibrate_run  (only if a check asks for it)
+    calibrate  scenarios.judge.calibration.calibrate_run  (only if a check asks for it; then
+               the run's images estimated again with the recovered mount)
     judge      scenarios.judge.checks.judge             (the spec's checks, else the default ones)
     finish     scenarios.record.recording.Recording.finish  (with the verdicts and calibration)
     report     scenarios.judge.report.build              (JSON)
     commit     scenarios.record.outputs.OutputPair.commit  (both files in place, or neither)
 
 The recording is finished only after the run is judged: what the checks found (and the mount
-calibration recovered) is in the recording as well as in the report.
+calibration recovered) is in the recording as well as in the report. The report's
+``timing_s`` gives the run's stages, ``calibrate``, ``judge`` and its ``total`` wall and CPU
+seconds (what ``vnav-demo run`` prints).
 """
 
 from __future__ import annotations

@@ -292,8 +292,11 @@ class RunResult:
     timing_s : dict of str to float
         Seconds spent per stage (``physics``, ``streams``, ``render``, ``detect``,
         ``localize``, ``log``) and once per run (``setup``: the world, the GL context and the
-        recording's start and finish, ``scenarios.run.runner.STAGES``); the only figures that
-        depend on the machine.
+        recording's start and finish, ``scenarios.run.runner.STAGES``); ``scenarios.pipeline``
+        adds ``calibrate`` (the calibration and the second estimate with its mount, 0 when
+        none), ``judge`` (the checks), ``total`` (wall seconds from the run's start to its
+        report) and ``total_cpu`` (the process's user and system seconds over the same span,
+        every thread's); the only figures that depend on the machine.
     poses : PoseStream or None
         The pose stream the estimator was sent (set when the run ends).
     calibration : CalibrationRecord or None
