@@ -50,7 +50,7 @@ noise in 8-bit grey levels); its keys are ``vnav.noise_model.NoiseModel``'s fiel
 made with the declared mount (``declared_mount``, the same as ``methods``) and of the same
 images estimated again with the recovered mount (``recovered_mount``): what calibrating
 gives. ``timing_s`` adds ``calibrate`` (the calibration and that second estimate), ``judge``
-(the checks) and ``total`` (the whole run, from its start to its report, wall seconds) and
+(the checks), ``total`` (the whole run, from its start to its report, wall seconds) and
 ``total_cpu`` (the process's CPU time, user and system, over the same span)."""
 
 
