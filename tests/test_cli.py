@@ -8,6 +8,7 @@ import re
 import subprocess
 import sys
 import textwrap
+import time
 from pathlib import Path
 
 import numpy as np
@@ -170,6 +171,31 @@ def test_a_check_with_no_data_says_why_and_fails(tmp_path, monkeypatch, capsys):
     assert "% (must be >= 95%)" in out and "x (must be >= 10x)" in out
     assert re.search(r"6 camera ticks, 6 detections, 6 matched", out)
     assert "detections: cones found in the images; matched: estimated within 3 m" in out
+
+
+def test_run_prints_each_scenarios_duration_and_their_total(tmp_path, monkeypatch, capsys):
+    """Each scenario's first line ends with its duration, wall and CPU seconds: its report's
+    ``timing_s`` ``total`` and ``total_cpu`` (the whole run, stages, calibration, judging and
+    recording included); with several, the summary gives the total, no less than their sum
+    and no more than the command took."""
+    started = time.perf_counter()
+    _, out = _run_in(tmp_path, monkeypatch, capsys, "frame-problem", "yaw-sweep", "--duration", "1")
+    took_s = time.perf_counter() - started
+    flat = " ".join(out.split())
+    totals = []
+    for name in ("frame-problem", "yaw-sweep"):
+        timing = json.loads((tmp_path / "out" / f"{name}.json").read_text())["timing_s"]
+        said = re.search(
+            rf"{name}: (PASSED|FAILED) \(.*? matched, ([\d.]+) s, ([\d.]+) s CPU\)", flat
+        )
+        assert said, flat
+        assert said[2] == f"{timing['total']:.1f}" and said[3] == f"{timing['total_cpu']:.1f}"
+        parts = sum(v for k, v in timing.items() if not k.startswith("total"))
+        assert parts <= timing["total"] + 1e-3 and timing["total_cpu"] > 0.0
+        totals.append(timing["total"])
+    said = re.search(r"2 scenarios: [^.]*? in ([\d.]+) s, ([\d.]+) s CPU", flat)
+    assert said, flat
+    assert sum(totals) - 0.1 <= float(said[1]) <= took_s + 0.05
 
 
 def test_copy_of_a_builtin_without_checks_passes_and_says_what_it_skipped(

@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import shlex
 import shutil
 import signal
@@ -574,6 +575,29 @@ def test_resume_after_an_interruption_runs_only_the_missing_episodes(work, seria
     assert len(after) == 6 and all(after[k] == v for k, v in before.items())
     assert_same_rows(rows(work / cut), rows(serial))
     assert json.loads((work / cut / "summary.json").read_text())["complete"] is True
+
+
+def test_sweep_prints_how_long_it_took(tmp_path):
+    """The sweep's last line is its whole duration, wall clock, from the command's start: no
+    less than its episodes took (the figure of the line before) and no more than the command
+    took, measured around it."""
+    (tmp_path / "one.toml").write_text(
+        'scenario = "frame-problem"\nseeds = 1\n[grid]\n"noise.attitude_std_deg" = [0.0]\n'
+    )
+    started = time.perf_counter()
+    proc = sweep_cli("one.toml", "--out", "one", "--workers", "0", cwd=tmp_path)
+    took_s = time.perf_counter() - started
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    episodes = re.search(r"\(1 run in ([\d.]+) s", proc.stdout)
+    total = re.search(
+        r"^took ([\d.]+) s in all, wall clock \(episodes ([\d.]+) s, planning, tables, plots "
+        r"and recordings ([\d.]+) s\)$",
+        proc.stdout.splitlines()[-1],
+    )
+    assert episodes and total, proc.stdout
+    assert total[2] == episodes[1]
+    assert float(episodes[1]) <= float(total[1]) <= took_s
+    assert float(total[1]) == pytest.approx(float(total[2]) + float(total[3]), abs=0.11)
 
 
 def test_record_worst(work, serial):

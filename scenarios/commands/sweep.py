@@ -94,16 +94,19 @@ def _validate(args: argparse.Namespace) -> tuple[SweepPlan, Path]:
 
 def command(args: argparse.Namespace) -> int:
     """Entry point of ``vnav-demo sweep``; returns the exit status."""
+    started_s = time.perf_counter()
     return guarded(
         lambda: _validate(args),
-        lambda plan, out_dir: _sweep_or_say(plan, out_dir, args),
+        lambda plan, out_dir: _sweep_or_say(plan, out_dir, args, started_s),
         kept="finished episodes are kept",
     )
 
 
-def _sweep_or_say(plan: SweepPlan, out_dir: Path, args: argparse.Namespace) -> int:
+def _sweep_or_say(
+    plan: SweepPlan, out_dir: Path, args: argparse.Namespace, started_s: float
+) -> int:
     try:
-        return _sweep(plan, out_dir, args)
+        return _sweep(plan, out_dir, args, started_s)
     except SweepError as exc:
         raise InputError(str(exc)) from None
     except OSError as exc:
@@ -111,7 +114,9 @@ def _sweep_or_say(plan: SweepPlan, out_dir: Path, args: argparse.Namespace) -> i
         return EXIT_INCOMPLETE
 
 
-def _sweep(plan: SweepPlan, out_dir: Path, args: argparse.Namespace) -> int:
+def _sweep(plan: SweepPlan, out_dir: Path, args: argparse.Namespace, started_s: float) -> int:
+    """The sweep; ``started_s`` is when the command started (``time.perf_counter``), for the
+    total duration printed at the end."""
     store = SweepStore.open(out_dir, plan, args.resume)
     pending = store.pending()
     if not args.quiet:
@@ -134,6 +139,7 @@ def _sweep(plan: SweepPlan, out_dir: Path, args: argparse.Namespace) -> int:
     _write_summary(store, out_dir, complete, recordings)
     if not args.quiet:
         say(_final(store, out_dir, outcome, args, recordings))
+        say(_took(time.perf_counter() - started_s, engine, outcome))
     if outcome.stopped_by is not None:
         name = signal.Signals(outcome.stopped_by).name
         finish = shlex.join(["vnav-demo", "sweep", args.file, "--out", str(out_dir), "--resume"])
@@ -198,6 +204,19 @@ def _seedless(plan: SweepPlan) -> str | None:
         f"no draw depends on the seed at {len(idle)} of {len(plan.points)} grid points "
         f"({shown}): {n} seeds give one result there"
     )
+
+
+def _took(total_s: float, engine, run: _Run) -> str:
+    """The sweep's whole duration, wall clock, from the command's start, and its parts: the
+    engine's start (Ray's), the episodes, and the rest (planning, tables, plots, recordings)."""
+    parts = []
+    startup_s = getattr(engine, "startup_s", None)
+    if startup_s:
+        parts.append(f"Ray start {startup_s:.1f} s")
+    parts.append(f"episodes {run.wall_s:.1f} s")
+    rest_s = total_s - run.wall_s - (startup_s or 0.0)
+    parts.append(f"planning, tables, plots and recordings {max(rest_s, 0.0):.1f} s")
+    return f"took {total_s:.1f} s in all, wall clock ({', '.join(parts)})"
 
 
 def _start_engine(args: argparse.Namespace):

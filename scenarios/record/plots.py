@@ -45,12 +45,18 @@ def _png(fig) -> bytes:
     return buffer.getvalue()
 
 
-def error_against_range_png(result: RunResult) -> bytes:
+RECOVERED_MOUNT_COLOR = (0.0, 225 / 255, 225 / 255)
+"""Cyan, as the recovered mount is drawn in the recording (``viewer.RECOVERED_MOUNT_COLOR``)."""
+
+
+def error_against_range_png(result: RunResult, recovered: RunResult | None = None) -> bytes:
     """One panel per method: each matched detection's error against its range, own y scale.
 
     Filled dots are detections inside the accuracy contract's domain, hollow ones outside it;
     the grey line is the method's bound ``max(floor, fraction * range)`` and the shaded band
-    the contract's range domain.
+    the contract's range domain. ``recovered``, the same run estimated again with the mount
+    calibration recovered (``RunResult.with_recovered_mount``), adds its errors as cyan
+    crosses.
     """
     columns = 2
     rows = -(-len(METHODS) // columns)
@@ -77,6 +83,15 @@ def error_against_range_png(result: RunResult) -> bytes:
         all_r, all_e = result.ranges_for(m.name), result.errors(m.name)
         ax.scatter(all_r, all_e, s=10, facecolors="none", edgecolors=[color], linewidths=0.7)
         ax.scatter(inside_r, inside_e, s=10, color=[color])
+        if recovered is not None:
+            ax.scatter(
+                recovered.ranges_for(m.name),
+                recovered.errors(m.name),
+                s=9,
+                marker="x",
+                color=[RECOVERED_MOUNT_COLOR],
+                linewidths=0.6,
+            )
         domain = (CONTRACT_DOMAIN.min_range_m, CONTRACT_DOMAIN.max_range_m)
         ax.axvspan(*domain, color="#ffffff", alpha=0.04, linewidth=0)
         top_r = max(float(all_r.max()) if all_r.size else 0.0, 1.0) * 1.1
@@ -99,8 +114,11 @@ def error_against_range_png(result: RunResult) -> bytes:
                 color=_FOREGROUND,
                 fontsize=9,
             )
+    title = "error against range (filled: inside the contract's domain; grey: the bound)"
+    if recovered is not None:
+        title = title[:-1] + "; cyan crosses: with the recovered mount)"
     fig.suptitle(
-        "error against range (filled: inside the contract's domain; grey: the bound)",
+        title,
         color=_FOREGROUND,
         fontsize=9.5,
         y=1.0 - 0.12 / height_in,

@@ -72,6 +72,10 @@ def _allowed(method: str) -> str:
     return f"metrics/allowed/{method}"
 
 
+def _error_recovered(method: str) -> str:
+    return f"metrics/error_recovered_mount/{method}"
+
+
 def _estimate(method: str) -> str:
     return f"world/cones/estimate/{method}"
 
@@ -142,6 +146,7 @@ entity = SimpleNamespace(
     TRUTH_VALUES="truth",
     error=_error,
     allowed=_allowed,
+    error_recovered=_error_recovered,
     estimate=_estimate,
     error_segment=_error_segment,
     ellipsoid=_ellipsoid,
@@ -265,8 +270,9 @@ def blueprint(
         names it, so that it shows without opening the tab.
     mounts_T_w_c : array_like, shape (4, 4), optional
         The true camera's pose at the last tick of a calibrated run: the close-up then looks
-        at the declared, true and recovered camera mounts (``mounts_close_up``), and the state
-        panel gets the room its mounts block needs.
+        at the declared, true and recovered camera mounts (``mounts_close_up``), the state
+        panel gets the room its mounts block needs, and each error plot also draws the error
+        with the recovered mount (``entity.error_recovered``).
     """
     if view not in VIEWS:
         raise ValueError(f"view must be one of {list(VIEWS)}, got {view!r}")
@@ -282,7 +288,13 @@ def blueprint(
             # With latency the plots and the state panel (its time block) get more room.
             rrb.Vertical(
                 _image_tabs(),
-                _lower_tabs(view, error_top_m or {}, cone0_top_m, latency),
+                _lower_tabs(
+                    view,
+                    error_top_m or {},
+                    cone0_top_m,
+                    latency,
+                    recovered_mount=mounts_T_w_c is not None,
+                ),
                 row_shares=[4, 6] if latency else [3, 5],
             ),
             _right_column(
@@ -506,19 +518,29 @@ def _gave_none(tops_m: dict[str, float | None], name: str) -> bool:
 
 
 def _error_plot(
-    name: str, tops_m: dict[str, float | None], newest_pose: bool = False
+    name: str,
+    tops_m: dict[str, float | None],
+    newest_pose: bool = False,
+    recovered_mount: bool = False,
 ) -> rrb.TimeSeriesView:
     """One checked method's mean error per tick, with the contract's bound in grey (and, if
-    ``newest_pose``, the newest-pose estimate's error in violet)."""
+    ``newest_pose``, the newest-pose estimate's error in violet; if ``recovered_mount``, the
+    error of the same images estimated again with the mount calibration recovered, in
+    ``RECOVERED_MOUNT_COLOR``)."""
     top_m = tops_m.get(name)
     paths = [entity.error(name), entity.allowed(name)]
     if _gave_none(tops_m, name):
         title = f"{name} error (m): no estimate in this run"
     else:
         title = f"{name} error (m), grey: the contract's bound"
+    if recovered_mount and not _gave_none(tops_m, name):
+        paths.append(entity.error_recovered(name))
+        title = f"{name} error (m), grey: bound, cyan: with the recovered mount"
     if newest_pose:
         paths.append(entity.NEWEST_ERROR)
         title = f"{name} error (m), grey: bound, violet: with the newest pose"
+        if recovered_mount:
+            title += ", cyan: recovered mount"
     return _series(title, paths, y_range=(0.0, top_m) if top_m is not None else None)
 
 
@@ -621,7 +643,11 @@ def _attitude_tab() -> rrb.Vertical:
 
 
 def _lower_tabs(
-    view: str, error_top_m: dict[str, float | None], cone0_top_m: float | None, latency: bool
+    view: str,
+    error_top_m: dict[str, float | None],
+    cone0_top_m: float | None,
+    latency: bool,
+    recovered_mount: bool = False,
 ) -> rrb.Tabs:
     """The tabs below the images: ``VIEWS`` first (in order), then the other plots.
 
@@ -633,18 +659,27 @@ def _lower_tabs(
     extra = []
     if latency:
         errors = rrb.Vertical(
-            _error_plot(NEWEST_POSE_METHOD, error_top_m, newest_pose=True),
+            _error_plot(
+                NEWEST_POSE_METHOD, error_top_m, newest_pose=True, recovered_mount=recovered_mount
+            ),
             *[_stream_plot(q) for q in STREAM_QUANTITIES],
             name="position error, time",
         )
         extra.append(
             rrb.Vertical(
-                *[_error_plot(name, error_top_m) for name in others], name=", ".join(others)
+                *[
+                    _error_plot(name, error_top_m, recovered_mount=recovered_mount)
+                    for name in others
+                ],
+                name=", ".join(others),
             )
         )
     else:
         errors = rrb.Vertical(
-            *[_error_plot(name, error_top_m) for name in PREFERENCE],
+            *[
+                _error_plot(name, error_top_m, recovered_mount=recovered_mount)
+                for name in PREFERENCE
+            ],
             # A method without an estimate keeps only its title ("no estimate in this run"):
             # the others get the height their axes need to be read.
             row_shares=[1 if _gave_none(error_top_m, name) else 4 for name in PREFERENCE],

@@ -364,6 +364,7 @@ def comment(path: str, table: dict[str, Any] | None = None) -> str | None:
     keys = {
         "": TOP,
         "camera": CAMERA,
+        "camera.mount_error": MOUNT_ERROR,
         "noise": NOISE,
         "timing": TIMING,
         "flight": tuple(k for mode in FLIGHT_MODES.values() for k in mode),
