@@ -167,10 +167,10 @@ LINE_UI_POINTS = rr.Radius.ui_points(0.9)
 thin in the close-up and visible in the wide view."""
 RAY_UI_POINTS = rr.Radius.ui_points(0.7)
 MOUNT_ARROW_UI_POINTS = {
-    "declared": rr.Radius.ui_points(1.5),
-    "recovered": rr.Radius.ui_points(0.8),
+    "declared": rr.Radius.ui_points(CAMERA_AXES_UI_POINTS),
+    "recovered": rr.Radius.ui_points(0.5 * CAMERA_AXES_UI_POINTS),
 }
-"""The declared mount's axes are about as thick on screen as the true camera's; the recovered
+"""The declared mount's axes are as thick on screen as the true camera's; the recovered
 mount's thinner, so that where they coincide with the true axes those stay in sight."""
 
 ELLIPSOID_LINE = rr.Radius.ui_points(1.8)

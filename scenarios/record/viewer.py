@@ -184,7 +184,7 @@ the true one."""
 
 AXIS_LENGTH_M = {FRAME.WORLD: 2.0, FRAME.BODY: 1.0, FRAME.CAMERA: 0.5}
 """Drawn axis length per frame: the lengths tell the three frames apart where they overlap."""
-CAMERA_AXES_UI_POINTS = 0.6
+CAMERA_AXES_UI_POINTS = 1.0
 """The camera's axes are thin arrows (``Arrows3D``, this radius on screen) where the world's
 and the body's are drawn thick (``TransformAxes3D``): the camera sits centimetres from the
 body's origin, and length alone did not tell their axes apart."""
@@ -533,11 +533,14 @@ def mounts_close_up(T_w_c: np.ndarray) -> rrb.Spatial3DView:
         contents=[
             f"+ /{entity.BODY}/**",
             f"- /{entity.DRONE}",
-            f"- /{entity.CAMERA}",
             f"- /{entity.IMAGE}",
             f"- /{entity.DEPTH}",
             f"- /{entity.DETECTIONS}/**",
         ],
+        overrides={
+            entity.CAMERA: rrb.EntityBehavior(visible=False),
+            entity.CAMERA_AXES: rrb.EntityBehavior(visible=True),
+        },
         eye_controls=rrb.EyeControls3D(
             position=se3.apply(T_w_c, MOUNTS_EYE_C),
             look_target=se3.apply(T_w_c, MOUNTS_TARGET_C),
