@@ -10,6 +10,7 @@ docs/CONVENTIONS.md; "in F" is the named transform frame an entity is drawn in):
     world/body/camera              Transform3D T_b_c (body <- camera), camera axes, Pinhole
                                    (image -> camera, true intrinsics, RDF) (static; T_b_c
                                    every tick in a scenario that slides the camera)
+    world/body/camera/axes         in camera: the camera's axes, thin arrows named on z (static)
     world/body/camera/image        in image: JPEG-compressed RGB
     world/body/camera/depth        in image: planar z-depth, PNG 16-bit mm, every 5th tick
     world/body/camera/detections   in image: Boxes2D + Points2D (apex, base keypoints)
@@ -18,6 +19,8 @@ docs/CONVENTIONS.md; "in F" is the named transform frame an entity is drawn in):
     world/body/camera_recovered    calibrated runs: Transform3D T_b_c_recovered (body <- the
                                    mount calibration recovered), static; its axes (cyan)
     world/cones/mesh, truth        in world: the cones' MuJoCo geoms; true base centres
+    world/cones/pins, pins/heads   in world: a line from each cone's apex up to PIN_TOP_M and a
+                                   head of fixed size on screen, cone 0's named (static)
     world/cones/estimate/<method>  in world: Points3D per method, every tick
     world/cones/error/<method>     in world: segment from the true cone to each estimate
     world/cones/uncertainty/<method>  in world: Ellipsoids3D, each checked estimate's
@@ -34,6 +37,8 @@ docs/CONVENTIONS.md; "in F" is the named transform frame an entity is drawn in):
     metrics/range_m                Scalars, metres
     metrics/nees/<method>          Scalars: the mean NEES of the tick's matched estimates
                                    (expected: their degrees of freedom, 3; ground_plane 2)
+    metrics/nees_clipped/<method>  Scalars: a mark just under the NEES plot's top where the
+                                   tick's NEES is above it (NaN elsewhere)
     attitude/rpy_deg, quat_xyzw    roll/pitch/yaw (deg), sign-continuous quaternion of R_w_b
     attitude/gimbal_lock, quat_sign  StateChange lanes
     coordinates/cone0_<frame>      cone 0 in world, body, camera (truth) and its estimate
@@ -46,6 +51,9 @@ docs/CONVENTIONS.md; "in F" is the named transform frame an entity is drawn in):
                                    and recovered mounts (its rows are sent at the end)
     plots/error_vs_range           image (matplotlib), logged at the end (static)
     plots/depth_scale              the depth colour scale, logged at the end (static)
+    plots/legend                   the 3D views' colours named, an image (static)
+    moment                         AnyValues (static): the tick and sim_time_s the 3D views
+                                   are framed for (scenario's show_at_s, else the last tick)
     description                    TextDocument (markdown), logged again at the end with
                                    every check's verdict and what calibration recovered
     estimator/pose_stream          sim_time only: Transform3D T_w_b of every pose sample the

@@ -6,11 +6,13 @@ Everything here is a viewer concern, declared once and shared by the recording
 - ``entity``: every Rerun entity path;
 - ``FRAME``: the named transform frames (the same names as ``vnav.frames`` and
   docs/CONVENTIONS.md: world, body, camera, and the image plane);
-- ``AXIS_LENGTH_M``: how long each frame's drawn axes are (world > body > camera);
+- ``AXIS_LENGTH_M``: how long each frame's drawn axes are (world > body > camera), the
+  camera's drawn thin (``CAMERA_AXES_UI_POINTS``); each cone's pin (``PIN_TOP_M``);
 - colours: each method's from ``vnav.methods``, the truth's, the rays', the x/y/z axes',
   the newest pose's (runs with latency: ``NEWEST_POSE_COLOR``);
 - ``STREAM_*``: the pose stream's plots against the image stamps (runs with latency);
-- ``blueprint``: the default layout; ``eye_for``: where the 3D view looks from;
+- ``blueprint``: the default layout; ``eye_for``: where the 3D view looks from, at the tick
+  ``shown_tick`` picks; ``legend_entries``: the 3D views' colours, named in a strip over them;
 - ``describe``: the markdown shown beside the recording, with the checks' verdicts
   (``checks_text``) once the run is judged.
 """
@@ -37,31 +39,45 @@ if TYPE_CHECKING:
     from scenarios.run.records import RunResult
 
 __all__ = [
+    "AXES_NOTE",
     "AXIS_COLORS",
     "AXIS_LENGTH_M",
+    "CAMERA_AXES_LABELS",
+    "CAMERA_AXES_UI_POINTS",
     "CONE0_SERIES",
     "DECLARED_MOUNT_COLOR",
+    "DEPTH_CLOUD_COLOR",
     "EXPOSURE_POSE_COLOR",
     "FRAME",
     "IMAGE_PLANE_M",
     "MOUNT_AXIS_LENGTH_M",
+    "NEES_CLIP_MARK",
+    "NEES_TOP",
     "NEWEST_POSE_COLOR",
     "NEWEST_POSE_METHOD",
+    "PIN_COLOR",
+    "PIN_HEAD_UI_POINTS",
+    "PIN_LINE_UI_POINTS",
+    "PIN_TOP_M",
     "POSE_SAMPLE_COLOR",
     "RAY_COLOR",
     "RECOVERED_MOUNT_COLOR",
     "STREAM_QUANTITIES",
     "STREAM_SERIES",
     "STREAM_WINDOW_S",
+    "TRAJECTORY_COLOR",
     "TRUTH_COLOR",
     "VERDICT_WORDS",
     "VIEWS",
+    "LegendEntry",
     "blueprint",
     "checks_summary",
     "checks_text",
     "describe",
     "entity",
     "eye_for",
+    "legend_entries",
+    "shown_tick",
 ]
 
 
@@ -314,8 +330,9 @@ def blueprint(
     view : {"errors", "coordinates", "attitude", "nees"}
         The tab shown first in the lower left panel (see ``VIEWS``).
     T_w_b : array_like, shape (4, 4), optional
-        The drone's pose at the last tick: the close-up view starts behind it, to its left
-        and above (``CLOSE_UP_EYE_B``).
+        The drone's pose at the tick the views are framed for (``shown_tick``: the scenario's
+        ``show_at_s``, else the last): the close-up view starts behind it, to its left and
+        above (``CLOSE_UP_EYE_B``).
     close_up_cone_w : array_like, shape (3,), optional
         A cone's base centre: the close-up looks at it instead of the drone, from its side
         (``cone_close_up``), to show the estimates around it and their ellipsoids.
@@ -332,7 +349,7 @@ def blueprint(
         The run's verdict in a few words (``checks_summary``): the scenario document's tab
         names it, so that it shows without opening the tab.
     mounts_T_w_c : array_like, shape (4, 4), optional
-        The true camera's pose at the last tick of a calibrated run: the close-up then looks
+        The true camera's pose at that tick of a calibrated run: the close-up then looks
         at the declared, true and recovered camera mounts (``mounts_close_up``), and the state
         panel gets the room its mounts block needs.
     """
@@ -861,14 +878,23 @@ def describe(spec: ScenarioSpec, seed: int, judged: Sequence[CheckResult] | None
         f"- cones (base centres, world): {[list(c) for c in spec.scene.cones_w]}",
         "",
         "Drawn: the world, body and camera frames (axes 2 m, 1 m, 0.5 m; x red, y green, "
-        "z blue), the drone and cones as built in MuJoCo, the ray from the camera through "
+        "z blue; the camera's thin, named on its optical axis), the drone and cones as built "
+        "in MuJoCo, each cone with an orange pin up to "
+        f"{PIN_TOP_M:g} m (cone 0's named), the ray from the camera through "
         "each detection's base pixel to the ground (yellow), each method's estimate with a "
-        "segment from the true cone, and a line from the drone to the naive estimate.",
+        "segment from the true cone, and a line from the drone to the naive estimate. The "
+        "strip over the 3D views names their colours.",
         "",
         f"Estimates: {estimates}. Truth: white.",
         "",
         _describe_timing(spec),
     ]
+    if spec.show_at_s is not None:
+        lines += [
+            "",
+            f"The 3D views are framed at t = {spec.show_at_s:g} s, where the lesson shows (the "
+            "screenshot's instant); the viewer opens at the end: move the time cursor there.",
+        ]
     if spec.checks_calibration:
         lines += ["", _describe_mounts()]
     return "\n".join(lines)
