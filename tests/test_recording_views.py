@@ -69,7 +69,8 @@ def _names_w(run) -> dict[str, np.ndarray]:
     mount_rows = [r for r in read_rows(rrd, entity.CAMERA) if r.get("Transform3D:translation")]
     at_tick = [r for r in mount_rows if r.get("tick") == tick]
     T_b_c = _pose(at_tick[0] if at_tick else mount_rows[0])
-    frames = {entity.CAMERA_AXES: T_w_b @ T_b_c}
+    T_w_c = T_w_b @ T_b_c
+    frames = {}
     for path, axes in (
         (entity.CAMERA_DECLARED, entity.CAMERA_DECLARED_AXES),
         (entity.CAMERA_RECOVERED, entity.CAMERA_RECOVERED_AXES),
@@ -89,10 +90,11 @@ def _names_w(run) -> dict[str, np.ndarray]:
         for label, v in zip(_static(rrd, path, "Arrows3D:labels"), vectors, strict=True):
             if label:
                 names[label] = se3.apply(T_w_f, 0.5 * v)
-    heads = np.array(_static(rrd, entity.CONE_PIN_HEADS, "Points3D:positions"))
-    for label, p in zip(_static(rrd, entity.CONE_PIN_HEADS, "Points3D:labels"), heads, strict=True):
-        if label:
-            names[label] = p
+    for path, T_w_f in ((entity.CONE_PIN_HEADS, np.eye(4)), (entity.CAMERA_NAME, T_w_c)):
+        points = np.array(_static(rrd, path, "Points3D:positions"))
+        for label, p in zip(_static(rrd, path, "Points3D:labels"), points, strict=True):
+            if label:
+                names[label] = se3.apply(T_w_f, p)
     return names
 
 
@@ -115,7 +117,8 @@ def test_names_in_the_3d_views_do_not_pile_up(builtin_runs, name):
 def test_camera_axes_drawn_thin_and_unlike_the_bodys(builtin_runs, name):
     """The body's axes are a ``TransformAxes3D`` (thick, named at the origin); the camera's
     are three thin arrows (a radius on screen, not in metres) along the camera's own axes,
-    half the body's length, named once, on the optical axis, so the two frames read apart."""
+    half the body's length, and its name is past the tip of the optical axis, so that the two
+    frames read apart."""
     rrd = builtin_runs[name].rrd
     assert _static(rrd, entity.BODY, "TransformAxes3D:axis_length") == [AXIS_LENGTH_M[FRAME.BODY]]
     assert _static(rrd, entity.CAMERA, "TransformAxes3D:axis_length") is None
@@ -127,7 +130,11 @@ def test_camera_axes_drawn_thin_and_unlike_the_bodys(builtin_runs, name):
     assert _static(rrd, entity.CAMERA_AXES, "Arrows3D:radii") == pytest.approx(
         [-CAMERA_AXES_UI_POINTS]
     )
-    assert _static(rrd, entity.CAMERA_AXES, "Arrows3D:labels") == ["", "", "camera"]
+    assert _static(rrd, entity.CAMERA_AXES, "Arrows3D:labels") is None
+    assert _static(rrd, entity.CAMERA_NAME, "CoordinateFrame:frame") == [FRAME.CAMERA]
+    (name_c,) = _static(rrd, entity.CAMERA_NAME, "Points3D:positions")
+    assert name_c[:2] == [0.0, 0.0] and name_c[2] > AXIS_LENGTH_M[FRAME.CAMERA]
+    assert _static(rrd, entity.CAMERA_NAME, "Points3D:labels") == ["camera"]
 
 
 @pytest.mark.parametrize("name", NAMES)

@@ -10,7 +10,8 @@ docs/CONVENTIONS.md; "in F" is the named transform frame an entity is drawn in):
     world/body/camera              Transform3D T_b_c (body <- camera), camera axes, Pinhole
                                    (image -> camera, true intrinsics, RDF) (static; T_b_c
                                    every tick in a scenario that slides the camera)
-    world/body/camera/axes         in camera: the camera's axes, thin arrows named on z (static)
+    world/body/camera/axes, name   in camera: the camera's axes, thin arrows, and its name on a
+                                   dot past the tip of z (static)
     world/body/camera/image        in image: JPEG-compressed RGB
     world/body/camera/depth        in image: planar z-depth, PNG 16-bit mm, every 5th tick
     world/body/camera/detections   in image: Boxes2D + Points2D (apex, base keypoints)
@@ -100,8 +101,8 @@ from scenarios.record.viewer import (
     AXES_NOTE,
     AXIS_COLORS,
     AXIS_LENGTH_M,
-    CAMERA_AXES_LABELS,
     CAMERA_AXES_UI_POINTS,
+    CAMERA_NAME_Z_M,
     CONE0_SERIES,
     DECLARED_MOUNT_COLOR,
     DEPTH_CLOUD_COLOR,
@@ -716,9 +717,9 @@ def _log_static(
     )
     for path in (entity.IMAGE, entity.DEPTH, entity.DETECTIONS, entity.KEYPOINTS):
         _in_frame(rec, path, FRAME.IMAGE)
-    # The camera's axes thin and named on one axis (``CAMERA_AXES_LABELS``), where the world's
-    # and the body's are thick and named at their origins: 15 cm from the body's origin, the
-    # camera's name there would sit on the body's.
+    # The camera's axes thin and its name past the tip of its optical axis
+    # (``CAMERA_NAME_Z_M``), where the world's and the body's axes are thick and named at
+    # their origins: 15 cm from the body's origin, the camera's name there sat on the body's.
     _in_frame(rec, entity.CAMERA_AXES, FRAME.CAMERA)
     rec.log(
         entity.CAMERA_AXES,
@@ -726,7 +727,17 @@ def _log_static(
             vectors=AXIS_LENGTH_M[FRAME.CAMERA] * np.eye(3),
             colors=AXIS_COLORS,
             radii=rr.Radius.ui_points(CAMERA_AXES_UI_POINTS),
-            labels=CAMERA_AXES_LABELS,
+        ),
+        static=True,
+    )
+    _in_frame(rec, entity.CAMERA_NAME, FRAME.CAMERA)
+    rec.log(
+        entity.CAMERA_NAME,
+        rr.Points3D(
+            [[0.0, 0.0, CAMERA_NAME_Z_M]],
+            colors=[AXIS_COLORS[2]],
+            radii=rr.Radius.ui_points(1.5),
+            labels=["camera"],
             show_labels=True,
         ),
         static=True,

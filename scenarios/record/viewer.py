@@ -42,8 +42,8 @@ __all__ = [
     "AXES_NOTE",
     "AXIS_COLORS",
     "AXIS_LENGTH_M",
-    "CAMERA_AXES_LABELS",
     "CAMERA_AXES_UI_POINTS",
+    "CAMERA_NAME_Z_M",
     "CONE0_SERIES",
     "DECLARED_MOUNT_COLOR",
     "DEPTH_CLOUD_COLOR",
@@ -131,6 +131,7 @@ entity = SimpleNamespace(
     DRONE="world/body/drone",
     CAMERA="world/body/camera",
     CAMERA_AXES="world/body/camera/axes",
+    CAMERA_NAME="world/body/camera/name",
     CAMERA_DECLARED="world/body/camera_declared",
     CAMERA_DECLARED_AXES="world/body/camera_declared/axes",
     CAMERA_RECOVERED="world/body/camera_recovered",
@@ -204,10 +205,12 @@ CAMERA_AXES_UI_POINTS = 1.0
 """The camera's axes are thin arrows (``Arrows3D``, this radius on screen) where the world's
 and the body's are drawn thick (``TransformAxes3D``): the camera sits centimetres from the
 body's origin, and length alone did not tell their axes apart."""
-CAMERA_AXES_LABELS = ["", "", "camera"]
-"""The camera's name sits at the middle of its optical axis z, ahead of the body: the body's
-name is at the body's origin, and in a calibrated run the declared mount's on its x axis and
-the recovered one's on its y axis, so that no two names fall on one spot."""
+CAMERA_NAME_Z_M = 0.65
+"""The camera's name sits on a small dot of its z axis' colour this far along its optical axis
+z, m, past the axis' tip (``entity.CAMERA_NAME``): the body's name is at the body's origin, and
+in a calibrated run the declared mount's on its x axis and the recovered one's on its y axis.
+Half-way along z, a camera looking 80 deg down put its name just under the body's in the
+close-up."""
 
 PIN_TOP_M = 1.7
 """Each cone has a pin: an orange line from its apex up to this height above the ground, m,
@@ -395,11 +398,15 @@ def _world_view(eye_w, look_target_w) -> rrb.Spatial3DView:
         # The depth image would also be drawn back-projected in 3D; the world-frame cloud
         # computed by vnav (world/depth_cloud) is the one to look at here. The mounts are
         # centimetres apart: seen from metres away they are one frame with three labels.
-        contents=["+ $origin/**", f"- /{entity.DEPTH}", *_NO_MOUNTS],
-        eye_controls=eye,
-        # Seen from metres away the camera's label would sit on the body's (they are 15 cm
+        # Seen from metres away the camera's name would sit on the body's (they are 15 cm
         # apart): the close-up names both.
-        overrides={entity.CAMERA_AXES: rr.Arrows3D.from_fields(show_labels=False)},
+        contents=[
+            "+ $origin/**",
+            f"- /{entity.DEPTH}",
+            f"- /{entity.CAMERA_NAME}",
+            *_NO_MOUNTS,
+        ],
+        eye_controls=eye,
     )
 
 
@@ -557,6 +564,7 @@ def mounts_close_up(T_w_c: np.ndarray) -> rrb.Spatial3DView:
         overrides={
             entity.CAMERA: rrb.EntityBehavior(visible=False),
             entity.CAMERA_AXES: rrb.EntityBehavior(visible=True),
+            entity.CAMERA_NAME: rrb.EntityBehavior(visible=True),
         },
         eye_controls=rrb.EyeControls3D(
             position=se3.apply(T_w_c, MOUNTS_EYE_C),
@@ -878,7 +886,8 @@ def describe(spec: ScenarioSpec, seed: int, judged: Sequence[CheckResult] | None
         f"- cones (base centres, world): {[list(c) for c in spec.scene.cones_w]}",
         "",
         "Drawn: the world, body and camera frames (axes 2 m, 1 m, 0.5 m; x red, y green, "
-        "z blue; the camera's thin, named on its optical axis), the drone and cones as built "
+        "z blue; the camera's thin, named past the tip of its optical axis), the drone and "
+        "cones as built "
         "in MuJoCo, each cone with an orange pin up to "
         f"{PIN_TOP_M:g} m (cone 0's named), the ray from the camera through "
         "each detection's base pixel to the ground (yellow), each method's estimate with a "
