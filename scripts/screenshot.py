@@ -39,13 +39,13 @@ SETTLE_S = 3.0
 
 
 def moment(rrd: Path) -> dict[str, float]:
-    """The recording's static ``moment`` row: ``tick`` and ``sim_time_s``."""
+    """The recording's static ``moment`` row: ``camera_tick`` and ``sim_time_s``."""
     chunks = RrdReader(str(rrd)).stream().filter(content="/moment").to_chunks()
     for chunk in chunks:
         table = pa.Table.from_batches([chunk.to_record_batch()])
         row = {name: table.column(name).to_pylist()[0] for name in table.column_names}
         # AnyValues columns are named by the value alone (some versions prefix a type).
-        tick = next((v for k, v in row.items() if k.split(":")[-1] == "tick"), None)
+        tick = next((v for k, v in row.items() if k.split(":")[-1] == "camera_tick"), None)
         sim_time_s = next((v for k, v in row.items() if k.split(":")[-1] == "sim_time_s"), None)
         if tick is not None and sim_time_s is not None:
             return {"tick": _scalar(tick), "sim_time_s": _scalar(sim_time_s)}

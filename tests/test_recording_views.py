@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from helpers import read_rows
 
+from scenarios.record.recording import nees_off_top
 from scenarios.record.viewer import (
     AXIS_LENGTH_M,
     CAMERA_AXES_UI_POINTS,
@@ -34,9 +35,10 @@ from vnav.cone import TRAFFIC_CONE
 from vnav.methods import METHODS
 
 FLOAT32_ATOL = 1e-5
-NAME_SPACING_M = 0.25
-"""The least distance between two names in the 3D views, m: 15 cm apart (the camera's name at
-its origin beside the body's), two names sat on one another in the close-up."""
+NAME_SPACING_M = 0.2
+"""The least distance between two names in the 3D views, m: about 20 points in the drone
+close-up (2.6 m away), 45 in the mounts close-up (1.2 m), a name's height; before, the
+camera's name sat 0.16 m from the body's and cone 0's on the world's origin."""
 
 NAMES = builtin.names()
 
@@ -52,9 +54,11 @@ def _pose(row) -> np.ndarray:
 
 
 def _moment(rrd) -> dict:
-    (row,) = [r for r in read_rows(rrd, entity.MOMENT) if "tick" not in r]
+    (row,) = [r for r in read_rows(rrd, entity.MOMENT) if "camera_tick" in r]
     return {
-        k.split(":")[-1]: v[0] for k, v in row.items() if k.split(":")[-1] in ("tick", "sim_time_s")
+        k.split(":")[-1]: v[0]
+        for k, v in row.items()
+        if k.split(":")[-1] in ("camera_tick", "sim_time_s")
     }
 
 
@@ -63,7 +67,7 @@ def _names_w(run) -> dict[str, np.ndarray]:
     frame's name at its origin (``TransformAxes3D`` with ``show_frame``), an arrow's at its
     middle, a point's at the point."""
     rrd = run.rrd
-    tick = _moment(rrd)["tick"]
+    tick = _moment(rrd)["camera_tick"]
     (body_row,) = [r for r in read_rows(rrd, entity.BODY) if r.get("tick") == tick]
     T_w_b = _pose(body_row)
     mount_rows = [r for r in read_rows(rrd, entity.CAMERA) if r.get("Transform3D:translation")]
@@ -183,7 +187,6 @@ def test_nees_above_the_plots_top_is_marked(builtin_runs):
     """A tick's NEES above the plot's top (``NEES_TOP``) would be cut off unmarked: it gets a
     mark just under the top, and no other tick does."""
     run = builtin_runs["uncertainty"]
-    marked = 0
     for m in ("depth_image", "ground_plane", "known_height"):
         nees = {
             r["tick"]: r["Scalars:scalars"][0]
@@ -199,11 +202,18 @@ def test_nees_above_the_plots_top_is_marked(builtin_runs):
         for tick, value in nees.items():
             if value > NEES_TOP:
                 assert marks[tick] == pytest.approx(NEES_CLIP_MARK)
-                marked += 1
             else:
                 assert np.isnan(marks[tick])
-    assert marked > 0  # the built-in's noise throws some ticks above the top
-    assert 10.0 < NEES_CLIP_MARK < NEES_TOP
+
+
+def test_nees_marks_are_exactly_the_values_off_the_top():
+    """The marks the recording logs: one just under the top for each value above it, none for
+    a value at or under it, or none at all (a tick without an estimate)."""
+    values = [1.0, NEES_TOP, NEES_TOP + 1e-9, 250.0, float("nan")]
+    marks = nees_off_top(values)
+    assert marks[2] == marks[3] == NEES_CLIP_MARK
+    assert all(np.isnan(marks[i]) for i in (0, 1, 4))
+    assert 10.0 < NEES_CLIP_MARK < NEES_TOP  # inside the plot, above its last labelled tick
 
 
 @pytest.mark.parametrize("name", NAMES)
@@ -219,7 +229,7 @@ def test_moment_is_the_tick_at_show_at_s(builtin_runs, name):
         expected = max(
             (t for t in ticks if t.t_s <= run.spec.show_at_s + 1e-9), key=lambda t: t.t_s
         )
-    assert moment["tick"] == expected.tick
+    assert moment["camera_tick"] == expected.tick
     assert moment["sim_time_s"] == pytest.approx(expected.t_s)
 
 

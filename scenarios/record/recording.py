@@ -53,7 +53,7 @@ docs/CONVENTIONS.md; "in F" is the named transform frame an entity is drawn in):
     plots/error_vs_range           image (matplotlib), logged at the end (static)
     plots/depth_scale              the depth colour scale, logged at the end (static)
     plots/legend                   the 3D views' colours named, an image (static)
-    moment                         AnyValues (static): the tick and sim_time_s the 3D views
+    moment                         AnyValues (static): camera_tick and sim_time_s the 3D views
                                    are framed for (scenario's show_at_s, else the last tick)
     description                    TextDocument (markdown), logged again at the end with
                                    every check's verdict and what calibration recovered
@@ -147,6 +147,7 @@ __all__ = [
     "Recording",
     "continuous_sign",
     "depth_for_display_mm",
+    "nees_off_top",
     "rerun_image_from_camera",
     "rerun_uv",
 ]
@@ -445,7 +446,11 @@ class Recording:
         if shown is not None:
             # Where the 3D views are framed: a screenshot (scripts/screenshots.sh) moves the
             # viewer's time cursor here.
-            rec.log(entity.MOMENT, rr.AnyValues(tick=shown.tick, sim_time_s=shown.t_s), static=True)
+            rec.log(
+                entity.MOMENT,
+                rr.AnyValues(camera_tick=shown.tick, sim_time_s=shown.t_s),
+                static=True,
+            )
         eye_w, look_target_w = eye_for(self._spec, result)
         close_up_cone_w = self._spec.scene.cones_w[0] if self._spec.close_up == "cone" else None
         rec.send_blueprint(
@@ -1202,11 +1207,15 @@ def _send_uncertainty(
                 running.append(np.nan)
                 bands.append((np.nan, np.nan))
         send(entity.nees(name), rows, rr.Scalars.columns(scalars=values))
-        # Above the plot's top a value would leave it unmarked: a triangle at its top says so.
-        clipped = [NEES_CLIP_MARK if v > NEES_TOP else np.nan for v in values]
-        send(entity.nees_clipped(name), rows, rr.Scalars.columns(scalars=clipped))
+        send(entity.nees_clipped(name), rows, rr.Scalars.columns(scalars=nees_off_top(values)))
         send(entity.nees_mean(name), rows, rr.Scalars.columns(scalars=running))
         send(entity.nees_band(name), rows, rr.Scalars.columns(scalars=np.array(bands)))
+
+
+def nees_off_top(values: Sequence[float]) -> list[float]:
+    """Per NEES value, ``NEES_CLIP_MARK`` if it is above the NEES plot's top (``NEES_TOP``),
+    else NaN (no mark): above the top a value would leave the plot unmarked."""
+    return [NEES_CLIP_MARK if v > NEES_TOP else np.nan for v in values]
 
 
 def _send_errors(send: _Sender, rows: list[_Buffered]) -> None:
