@@ -1,4 +1,5 @@
-"""Static plots as PNG (matplotlib): error against range, and the depth image's colour scale.
+"""Static plots as PNG (matplotlib): error against range, the depth image's colour scale and
+the legend of the 3D views' colours.
 
 Rerun's time-series views plot against time only; "how does each method's error grow with
 range" needs range on the x axis, so it is drawn here once per run and logged as an image.
@@ -12,10 +13,11 @@ import io
 
 import numpy as np
 
+from scenarios.record.viewer import LegendEntry
 from scenarios.run.records import RunResult
 from vnav.methods import CONTRACT_DOMAIN, METHODS
 
-__all__ = ["depth_scale_png", "error_against_range_png"]
+__all__ = ["depth_scale_png", "error_against_range_png", "legend_png"]
 
 _BACKGROUND = "#1b1b1f"
 _FOREGROUND = "#d0d0d0"
@@ -138,4 +140,51 @@ def depth_scale_png(depth_max_m: float, colormap: str = "viridis") -> bytes:
     bar = fig.colorbar(ScalarMappable(Normalize(0.0, depth_max_m), colormaps[colormap]), cax=ax)
     bar.set_label("planar depth z (m)", color=_FOREGROUND, fontsize=8)
     bar.ax.tick_params(colors=_FOREGROUND, labelsize=8)
+    return _png(fig)
+
+
+LEGEND_SIZE_IN = (8.4, 0.42)
+"""The legend strip, inches at 100 dpi: as wide as the viewer's two 3D views side by side in
+a 1400-point window, two lines high."""
+
+
+def legend_png(rows: list[list[LegendEntry]], note: str, dpi: float = 200.0) -> bytes:
+    """A strip naming each colour of the 3D views: one line per row of entries, each a dot or
+    a line of its colour before its text, and ``note`` closing the last line; drawn at
+    ``dpi`` so that the viewer's scaling keeps the text sharp."""
+    from matplotlib.lines import Line2D
+
+    fig = _figure(*LEGEND_SIZE_IN)
+    fig.set_dpi(dpi)
+    for i, row in enumerate(rows):
+        handles = [
+            Line2D(
+                [],
+                [],
+                color=np.array(e.color_rgb) / 255.0,
+                marker="o" if e.mark == "dot" else None,
+                markersize=5.5,
+                linestyle="-" if e.mark == "line" else "none",
+                linewidth=2.0,
+            )
+            for e in row
+        ]
+        labels = [e.text for e in row]
+        if i == len(rows) - 1:
+            handles.append(Line2D([], [], linestyle="none"))
+            labels.append(note)
+        fig.legend(
+            handles,
+            labels,
+            loc="upper left",
+            bbox_to_anchor=(0.0, 1.0 - i / len(rows)),
+            ncol=len(labels),
+            frameon=False,
+            fontsize=8.0,
+            labelcolor=_FOREGROUND,
+            handlelength=1.3,
+            handletextpad=0.4,
+            columnspacing=1.1,
+            borderaxespad=0.1,
+        )
     return _png(fig)

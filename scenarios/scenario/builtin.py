@@ -156,6 +156,9 @@ def transform_composer() -> Scenario:
     return {
         "name": "transform-composer",
         "view": "coordinates",
+        # Framed where body translation, yaw and camera offset are all away from the start
+        # (the flight ends back there).
+        "show_at_s": 4.0,
         "description": "Chapter 8: body translation, yaw and camera offset swept; the cone "
         "in world, body and camera frames side by side.",
         "lesson": "T_w_c = T_w_b T_b_c: the composer of chapter 8, running on a simulated drone.",
@@ -324,6 +327,8 @@ def latency() -> Scenario:
         "ignoring stamps does) is off by what the drone moved in between: |v| dt + "
         "range |omega| dt, half a metre at 6 m while yawing 100 deg/s.",
         "camera_rate_hz": 10.0,
+        # Framed in the middle of the fast yaw, where the newest pose is furthest off.
+        "show_at_s": 0.5,
         "camera": {"pitch_down_deg": 15.0},
         "cones": [{"position_w": [6.0, 0.0, 0.0]}],
         "flight": {"mode": "kinematic", "keyframes": keyframes},
