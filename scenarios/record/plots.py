@@ -10,12 +10,15 @@ no display is needed.
 from __future__ import annotations
 
 import io
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from scenarios.record.viewer import LegendEntry
 from scenarios.run.records import RunResult
 from vnav.methods import CONTRACT_DOMAIN, METHODS
+
+if TYPE_CHECKING:  # the viewer imports Rerun; a plot needs only the entries' fields
+    from scenarios.record.viewer import LegendEntry
 
 __all__ = ["depth_scale_png", "error_against_range_png", "legend_png"]
 
