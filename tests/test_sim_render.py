@@ -11,7 +11,7 @@ from helpers import mujoco_T_w_c
 from scipy.spatial.transform import Rotation
 
 from sim import names
-from sim.config import CameraConfig, SceneConfig
+from sim.config import MAX_FOVY_DEG, MIN_FOVY_DEG, CameraConfig, SceneConfig
 from sim.gl import mujoco
 from sim.render import Renderer
 from sim.world import World, build_spec
@@ -36,7 +36,14 @@ def _back_project_w(world: World, depth: np.ndarray, mask: np.ndarray) -> np.nda
 
 @pytest.mark.parametrize(
     ("width", "height", "fovy_deg"),
-    [(640, 480, 45.0), (320, 240, 60.0), (641, 479, 50.0), (640, 360, 90.0), (1024, 769, 70.0)],
+    [
+        (640, 480, 45.0),
+        (320, 240, 60.0),
+        (641, 479, 50.0),
+        (640, 360, 90.0),
+        (1024, 769, 70.0),
+        (640, 480, MIN_FOVY_DEG),  # the narrowest accepted: still within 0.05 px
+    ],
 )
 def test_sphere_centroids_match_projection(width: int, height: int, fovy_deg: float) -> None:
     cfg = SceneConfig(
@@ -158,6 +165,23 @@ def test_depth_back_projects_onto_ground_and_cone_surfaces() -> None:
         dist = _cone_surface_distance_m(p_k)
         # The rendered body is a 64-sided pyramid: at most R (1 - cos(pi/64)) = 0.2 mm inside.
         assert np.median(dist) < 0.002 and np.max(dist) < 0.01, (np.median(dist), dist.max())
+
+
+def test_the_widest_field_of_view_still_renders_the_ground_where_it_is() -> None:
+    """At ``MAX_FOVY_DEG``, looking down from 3 m: every pixel sees the ground, and its depth
+    back-projects through the pinhole intrinsics onto z = 0."""
+    cfg = SceneConfig(
+        camera=CameraConfig(pitch_down_deg=89.0, fovy_deg=MAX_FOVY_DEG),
+        cones_w=(),
+        start_position_w=(0.0, 0.0, 3.0),
+    )
+    world = World.from_config(cfg)
+    with Renderer(world) as renderer:
+        frame = renderer.render(segmentation=True)
+    ground = frame.segmentation == world.model.geom(names.GROUND_GEOM).id
+    assert ground.all()
+    z_w = _back_project_w(world, frame.depth, ground)[:, 2]
+    assert np.max(np.abs(z_w)) < 1e-4, f"ground z off by up to {np.max(np.abs(z_w)):.2e} m"
 
 
 def test_sky_depth_reads_the_far_plane() -> None:
