@@ -140,3 +140,37 @@ def test_refuses_malformed_input() -> None:
         calibrate_camera(
             CAMERA, np.zeros(3), np.tile(np.eye(4), (2, 1, 1)), [0.0], [[]], APEX_W, DECLARED
         )
+
+
+@pytest.mark.parametrize(
+    ("argument", "message"),
+    [
+        ("apex_uv", r"apex_uv\[3\] must be finite"),
+        ("apex_w", r"apex_w must be finite"),
+        ("pose_stamps_s", r"pose_stamps_s must be finite"),
+        ("image_stamps_cam_s", r"image_stamps_cam_s must be finite"),
+        ("max_offset_s", r"max_offset_s must be a finite number >= 0, got nan"),
+    ],
+)
+def test_a_nan_input_is_a_value_error_naming_it(argument: str, message: str) -> None:
+    """A NaN anywhere (an apex: it reached OpenCV's PnP, a raw ``cv2.error``) is refused up
+    front, by name."""
+    rng = np.random.default_rng(11)
+    stamps, T_w_b, t_cam, apex_uv = _flight(rng, DECLARED, 0.0, duration_s=2.0)
+    kwargs = {}
+    apex_w = APEX_W.copy()
+    if argument == "apex_uv":
+        apex_uv[3] = apex_uv[3].copy()
+        apex_uv[3][0, 0] = np.nan
+    elif argument == "apex_w":
+        apex_w[2, 1] = np.nan
+    elif argument == "pose_stamps_s":
+        stamps = stamps.copy()
+        stamps[-1] = np.nan
+    elif argument == "image_stamps_cam_s":
+        t_cam = t_cam.copy()
+        t_cam[0] = np.nan
+    else:
+        kwargs["max_offset_s"] = math.nan
+    with pytest.raises(ValueError, match=message):
+        calibrate_camera(CAMERA, stamps, T_w_b, t_cam, apex_uv, apex_w, DECLARED, **kwargs)

@@ -141,7 +141,8 @@ def calibrate_camera(
     Raises
     ------
     ValueError
-        On malformed input.
+        On malformed input: shapes that do not match, a stamp, apex or pixel that is not
+        finite (named), ``max_offset_s`` not a finite number >= 0.
     CalibrationError
         Too few matched apexes or images, or a mount or offset the flight does not determine
         (its standard error above ``MAX_STD_*``): the message names what is missing.
@@ -154,6 +155,21 @@ def calibrate_camera(
     if t_cam.ndim != 1 or len(apex_uv) != t_cam.size:
         raise ValueError("image_stamps_cam_s (N,) and apex_uv (N arrays) must match")
     P = np.asarray(apex_w, dtype=np.float64).reshape(-1, 3)
+    # Checked here, by name: past this point NaN reaches OpenCV's PnP (a cv2.error) or the
+    # pose buffer's interval tests (which NaN passes silently).
+    for name, values in (("pose_stamps_s", stamps), ("image_stamps_cam_s", t_cam), ("apex_w", P)):
+        if not np.isfinite(values).all():
+            raise ValueError(f"{name} must be finite; it holds NaN or inf")
+    for i, uv in enumerate(apex_uv):
+        uv = np.asarray(uv, dtype=np.float64)
+        if uv.size and (uv.ndim != 2 or uv.shape[1] != 2):
+            raise ValueError(f"apex_uv[{i}] must have shape (K, 2), got {uv.shape}")
+        if not np.isfinite(uv).all():
+            raise ValueError(f"apex_uv[{i}] must be finite; it holds NaN or inf")
+    if isinstance(max_offset_s, bool) or not (
+        isinstance(max_offset_s, int | float) and 0.0 <= max_offset_s < math.inf
+    ):
+        raise ValueError(f"max_offset_s must be a finite number >= 0, got {max_offset_s!r}")
     T_b_c_guess = se3.check_pose(T_b_c_guess, "T_b_c_guess")
     buffer = FrameBuffer(cache_s=max(float(stamps[-1] - stamps[0]) + 1.0, 1.0))
     buffer.set_transform("world", "body", stamps, T_w_b)
