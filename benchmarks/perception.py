@@ -51,7 +51,7 @@ def _time_interleaved_ms(fns: list[Callable[[], object]], repeat: int) -> list[t
     return [(statistics.median(out), min(out)) for out in samples]
 
 
-def _frame() -> dict:
+def benchmark_frame() -> dict:
     from sim.config import SceneConfig
     from sim.render import Renderer
     from sim.world import World
@@ -65,7 +65,7 @@ def _frame() -> dict:
     return {"world": world, "rgb": frame.rgb, "depth": frame.depth, "far_m": far_m}
 
 
-def _uncertainty_noise(T_w_b: np.ndarray) -> tuple[NoiseModel, np.ndarray]:
+def uncertainty_noise(T_w_b: np.ndarray) -> tuple[NoiseModel, np.ndarray]:
     """The built-in ``uncertainty`` scenario's sensor noise and pose covariance at ``T_w_b``."""
     from scenarios.scenario.builtin import load
     from vnav.sensor_noise import body_pose_covariance
@@ -80,7 +80,7 @@ def run(args: argparse.Namespace) -> dict:
     from vnav.localize import localize
 
     repeat = getattr(args, "repeat", 1000)
-    f = _frame()
+    f = benchmark_frame()
     world, rgb, depth, far_m = f["world"], f["rgb"], f["depth"], f["far_m"]
     detections = detect_cones(rgb)
     if len(detections) != 1:
@@ -88,7 +88,7 @@ def run(args: argparse.Namespace) -> dict:
     det = detections[0]
     cam, T_w_b, T_b_c, T_w_c = world.camera, world.T_w_b, world.T_b_c, world.T_w_c
 
-    noise, cov_T_w_b = _uncertainty_noise(T_w_b)
+    noise, cov_T_w_b = uncertainty_noise(T_w_b)
 
     def localize_call(with_covariance: bool) -> Callable[[], object]:
         return lambda: localize(

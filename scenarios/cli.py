@@ -174,8 +174,9 @@ def _add_sweep_parser(sub) -> None:
         type=int,
         default=None,
         metavar="N",
-        help="Ray workers (default: one per core, or per CPU of the cluster); "
-        "0 runs every episode in this process, one after another",
+        help="Ray workers, one CPU each (default: one per CPU this process may use, or per "
+        "CPU of the cluster; more are refused); 0 runs every episode in this process, one "
+        "after another",
     )
     p.add_argument(
         "--address",

@@ -4,14 +4,17 @@ The command line (``vnav-demo run``), the benchmarks and the tests all call ``ru
 scenario is run, judged and written the same way everywhere::
 
     run        scenarios.run.runner.run_scenario        (MuJoCo; the recording observes every tick)
-    calibrate  scenarios.judge.calibration.calibrate_run  (only if a check asks for it)
+    calibrate  scenarios.judge.calibration.calibrate_run  (only if a check asks for it; then
+               the run's images estimated again with the recovered mount)
     judge      scenarios.judge.checks.judge             (the spec's checks, else the default ones)
     finish     scenarios.record.recording.Recording.finish  (with the verdicts and calibration)
     report     scenarios.judge.report.build              (JSON)
     commit     scenarios.record.outputs.OutputPair.commit  (both files in place, or neither)
 
 The recording is finished only after the run is judged: what the checks found (and the mount
-calibration recovered) is in the recording as well as in the report.
+calibration recovered) is in the recording as well as in the report. The report's
+``timing_s`` gives the run's stages, ``calibrate``, ``judge`` and its ``total`` wall and CPU
+seconds (what ``vnav-demo run`` prints).
 """
 
 from __future__ import annotations
@@ -99,10 +102,12 @@ def run(
     scenarios.record.outputs.OutputError
         If the files cannot be written whole (a full disk...); the previous pair stays.
     """
+    started = _Clock()
     recording_id = f"{spec.name}-seed{seed}-{uuid.uuid4().hex[:12]}"
     if out_dir is None:
         result = run_scenario(spec, seed=seed, progress=progress, scenes=scenes)
         judged = _calibrate_and_judge(spec, result)
+        started.stop(result)
         return Outcome(result, judged, report.build(result, judged))
     rrd_path, json_path = output_paths(spec, Path(out_dir))
     pair = OutputPair(rrd_path, json_path)
@@ -122,6 +127,7 @@ def run(
             raise
         # The recording's end (plots, layout, footer) is set-up work, as its start is.
         result.timing_s["setup"] += time.perf_counter() - finish_start
+        started.stop(result)
         rep = report.build(result, judged, recording={"file": rrd_path.name, "id": recording_id})
         pair.write_json(report.dumps(rep))
         pair.commit()
@@ -134,8 +140,26 @@ def run(
 def _calibrate_and_judge(spec: ScenarioSpec, result: RunResult) -> list[checks.CheckResult]:
     """Recover the camera mount and clock offset from the run if a check judges them (into
     ``result.calibration``), then judge every check of ``spec`` (or the default ones)."""
+    start = time.perf_counter()
     if spec.checks_calibration:
         from scenarios.judge.calibration import calibrate_run
 
         result.calibration = calibrate_run(result)
-    return [checks.judge(c, result) for c in (spec.checks or check_kinds.default_checks())]
+    judge_start = time.perf_counter()
+    judged = [checks.judge(c, result) for c in (spec.checks or check_kinds.default_checks())]
+    result.timing_s["calibrate"] = judge_start - start
+    result.timing_s["judge"] = time.perf_counter() - judge_start
+    return judged
+
+
+class _Clock:
+    """The wall and CPU time of a whole run, from ``run``'s start to its report."""
+
+    def __init__(self) -> None:
+        self.wall_s, self.cpu_s = time.perf_counter(), time.process_time()
+
+    def stop(self, result: RunResult) -> None:
+        """Put the run's ``total`` (wall) and ``total_cpu`` (this process's user and system
+        time, every thread's) seconds in ``result.timing_s``."""
+        result.timing_s["total"] = time.perf_counter() - self.wall_s
+        result.timing_s["total_cpu"] = time.process_time() - self.cpu_s

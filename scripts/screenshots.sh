@@ -1,17 +1,20 @@
 #!/usr/bin/env bash
 # Re-make docs/screenshots/<scenario>.png: run every built-in scenario, open each recording in
-# the Rerun viewer (the one that ships in rerun-sdk) on a virtual display, save a screenshot.
+# the Rerun viewer (the one that ships in rerun-sdk) on a virtual display and take its picture
+# at the instant the recording's 3D views are framed for (the scenario's show_at_s, else its
+# end): scripts/screenshot.py.
 #
 # Needs Debian's xvfb and mesa-vulkan-drivers (the viewer renders through Mesa's Vulkan
-# software rasteriser, lavapipe); installs them with apt-get if missing. The virtual screen is
-# larger than the window so that its pointer, parked at the screen's centre, lies outside the
-# viewer and shows no hover tooltip. Run from anywhere:
+# software rasteriser, lavapipe) and xclip (the picture comes by the clipboard); installs them
+# with apt-get if missing. The virtual screen is larger than the window so that its pointer,
+# parked at the screen's centre, lies outside the viewer and shows no hover tooltip. Run from
+# anywhere:
 #   bash scripts/screenshots.sh [SCENARIO ...]
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 missing=()
-for pkg in xvfb mesa-vulkan-drivers; do
+for pkg in xvfb mesa-vulkan-drivers xclip; do
   dpkg -s "$pkg" >/dev/null 2>&1 || missing+=("$pkg")
 done
 if [ ${#missing[@]} -gt 0 ]; then
@@ -48,13 +51,7 @@ for name in "${scenarios[@]}"; do
     echo "screenshots.sh: vnav-demo run $name failed (exit $rc)" >&2
     exit 1
   fi
-  # RUST_LOG=error: the viewer's start-up notices (software rasteriser, container) are
-  # warnings shown as toasts over the views; errors still show.
-  DISPLAY="$display" RUST_LOG=error timeout 300 .venv/bin/rerun --port auto --window-size 1400x900 \
-    --screenshot-to "$out_dir/$name.png" "$rec_dir/$name.rrd" >/dev/null 2>&1
-  # The viewer writes at twice the window size; half of that reads as well and weighs less.
-  .venv/bin/python -c 'import cv2, sys; img = cv2.imread(sys.argv[1]); \
-cv2.imwrite(sys.argv[1], cv2.resize(img, None, fx=0.5, fy=0.5, interpolation=cv2.INTER_AREA), \
-[cv2.IMWRITE_PNG_COMPRESSION, 9])' "$out_dir/$name.png"
+  DISPLAY="$display" timeout 600 .venv/bin/python scripts/screenshot.py \
+    "$rec_dir/$name.rrd" "$out_dir/$name.png"
   echo "wrote $out_dir/$name.png"
 done

@@ -142,6 +142,18 @@ class MountError:
     def is_zero(self) -> bool:
         return not any(self.position_m) and not any(self.rpy_deg)
 
+    @property
+    def angle_deg(self) -> float:
+        """The angle of ``E``'s rotation, degrees: how far the true mount is turned from the
+        declared one, whatever the axis (not the sum or norm of ``rpy_deg``)."""
+        return math.degrees(float(np.linalg.norm(so3.log(self.T[:3, :3]))))
+
+    @property
+    def offset_m(self) -> float:
+        """The length of ``E``'s translation, metres: how far the true camera centre is from
+        the declared one."""
+        return float(np.linalg.norm(self.position_m))
+
 
 @dataclass(frozen=True)
 class CameraConfig:

@@ -93,6 +93,7 @@ SHARED = {
             "tests/test_recording.py::",
             "tests/test_report.py::",
             "tests/test_recording_outcome.py::",
+            "tests/test_recording_views.py::",
             "tests/test_calibrate_command.py::test_calibrate_a_recording_recovers_",
             "tests/test_calibrate_command.py::test_recording_inputs_are_the_runs",
             "tests/test_calibrate_command.py::test_in_run_calibration_meets_",
@@ -121,6 +122,8 @@ LONGEST_FIRST = (
     "builtin-runs",
     "tests/test_readme.py::test_sweep_commands_run",
     "tests/test_sweep.py::test_resume_after_an_interruption_runs_only_the_missing_episodes",
+    "tests/test_sweep.py::test_a_killed_worker_costs_no_episode",
+    "tests/test_sweep.py::test_on_ray_an_episode_that_raises_or_kills_its_worker_costs_",
     "tests/test_sweep.py::test_ray_workers_give_the_serial_rows",
     "tests/test_sweep.py::test_ray_engine_reuses_each_workers_scene",
 )

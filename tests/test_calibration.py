@@ -174,3 +174,38 @@ def test_a_nan_input_is_a_value_error_naming_it(argument: str, message: str) -> 
         kwargs["max_offset_s"] = math.nan
     with pytest.raises(ValueError, match=message):
         calibrate_camera(CAMERA, stamps, T_w_b, t_cam, apex_uv, apex_w, DECLARED, **kwargs)
+
+
+def test_a_declared_mount_far_off_is_searched_without_a_prior() -> None:
+    """A declared mount 25 deg off the true one projects the map nowhere near the apexes: the
+    first mount then comes from the search over every choice of cones, and the answer is still
+    the truth (exact projections)."""
+    rng = np.random.default_rng(11)
+    E = se3.make(so3.from_rpy(*np.radians([0.0, 25.0, 10.0])), [0.05, 0.0, 0.0])
+    true_mount = DECLARED @ E
+    flight = _flight(rng, true_mount, 0.02, pixel_std=0.0)
+    result = calibrate_camera(CAMERA, *flight, APEX_W, DECLARED)
+    rot, trans, dt = _errors(result, true_mount, 0.02)
+    assert rot < 1e-6 and trans < 1e-6 and dt < 1e-6
+
+
+def test_first_mount_through_the_declared_mount_equals_the_search() -> None:
+    """Matching through the declared mount (a few degrees off) and the search without a prior
+    find the same apexes, hence the same PnP poses, bit for bit."""
+    rng = np.random.default_rng(5)
+    E = se3.make(so3.from_rpy(*np.radians([1.0, -2.0, 2.0])), [0.02, 0.01, -0.01])
+    stamps, T_w_b, t_cam, apex_uv = _flight(rng, DECLARED @ E, 0.0)
+    buffer = FrameBuffer(cache_s=stamps[-1] + 1.0)
+    buffer.set_transform("world", "body", stamps, T_w_b)
+    images = [(float(t), uv) for t, uv in zip(t_cam, apex_uv, strict=True) if len(uv) >= 4]
+    problem = _Problem(CAMERA, buffer, images, APEX_W, DECLARED)
+    from vnav.multiview import camera_pose_from_apexes
+
+    for i in range(0, len(images), len(images) // 3):
+        t, uv = images[i]
+        guess = buffer.lookup("world", "body", t) @ DECLARED
+        guessed, matches_guessed = camera_pose_from_apexes(CAMERA, APEX_W, uv, T_w_c_prior=guess)
+        searched, matches_searched = camera_pose_from_apexes(CAMERA, APEX_W, uv)
+        assert matches_guessed == matches_searched
+        np.testing.assert_array_equal(guessed.T_w_c, searched.T_w_c)
+        np.testing.assert_array_equal(problem._pnp(i), guessed.T_w_c)

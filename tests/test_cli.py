@@ -8,6 +8,7 @@ import re
 import subprocess
 import sys
 import textwrap
+import time
 from pathlib import Path
 
 import numpy as np
@@ -170,6 +171,31 @@ def test_a_check_with_no_data_says_why_and_fails(tmp_path, monkeypatch, capsys):
     assert "% (must be >= 95%)" in out and "x (must be >= 10x)" in out
     assert re.search(r"6 camera ticks, 6 detections, 6 matched", out)
     assert "detections: cones found in the images; matched: estimated within 3 m" in out
+
+
+def test_run_prints_each_scenarios_duration_and_their_total(tmp_path, monkeypatch, capsys):
+    """Each scenario's first line ends with its duration, wall and CPU seconds: its report's
+    ``timing_s`` ``total`` and ``total_cpu`` (the whole run, stages, calibration, judging and
+    recording included); with several, the summary gives the total, no less than their sum
+    and no more than the command took."""
+    started = time.perf_counter()
+    _, out = _run_in(tmp_path, monkeypatch, capsys, "frame-problem", "yaw-sweep", "--duration", "1")
+    took_s = time.perf_counter() - started
+    flat = " ".join(out.split())
+    totals = []
+    for name in ("frame-problem", "yaw-sweep"):
+        timing = json.loads((tmp_path / "out" / f"{name}.json").read_text())["timing_s"]
+        said = re.search(
+            rf"{name}: (PASSED|FAILED) \(.*? matched, ([\d.]+) s, ([\d.]+) s CPU\)", flat
+        )
+        assert said, flat
+        assert said[2] == f"{timing['total']:.1f}" and said[3] == f"{timing['total_cpu']:.1f}"
+        parts = sum(v for k, v in timing.items() if not k.startswith("total"))
+        assert parts <= timing["total"] + 1e-3 and timing["total_cpu"] > 0.0
+        totals.append(timing["total"])
+    said = re.search(r"2 scenarios: [^.]*? in ([\d.]+) s, ([\d.]+) s CPU", flat)
+    assert said, flat
+    assert sum(totals) - 0.1 <= float(said[1]) <= took_s + 0.05
 
 
 def test_copy_of_a_builtin_without_checks_passes_and_says_what_it_skipped(
@@ -548,10 +574,13 @@ def test_sigterm_and_sighup_end_the_run_like_ctrl_c(tmp_path, signame, first_pai
         stderr=subprocess.PIPE,
         text=True,
     )
+    from scenarios.record import outputs
+
+    writing = outputs.temp_path(tmp_path / "orbit.rrd", pid=proc.pid)
     deadline = time.monotonic() + 60
-    while not list(tmp_path.glob(".orbit.rrd.*.partial")) and time.monotonic() < deadline:
+    while not writing.exists() and time.monotonic() < deadline:
         time.sleep(0.05)
-    assert list(tmp_path.glob(".orbit.rrd.*.partial")), "the run never started writing"
+    assert writing.exists(), "the run never started writing"
     proc.send_signal(signum)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 128 + signum, err
@@ -820,3 +849,47 @@ def test_bad_sweep_grids_exit_2_in_one_line(tmp_path, capsys, grid, message):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and re.search(message, err), err
     assert not out.exists()
+
+
+def test_a_lock_file_taken_by_a_directory_is_one_line_exit_2(tmp_path):
+    """The directory's lock name taken by a directory: no run can lock it; said in one line."""
+    from scenarios.record import outputs
+
+    (tmp_path / outputs.LOCK_NAME).mkdir()
+    proc = subprocess.run(
+        [sys.executable, "-m", "scenarios.cli", "run", "frame-problem", "--out", str(tmp_path)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr
+    assert outputs.LOCK_NAME in proc.stderr and "is a directory" in proc.stderr.lower()
+    assert [p.name for p in tmp_path.iterdir()] == [outputs.LOCK_NAME]
+
+
+@pytest.mark.parametrize("which", ["truth", "pnp"])
+def test_export_name_taken_by_a_directory_is_refused_before_running(tmp_path, capsys, which):
+    (tmp_path / f"frame-problem.{which}.tum").mkdir()
+    args = ["run", "frame-problem", "--export", "tum", "--out", str(tmp_path), "--quiet"]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "is a directory" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == [f"frame-problem.{which}.tum"]
+
+
+def test_a_dead_runs_commit_that_cannot_be_ended_stops_the_run(tmp_path, capsys, monkeypatch):
+    """Writing over a pair whose killed commit is not ended could bring the dead run's files
+    back later: the run stops first (one line, exit 3, nothing written)."""
+    import errno
+
+    from scenarios.record import outputs
+
+    def cannot(out_dir):
+        raise PermissionError(errno.EACCES, "Permission denied", str(out_dir / "x"))
+
+    monkeypatch.setattr(outputs, "remove_stale_partials", cannot)
+    assert main(["run", "frame-problem", "--out", str(tmp_path), "--duration", "0.5"]) == 3
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "cannot end a dead run's work" in err
+    assert [p.name for p in tmp_path.iterdir()] == [outputs.LOCK_NAME]

@@ -5,6 +5,7 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from scenarios.scenario import toml_out
@@ -103,3 +104,27 @@ def test_the_layer_table_lists_every_scenarios_sub_package_and_module():
             p.stem for p in (ROOT / "scenarios" / package).glob("*.py") if p.stem != "__init__"
         )
         assert set(on_disk) <= set(listed[package]), (package, on_disk, listed[package])
+
+
+def test_the_calibration_mount_error_is_stated_as_its_true_angle():
+    """The calibration built-in's mount error, stated in its description (what ``vnav-demo
+    list`` prints) and in the README, is the angle of its rotation (SciPy, from the scenario's
+    ``rpy_deg``, ``R = Rz(yaw) Ry(pitch) Rx(roll)``) and the length of its translation, at the
+    rounding stated: not the largest angle, nor a rounded-up figure."""
+    from scipy.spatial.transform import Rotation
+
+    from scenarios.scenario import builtin
+
+    error = builtin.REGISTRY["calibration"]()["camera"]["mount_error"]
+    roll, pitch, yaw = error["rpy_deg"]
+    angle_deg = float(
+        np.degrees(Rotation.from_euler("ZYX", [yaw, pitch, roll], degrees=True).magnitude())
+    )
+    offset_mm = 1e3 * float(np.linalg.norm(error["position_m"]))
+    readme = (ROOT / "README.md").read_text()
+    description = builtin.REGISTRY["calibration"]()["description"]
+    for where, text in (("README.md", " ".join(readme.split())), ("description", description)):
+        stated = re.search(r"mounted (\d+\.(\d+)) deg and (\d+) mm off", text)
+        assert stated, where
+        assert stated[1] == f"{angle_deg:.{len(stated[2])}f}", where
+        assert stated[3] == f"{offset_mm:.0f}", where

@@ -134,20 +134,20 @@ def test_first_command_writes_what_the_readme_says(first_run: Path) -> None:
 
 def test_vnav_demo_commands_run_in_order(tmp_path: Path) -> None:
     """Every ``vnav-demo`` command of the README, in its order, in one directory: each exits
-    0; ``show orbit > my-scene.toml`` then ``run my-scene.toml`` writes ``my-orbit`` files and
+    0; ``show orbit > my-orbit.toml`` then ``run my-orbit.toml`` writes ``my-orbit`` files and
     leaves ``orbit``'s alone."""
     commands = [c for c in COMMANDS if _kind(c) == "run"]
     assert len(commands) >= 6
     orbit_report = tmp_path / "recordings" / "orbit.json"
     before = None
     for command in commands:
-        if "run my-scene.toml" in command:
+        if "run my-orbit.toml" in command:
             before = orbit_report.read_text()  # written by `run --all`
         proc = _shell(command, tmp_path)
         assert proc.returncode == 0, f"{command}\n{proc.stdout}\n{proc.stderr}"
         assert proc.stderr == "", proc.stderr
     assert before is not None and orbit_report.read_text() == before
-    name = tomllib.loads((tmp_path / "my-scene.toml").read_text())["name"]
+    name = tomllib.loads((tmp_path / "my-orbit.toml").read_text())["name"]
     assert name != "orbit"
     assert (tmp_path / "recordings" / f"{name}.rrd").is_file()
     assert json.loads((tmp_path / "recordings" / f"{name}.json").read_text())["passed"]

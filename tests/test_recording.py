@@ -239,16 +239,21 @@ def _sampled_ticks(result, n: int = 3) -> list:
 
 
 def test_frames_named_with_axes_that_tell_them_apart(recorded):
-    """world -> body -> camera -> image, as vnav.frames names them, each with its axes."""
+    """world -> body -> camera -> image, as vnav.frames names them, each with its axes: the
+    world's and the body's named at their origins, the camera's drawn as arrows in its own
+    frame (tests/test_recording_views.py: thin, named on one axis)."""
     _, result, rrd, _ = recorded
     assert _static(rrd, "world", "CoordinateFrame:frame") == ["world"]
     lengths = {
         path: _static(rrd, path, "TransformAxes3D:axis_length")[0]
-        for path in ("world", "world/body", "world/body/camera")
+        for path in ("world", "world/body")
     }
+    arrows = np.array(_static(rrd, "world/body/camera/axes", "Arrows3D:vectors"))
+    lengths["world/body/camera"] = float(np.linalg.norm(arrows, axis=1).max())
     assert lengths["world"] > lengths["world/body"] > lengths["world/body/camera"] > 0.0
-    for path in lengths:
+    for path in ("world", "world/body"):
         assert _static(rrd, path, "TransformAxes3D:show_frame") == [True]  # labelled
+    assert _static(rrd, "world/body/camera/axes", "CoordinateFrame:frame") == ["camera"]
 
     body = [r for r in read_rows(rrd, "world/body") if "tick" in r]
     assert len(body) == len(result.ticks)

@@ -120,3 +120,33 @@ def test_report_nees_is_recomputed_from_the_estimates_covariances_and_the_truth(
         assert summary["band"] == pytest.approx(expected_band, rel=0.01)
         low, high = summary["band"]
         assert summary["consistent"] == (low <= summary["mean"] <= high)
+
+
+def test_run_table_gives_the_estimates_with_the_recovered_mount(runs):
+    """``vnav-demo run``'s table of a calibrated run: after each method's row with the
+    declared mount, the rows of the same images estimated again with the recovered mount,
+    with the report's figures; a run not calibrated has no such rows."""
+    from pathlib import Path
+
+    from scenarios.commands.run import summary
+
+    _, _, _, rep = runs["calibration"]
+    lines = summary(rep, Path("c.rrd"), Path("c.json")).splitlines()
+    marker = next(i for i, line in enumerate(lines) if "camera mount calibration recovered" in line)
+    rows = {}
+    for line in lines[marker:]:
+        cells = line.split()
+        if cells and cells[0] in METHOD_NAMES and cells[0] not in rows:
+            rows[cells[0]] = cells[1:]
+    by_mount = rep["calibration"]["position_error_m"]
+    for method in METHOD_NAMES:
+        s = by_mount["recovered_mount"][method]
+        assert rows[method] == [
+            str(s["count"]),
+            *(f"{s[k]:.3f}" for k in ("mean", "median", "rmse", "max")),
+        ], method
+    declared = next(line for line in lines if line.split()[:1] == ["depth_image"])
+    mean = by_mount["declared_mount"]["depth_image"]["mean"]
+    assert declared.split()[2] == f"{mean:.3f}"
+    _, _, _, plain = runs["orbit"]
+    assert "calibration recovered" not in summary(plain, Path("o.rrd"), Path("o.json"))

@@ -4,13 +4,15 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 import tomllib
 
 import numpy as np
 import pytest
 
 from scenarios.cli import main
-from scenarios.scenario import builtin
+from scenarios.scenario import builtin, schema
+from scenarios.scenario.check_kinds import KINDS
 from scenarios.scenario.spec import OrbitFlight, ScenarioError, from_dict, load_toml
 from vnav import quat, so3
 
@@ -116,21 +118,83 @@ def _close(a, b, rel: float = 1e-5) -> bool:
     return a == b
 
 
+def _holds(a, b, rel: float = 1e-5) -> bool:
+    """``a`` holds every key of ``b`` (tables within tables, list by list), each value
+    ``_close`` to ``b``'s."""
+    if isinstance(b, dict):
+        return isinstance(a, dict) and all(k in a and _holds(a[k], b[k], rel) for k in b)
+    if isinstance(b, list) and b and isinstance(b[0], dict):
+        return len(a) == len(b) and all(_holds(x, y, rel) for x, y in zip(a, b, strict=True))
+    return _close(a, b, rel)
+
+
 @pytest.mark.parametrize("name", builtin.names())
 def test_show_prints_a_file_that_parses_to_the_same_scenario(tmp_path, capsys, name):
     """``vnav-demo show NAME`` output, parsed by tomllib (the independent reader) and by
-    load_toml, gives the built-in's own dict and spec back, but for its name (``my-NAME``, so
-    running it does not overwrite the built-in's files) and floats rounded to 6 digits."""
+    load_toml, gives the built-in's own dict (and the keys it leaves at their defaults) and
+    spec back, but for its name (``my-NAME``, so running it does not overwrite the built-in's
+    files) and floats rounded to 6 digits."""
     assert main(["show", name]) == 0
     text = capsys.readouterr().out
     assert all(len(line) <= 80 for line in text.splitlines())
     parsed = tomllib.loads(text)
     assert parsed["name"] == f"my-{name}" != name
     expected = {**builtin.REGISTRY[name](), "name": parsed["name"]}
-    assert _close(parsed, expected)
+    assert _holds(parsed, expected)
     path = tmp_path / f"{name}.toml"
     path.write_text(text)
     assert _close(load_toml(path), dataclasses.replace(builtin.load(name), name=f"my-{name}"))
+
+
+def _keyed_lines(text: str) -> list[tuple[int, str]]:
+    """(index, line) of every ``key = value`` line, outside multi-line strings and lists."""
+    out, in_string = [], False
+    for i, line in enumerate(text.splitlines()):
+        if in_string:
+            in_string = not line.endswith('"""')
+            continue
+        if re.match(r"^[a-z_]+ = ", line):
+            out.append((i, line))
+            in_string = line.endswith('"""\\')
+    return out
+
+
+@pytest.mark.parametrize("name", builtin.names())
+def test_show_writes_every_key_of_the_schema_each_commented(capsys, name):
+    """Every key of the schema (``scenarios.scenario.schema``) for the built-in, those at their
+    defaults too (the file parses to the same scenario: the test above), an optional one
+    without a value as a comment naming it; each check's keys that apply to its kind; the keys
+    of the keyframes or waypoints named in their list's comment (or written, each commented,
+    in ``[[flight.keyframes]]``). Every key written has its comment, after it or above it."""
+    assert main(["show", name]) == 0
+    text = capsys.readouterr().out
+    parsed = tomllib.loads(text)
+    commented = set(re.findall(r"^# ([a-z_]+): not set here", text, flags=re.M))
+
+    def has_all(table: dict, keys, where: str) -> None:
+        for key in keys:
+            assert key.name in table or key.name in commented, f"{name}: {where}{key.name}"
+
+    has_all(parsed, schema.TOP, "")
+    has_all(parsed["camera"], schema.CAMERA, "camera.")
+    has_all(parsed["camera"]["mount_error"], schema.MOUNT_ERROR, "camera.mount_error.")
+    mode = parsed["flight"]["mode"]
+    has_all(parsed["flight"], schema.FLIGHT_MODES[mode], "flight.")
+    has_all(parsed["noise"], schema.NOISE, "noise.")
+    has_all(parsed["timing"], schema.TIMING, "timing.")
+    for cone in parsed["cones"]:
+        assert set(cone) == {k.name for k in schema.CONE}
+    for check in parsed["checks"]:
+        kind = KINDS[check["kind"]]
+        applies = {"kind", kind.limit_key, "name"} | ({"method"} if kind.uses_method else set())
+        assert set(check) | (commented & {"name"}) >= applies, check
+    entry_keys = schema.KEYFRAME if mode == "kinematic" else schema.WAYPOINT
+    if mode != "orbit":
+        for k in entry_keys:  # in the list's comment, or written in each [[flight.keyframes]]
+            assert re.search(rf"^(# .*\b{k.name}\b|{k.name} = )", text, re.M), k.name
+    lines = text.splitlines()
+    for i, line in _keyed_lines(text):
+        assert "  # " in line or lines[i - 1].startswith("# "), line
 
 
 def test_show_rounds_floats_and_explains_check_limits(capsys):

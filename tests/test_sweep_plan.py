@@ -137,3 +137,28 @@ def test_bad_sweeps_are_refused_naming_the_key(data, message):
 def test_missing_sweep_file(tmp_path):
     with pytest.raises(SweepError, match="no such sweep file"):
         load(tmp_path / "none.toml")
+
+
+def test_a_grid_of_more_points_than_plan_in_seconds_is_refused_before_planning(monkeypatch):
+    """A 1,000 x 1,000 grid (one seed: the episode limit) is refused at once, naming the limit,
+    before a single point is planned (each takes milliseconds: a million take an hour)."""
+    from scenarios.sweep import plan as plan_module
+
+    def planned(*args):
+        raise AssertionError("a grid point was planned")
+
+    monkeypatch.setattr(plan_module, "_point", planned)
+    grid = {
+        "camera.pitch_down_deg": [10.0 + 0.01 * i for i in range(1000)],
+        "noise.attitude_std_deg": [0.001 * i for i in range(1000)],
+    }
+    with pytest.raises(SweepError) as info:
+        plan({"scenario": "approach", "grid": grid}, "s.toml")
+    message = str(info.value)
+    assert f"1000000 grid points is more than {plan_module.MAX_POINTS}" in message
+    assert "\n" not in message
+    one_over = {
+        "camera.pitch_down_deg": [10.0 + 0.01 * i for i in range(plan_module.MAX_POINTS + 1)]
+    }
+    with pytest.raises(SweepError, match="grid points is more than"):
+        plan({"scenario": "approach", "grid": one_over}, "s.toml")

@@ -1,19 +1,35 @@
-"""A diverged episode is a row like any other: NaN errors, zero counts, ranked worst, plotted
-around; the tables and the summary take it."""
+"""A sweep's rows without running a sweep: a diverged episode is a row like any other (NaN
+errors, zero counts, ranked worst, plotted around); the plots' curves against the per-point
+summary, read back from the figures; the tables' column names, read back from Parquet."""
 
 from __future__ import annotations
 
 import dataclasses
+import json
+import keyword
 import math
+import re
 
 import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
 
 from scenarios import pipeline
+from scenarios.scenario import schema
 from scenarios.sweep import episode, plots, summary
 from scenarios.sweep.plan import plan
-from scenarios.sweep.rows import row_columns
-from scenarios.sweep.store import estimates_table, results_table
+from scenarios.sweep.rows import (
+    ESTIMATE_COLUMNS,
+    TABLES_VERSION,
+    Episode,
+    grid_column,
+    method_column,
+    row_columns,
+)
+from scenarios.sweep.store import estimates_table, results_table, table_metadata
 from sim.world import SimulationError
+from vnav import metrics
 from vnav.methods import METHOD_NAMES
 
 
@@ -31,8 +47,9 @@ def test_diverged_flight_is_a_row(monkeypatch):
     assert list(diverged.row) == row_columns()
     assert diverged.row["status"] == "diverged" and diverged.row["passed"] is False
     assert "t = 0.7000 s" in diverged.row["message"]
-    assert all(diverged.row[f"{m}.count"] == 0 for m in METHOD_NAMES)
-    assert math.isnan(diverged.row["depth_image.median_m"])
+    assert all(diverged.row[f"{m}__count"] == 0 for m in METHOD_NAMES)
+    assert math.isnan(diverged.row["depth_image__median_m"])
+    assert diverged.row["failed_checks"] == []
     assert diverged.estimates == {c: [] for c in diverged.estimates}
 
     episodes = [*ran, dataclasses.replace(diverged, seed=1)]
@@ -45,5 +62,293 @@ def test_diverged_flight_is_a_row(monkeypatch):
     assert doc["points"][1]["methods"]["depth_image"]["median_m"]["median"] is None
     png = plots.error_vs_key_png(sweep, episodes, "duration_s")
     assert png[:4] == b"\x89PNG"
-    empty = {"method": np.array([], str), "range_m": np.array([]), "error_m": np.array([])}
-    assert plots.error_vs_range_png(sweep, empty)[:4] == b"\x89PNG"
+    assert plots.error_vs_range_png(sweep, episodes)[:4] == b"\x89PNG"
+    assert (
+        plots.error_vs_range_png(sweep, [dataclasses.replace(diverged, seed=1)])[:4] == b"\x89PNG"
+    )
+
+
+# ------------------------------------------------------------------ the README's sweep, synthetic
+# The README's sweep (two swept keys), its grid points parsed as the sweep command does, with
+# episodes made up (nothing runs): errors that depend strongly on the noise level, as the
+# README says they do (about 2 cm without noise, 16 cm with), so that a curve pooling the
+# noise levels matches neither.
+README_SWEEP = {
+    "scenario": "approach",
+    "seeds": 5,
+    "rank_by": "depth_image",
+    "grid": {"camera.pitch_down_deg": [8.0, 12.0, 16.0], "noise.attitude_std_deg": [0.0, 0.5]},
+}
+
+
+def _episodes(sweep, rng: np.random.Generator, skip=()) -> list[Episode]:
+    """One made-up episode per (point, seed) of ``sweep`` but ``skip``; ``naive`` never gives
+    an estimate at the first seed (NaN), as a method out of range would not."""
+    out = []
+    for p, s in sweep.episodes:
+        if (p, s) in skip:
+            continue
+        values = sweep.points[p].values
+        scale = 0.02 + 0.3 * values.get("noise.attitude_std_deg", 0.0)
+        row: dict = dict.fromkeys(row_columns(), math.nan)
+        failed = ["accuracy depth_image"] if scale > 0.1 else []
+        row.update(status="failed" if failed else "passed", passed=not failed)
+        row.update(failed_checks=failed, message="", wall_s=0.1, simulated_s=8.0)
+        row.update(dict.fromkeys(["camera_ticks", "detections", "matched_detections"], 10))
+        row.update(cones_in_view=1, cones_detected=1, detection_rate=1.0)
+        estimates: dict = {c: [] for c in ESTIMATE_COLUMNS}
+        for m in METHOD_NAMES:
+            given = not (m == "naive" and s == sweep.seeds[0])
+            errors = scale * rng.lognormal(0.0, 0.5, 8) if given else np.array([])
+            ranges = rng.uniform(2.0, 12.0, errors.size)
+            row[method_column(m, "count")] = int(errors.size)
+            for stat, value in metrics.error_stats(errors).items():
+                if stat in ("mean", "median", "rmse", "max"):
+                    row[method_column(m, stat)] = math.nan if value is None else float(value)
+            for tick, (r, e) in enumerate(zip(ranges, errors, strict=True)):
+                for c, v in zip(ESTIMATE_COLUMNS, (tick, 0.1 * tick, 0, m, r, e), strict=True):
+                    estimates[c].append(float(v) if c in ("range_m", "error_m") else v)
+        out.append(Episode(p, s, row, estimates))
+    return out
+
+
+@pytest.fixture
+def figures(monkeypatch) -> list:
+    """Every matplotlib figure saved while the test runs (a plot function's PNG is one)."""
+    from matplotlib.figure import Figure
+
+    saved, savefig = [], Figure.savefig
+
+    def keep(fig, *args, **kwargs):
+        saved.append(fig)
+        return savefig(fig, *args, **kwargs)
+
+    monkeypatch.setattr(Figure, "savefig", keep)
+    return saved
+
+
+def _lines(ax) -> dict[str, object]:
+    """An axes' lines by label (``depth_image median``, ``depth_image p90``)."""
+    return {line.get_label(): line for line in ax.lines}
+
+
+def _caption(fig) -> str:
+    return " ".join(t.get_text() for t in fig.texts).replace("\n", " ")
+
+
+@pytest.mark.parametrize("skip", [(), ((1, 2), (1, 4), (4, 5))], ids=["complete", "partial"])
+def test_error_vs_key_has_a_curve_per_value_of_the_other_key(figures, rng, skip):
+    """In error_vs_camera.pitch_down_deg.png, each noise level is a curve of its own (a panel
+    titled with it), and each point is its grid point's median and p90 across its seeds, as
+    summary.json gives them; the caption counts a point's episodes, not the sweep's."""
+    sweep = plan(README_SWEEP, "my-sweep.toml")
+    episodes = _episodes(sweep, rng, skip)
+    doc = summary.build(
+        sweep, episodes, out_dir="d", point_files=["f"] * len(sweep.points), complete=not skip
+    )
+    assert plots.error_vs_key_png(sweep, episodes, "camera.pitch_down_deg")[:4] == b"\x89PNG"
+    (fig,) = figures
+    panels = [ax for ax in fig.axes if ax.lines]
+    assert sorted(ax.get_title() for ax in panels) == [
+        "noise.attitude_std_deg = 0.0",
+        "noise.attitude_std_deg = 0.5",
+    ]
+    compared = 0
+    for ax in panels:
+        noise = float(ax.get_title().split(" = ")[1])
+        lines = _lines(ax)
+        assert {label.split()[0] for label in lines} == set(METHOD_NAMES)
+        for m in METHOD_NAMES:
+            for stat, name in (("median", f"{m} median"), ("p90", f"{m} p90")):
+                for x, y in zip(lines[name].get_xdata(), lines[name].get_ydata(), strict=True):
+                    (point,) = [
+                        p
+                        for p in doc["points"]
+                        if p["values"]
+                        == {"camera.pitch_down_deg": x, "noise.attitude_std_deg": noise}
+                    ]
+                    expected = point["methods"][m]["median_m"][stat]
+                    assert (math.isnan(y) and expected is None) or y == expected, (m, stat, x)
+                    compared += 1
+    assert compared == 2 * len(METHOD_NAMES) * len(sweep.points)
+    for curve in plots.key_curves(sweep, episodes, "camera.pitch_down_deg"):
+        for x, n in zip(curve.x, curve.episodes, strict=True):
+            (point,) = [
+                p
+                for p in doc["points"]
+                if p["values"] == {"camera.pitch_down_deg": x, **curve.others}
+            ]
+            assert n == point["methods"][curve.method]["episodes_with_estimates"]
+    caption = _caption(fig)
+    per_point = "5 episodes" if not skip else "3 to 5 episodes"
+    assert f"one grid point's {per_point}" in caption
+    assert f"{len(episodes)} episodes in 6 grid points" in caption
+
+
+def test_one_key_sweep_has_one_panel(figures, rng):
+    """A sweep with one swept key (and one fixed): one panel, each point its grid point's."""
+    sweep = plan(
+        {
+            "scenario": "approach",
+            "seeds": 4,
+            "grid": {"noise.attitude_std_deg": [0.0, 0.25, 0.5], "duration_s": [6.0]},
+        },
+        "s.toml",
+    )
+    episodes = _episodes(sweep, rng)
+    doc = summary.build(sweep, episodes, out_dir="d", point_files=["f"] * 3, complete=True)
+    assert list(plots.plot_names(sweep)) == [
+        "error_vs_noise.attitude_std_deg.png",
+        "error_vs_range.png",
+    ]
+    plots.error_vs_key_png(sweep, episodes, "noise.attitude_std_deg")
+    (fig,) = figures
+    (panel,) = [ax for ax in fig.axes if ax.lines]
+    assert panel.get_title() == ""
+    line = _lines(panel)["depth_image median"]
+    assert list(line.get_xdata()) == [0.0, 0.25, 0.5]
+    assert list(line.get_ydata()) == [
+        p["methods"]["depth_image"]["median_m"]["median"] for p in doc["points"]
+    ]
+    caption = _caption(fig)
+    assert "one grid point's 4 episodes" in caption and "fixed: duration_s = 6.0" in caption.lower()
+
+
+def _ink_runs(rgba: np.ndarray, row: int, x0: int, x1: int) -> int:
+    """Runs of non-background pixels along ``row`` between columns ``x0`` and ``x1``."""
+    ink = np.abs(rgba[row, x0:x1, :3].astype(int) - 255).sum(axis=1) > 60
+    return int(np.count_nonzero(ink[1:] & ~ink[:-1]) + ink[0])
+
+
+def test_legend_draws_each_statistic_as_the_lines_do(figures, rng):
+    """The legend's median entry is drawn solid and its 90th percentile entry dashed, as the
+    lines are: read from the rendered pixels of each entry."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    sweep = plan(README_SWEEP, "my-sweep.toml")
+    plots.error_vs_key_png(sweep, _episodes(sweep, rng), "camera.pitch_down_deg")
+    (fig,) = figures
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()
+    rgba = np.asarray(canvas.buffer_rgba())
+    height = rgba.shape[0]
+    (legend,) = fig.legends or [ax.get_legend() for ax in fig.axes if ax.get_legend()]
+    styles = {}
+    for handle, text in zip(legend.legend_handles, legend.get_texts(), strict=True):
+        box = handle.get_window_extent(canvas.get_renderer())
+        row = height - 1 - round(0.5 * (box.y0 + box.y1))
+        styles[text.get_text()] = (
+            handle.get_linestyle(),
+            _ink_runs(rgba, row, int(box.x0) + 1, int(box.x1) - 1),
+        )
+    plotted = {
+        line.get_label().split()[1]: line.get_linestyle() for ax in fig.axes for line in ax.lines
+    }
+    median = next(v for k, v in styles.items() if "median" in k)
+    p90 = next(v for k, v in styles.items() if "p90" in k or "percentile" in k)
+    assert median[0] == plotted["median"] == "-" and median[1] <= 2  # a line (and its dot)
+    assert p90[0] == plotted["p90"] == "--" and p90[1] >= 4  # dashes, either side of the mark
+
+
+def test_error_vs_range_has_a_panel_per_grid_point(figures, rng):
+    """The range plot pools no grid points: one panel per point, its own estimates binned."""
+    sweep = plan(README_SWEEP, "my-sweep.toml")
+    episodes = _episodes(sweep, rng)
+    plots.error_vs_range_png(sweep, episodes)
+    (fig,) = figures
+    panels = [ax for ax in fig.axes if ax.lines]
+    assert len(panels) == len(sweep.points)
+    ranges = np.array([r for e in episodes for r in e.estimates["range_m"]])
+    edges = np.linspace(ranges.min(), ranges.max() + 1e-9, plots.RANGE_BINS + 1)
+    for ax in panels:
+        title = dict(line.split(" = ") for line in ax.get_title().split("\n"))
+        (point,) = [p for p in sweep.points if {k: repr(v) for k, v in p.values.items()} == title]
+        mine = [e for e in episodes if e.point == point.index]
+        line = _lines(ax)["depth_image median"]
+        for x, y in zip(line.get_xdata(), line.get_ydata(), strict=True):
+            lo, hi = edges[edges < x].max(), edges[edges > x].min()
+            errors = [
+                err
+                for e in mine
+                for m, r, err in zip(
+                    e.estimates["method"],
+                    e.estimates["range_m"],
+                    e.estimates["error_m"],
+                    strict=True,
+                )
+                if m == "depth_image" and lo <= r < hi
+            ]
+            if len(errors) < plots.MIN_PER_BIN:
+                assert math.isnan(y)
+            else:
+                assert y == np.median(errors)
+
+
+def test_too_many_panels_are_not_drawn(figures, rng):
+    """A plot that would need more than MAX_PANELS panels says so instead."""
+    sweep = plan(
+        {
+            "scenario": "approach",
+            "grid": {
+                "camera.pitch_down_deg": [8.0, 12.0],
+                "noise.attitude_std_deg": [0.01 * i for i in range(plots.MAX_PANELS + 1)],
+            },
+        },
+        "s.toml",
+    )
+    plots.error_vs_key_png(sweep, _episodes(sweep, rng), "camera.pitch_down_deg")
+    (fig,) = figures
+    assert not any(ax.lines for ax in fig.axes)
+    shown = " ".join(t.get_text() for ax in fig.axes for t in ax.texts).replace("\n", " ")
+    assert f"{plots.MAX_PANELS + 1} combinations of noise.attitude_std_deg" in shown
+
+
+# ------------------------------------------------------------------ the tables' column names
+def test_tables_have_plain_column_names_and_a_list_of_failed_checks(tmp_path, rng):
+    """results.parquet and estimates.parquet written and read back with pyarrow: every column
+    name a plain identifier (SQL, pandas' attribute access), each grid key's column as the
+    metadata maps it, and failed_checks a list column that round-trips."""
+    sweep = plan(README_SWEEP, "my-sweep.toml")
+    episodes = _episodes(sweep, rng)
+    meta = {b"vnav.sweep": json.dumps(table_metadata(sweep)).encode()}
+    pq.write_table(
+        results_table(sweep, episodes).replace_schema_metadata(meta), tmp_path / "r.parquet"
+    )
+    pq.write_table(estimates_table(episodes), tmp_path / "e.parquet")
+    results = pq.read_table(tmp_path / "r.parquet")
+    estimates = pq.read_table(tmp_path / "e.parquet")
+    for name in [*results.column_names, *estimates.column_names]:
+        assert re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name) and not keyword.iskeyword(name), name
+    held = json.loads(results.schema.metadata[b"vnav.sweep"])
+    assert held["grid_columns"] == {
+        "camera.pitch_down_deg": "camera__pitch_down_deg",
+        "noise.attitude_std_deg": "noise__attitude_std_deg",
+    }
+    assert held["tables_version"] == TABLES_VERSION and held["fingerprint"] == sweep.fingerprint
+    got = results.to_pylist()
+    for key, column in held["grid_columns"].items():
+        assert [r[column] for r in got] == [sweep.points[e.point].values[key] for e in episodes]
+    for m in METHOD_NAMES:
+        assert [r[method_column(m, "median")] for r in got] == pytest.approx(
+            [e.row[method_column(m, "median")] for e in episodes], nan_ok=True, abs=0
+        )
+    assert results.schema.field("failed_checks").type == pa.list_(pa.string())
+    assert [r["failed_checks"] for r in got] == [e.row["failed_checks"] for e in episodes]
+    assert {len(r["failed_checks"]) for r in got} == {0, 1}
+
+
+def test_every_scenario_key_has_a_plain_column():
+    """Every key path the scenario parser accepts (a list index as a number) maps to a plain
+    identifier that splits back into the key; a key that could not is refused."""
+    tables = {"": schema.TOP, "camera": schema.CAMERA, "noise": schema.NOISE}
+    tables |= {"timing": schema.TIMING, "checks.0": schema.CHECK, "cones.1": schema.CONE}
+    tables |= {"flight.waypoints.2": schema.WAYPOINT, "flight.keyframes.0": schema.KEYFRAME}
+    tables |= {"camera.mount_error": schema.MOUNT_ERROR}
+    for prefix, keys in tables.items():
+        for k in keys:
+            key = f"{prefix}.{k.name}" if prefix else k.name
+            column = grid_column(key)
+            assert column.isidentifier() and column.split("__") == key.split("."), key
+    for bad in ("a..b", "_x", "x_", "a__b", "2.x", "a-b", "é"):
+        with pytest.raises(ValueError, match="no plain column name"):
+            grid_column(bad)

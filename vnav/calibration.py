@@ -61,6 +61,9 @@ OUTLIER_SIGMAS = 4.0
 """Apexes whose reprojection error exceeds this many robust standard deviations are dropped
 after the matching rounds (Gaussian 2-D errors: 1 in 3000 beyond 4 sigma)."""
 
+PNP_RMS_PX = 3.0
+"""A first mount's PnP pose is kept only if its apexes reproject within this RMS, px."""
+
 GATES_PX = (25.0, 8.0, 4.0)
 """Matching gates of the successive rounds, px: the first tolerates the offset's and the PnP
 mount's error, the last only the detector's."""
@@ -228,7 +231,11 @@ class _Problem:
 
     def first_mount(self) -> np.ndarray:
         """``xi`` of the mount from PnP on the images with the most apexes (up to 5): each gives
-        ``T_b_c = T_w_b(t)^-1 T_w_c``; the one nearest the others (a medoid) is kept."""
+        ``T_b_c = T_w_b(t)^-1 T_w_c``; the one nearest the others (a medoid) is kept.
+
+        The apexes are matched to the map by projecting it through the declared mount (a
+        mount a few degrees off moves them tens of pixels); only an image where that match
+        gives no pose is searched without a prior, every ordered choice of 4 cones."""
         ranked = sorted(range(len(self.images)), key=lambda i: -len(self.images[i][1]))
         mounts = []
         for i in ranked[:5]:
@@ -243,16 +250,20 @@ class _Problem:
         return se3.log(se3.invert(self.T_b_c_guess) @ best)
 
     def _pnp(self, i: int) -> np.ndarray | None:
-        """The camera pose of image ``i`` from its apexes, matched to the map without a prior
-        (``vnav.multiview.camera_pose_from_apexes``), or None."""
-        _, uv = self.images[i]
+        """The camera pose of image ``i`` from its apexes, or None: matched to the map under
+        the declared mount, else without a prior (``vnav.multiview.camera_pose_from_apexes``)."""
+        t, uv = self.images[i]
         if len(uv) < 4:
             return None
-        try:
-            fit, _ = camera_pose_from_apexes(self.camera, self.apex_w, uv)
-        except ValueError:
-            return None
-        return fit.T_w_c if fit.rms_px < 3.0 else None
+        T_w_c_prior = self.buffer.lookup("world", "body", t) @ self.T_b_c_guess
+        for prior in (T_w_c_prior, None):
+            try:
+                fit, _ = camera_pose_from_apexes(self.camera, self.apex_w, uv, T_w_c_prior=prior)
+            except ValueError:
+                continue
+            if fit.rms_px < PNP_RMS_PX:
+                return fit.T_w_c
+        return None
 
     def match(self, x: np.ndarray, gate_px: float) -> None:
         """Match every image's apexes to the map's under ``x``."""

@@ -214,7 +214,8 @@ def _exposure(
     return Exposure(
         T_w_b=T_w_b,
         T_b_c=T_b_c,
-        T_w_c=se3.check_pose(T_w_b @ T_b_c, "T_w_c"),
+        # The product of two checked rigid transforms is rigid to rounding: not checked again.
+        T_w_c=T_w_b @ T_b_c,
         cov_T_w_b=_ZERO_6
         if cov_T_w_b is None
         else check_covariance(cov_T_w_b, (6, 6), "cov_T_w_b"),

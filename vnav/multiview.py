@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import cv2
@@ -411,13 +411,21 @@ def _edges(centres: np.ndarray, T_w_c: np.ndarray, cone: ConeModel) -> np.ndarra
 
 
 def camera_pose_from_apexes(
-    camera: PinholeCamera, apex_w: object, uv: object, seeds: Sequence[int] | None = None
+    camera: PinholeCamera,
+    apex_w: object,
+    uv: object,
+    seeds: Sequence[int] | None = None,
+    *,
+    T_w_c_prior: np.ndarray | None = None,
 ) -> tuple[PnPResult, dict[int, int]]:
     """``camera_pose_from_cones`` on bare points: a map's points ``apex_w`` (M, 3) seen at some
     of the pixels ``uv`` (K, 2), which is which unknown, K >= 4, M >= 4.
 
     ``seeds``: the 4 pixels to try every ordered choice of 4 map points on (default: the first
-    4). Returns the refined pose and the matches (pixel index -> map index).
+    4). ``T_w_c_prior``: a rough pose that narrows the choices: a seed pixel is tried only with
+    the map points it projects within ``GUESS_GATE_PX`` of (each choice is solved and scored
+    as without it); if none of those gives a pose, every choice is tried. Returns the refined
+    pose and the matches (pixel index -> map index).
 
     Raises
     ------
@@ -435,8 +443,40 @@ def camera_pose_from_apexes(
     valid = all(isinstance(k, int | np.integer) and 0 <= k < len(px) for k in seeds)
     if not valid or len(set(seeds)) != 4:
         raise ValueError(f"seeds must be 4 distinct pixel indices in [0, {len(px)}), got {seeds}")
+    everything = itertools.permutations(range(len(P)), 4)
+    if T_w_c_prior is None:
+        return _best_choice(camera, P, px, seeds, everything)
+    near = _near_projections(camera, se3.check_pose(T_w_c_prior, "T_w_c_prior"), P, px[seeds])
+    narrowed = (c for c in itertools.product(*near) if len(set(c)) == 4)
+    try:
+        return _best_choice(camera, P, px, seeds, narrowed)
+    except ValueError:
+        return _best_choice(camera, P, px, seeds, everything)
+
+
+def _near_projections(
+    camera: PinholeCamera, T_w_c: np.ndarray, P: np.ndarray, px: np.ndarray
+) -> list[list[int]]:
+    """For each pixel, the map points that ``T_w_c`` projects within ``GUESS_GATE_PX`` of it."""
+    T_c_w = se3.invert(T_w_c)
+    p_c = P @ T_c_w[:3, :3].T + T_c_w[:3, 3]
+    proj = np.full((len(P), 2), np.inf)
+    front = p_c[:, 2] > 0.0
+    proj[front] = camera.project(p_c[front])
+    dist = np.linalg.norm(px[:, None, :] - proj[None, :, :], axis=2)
+    return [np.flatnonzero(row <= GUESS_GATE_PX).tolist() for row in dist]
+
+
+def _best_choice(
+    camera: PinholeCamera,
+    P: np.ndarray,
+    px: np.ndarray,
+    seeds: list[int],
+    choices: Iterable[tuple[int, ...]],
+) -> tuple[PnPResult, dict[int, int]]:
+    """``camera_pose_from_apexes``' search over ``choices`` (ordered map points for the seeds)."""
     scored: list[tuple[int, float, dict[int, int]]] = []
-    for chosen in itertools.permutations(range(len(P)), 4):
+    for chosen in choices:
         trial = _pnp(camera, P[list(chosen)], px[seeds], cv2.SOLVEPNP_SQPNP, refine=False)
         if trial is None or trial.rms_px > MATCH_GATE_PX:
             continue

@@ -7,7 +7,6 @@ then reads what it needs without validating again.
 
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,7 +21,7 @@ from vnav.uncertainty import compose_covariance
 __all__ = ["Exposure", "Observation"]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, init=False)
 class Exposure:
     """One image as the estimator knows it (inputs already validated).
 
@@ -55,13 +54,48 @@ class Exposure:
     cone: ConeModel
     far_m: float
 
-    @functools.cached_property
+    def __init__(
+        self,
+        *,
+        T_w_b: np.ndarray,
+        T_b_c: np.ndarray,
+        T_w_c: np.ndarray,
+        cov_T_w_b: np.ndarray,
+        cov_T_b_c: np.ndarray,
+        noise: NoiseModel,
+        camera: PinholeCamera,
+        cone: ConeModel,
+        far_m: float,
+    ) -> None:
+        # One dict update instead of the frozen dataclass's nine object.__setattr__ calls:
+        # an Exposure is built for every localised detection. Still frozen after this.
+        self.__dict__.update(
+            T_w_b=T_w_b,
+            T_b_c=T_b_c,
+            T_w_c=T_w_c,
+            cov_T_w_b=cov_T_w_b,
+            cov_T_b_c=cov_T_b_c,
+            noise=noise,
+            camera=camera,
+            cone=cone,
+            far_m=far_m,
+        )
+
+    @property
     def cov_T_w_c(self) -> np.ndarray:
         """The camera pose's covariance, (6, 6): the body pose's and the mount's composed
-        (Barfoot & Furgale 2014, eq. 38), or the body pose's alone for a mount known exactly."""
-        if not self.cov_T_b_c.any():
-            return self.cov_T_w_b
-        return compose_covariance(self.T_w_b, self.cov_T_w_b, self.cov_T_b_c)
+        (Barfoot & Furgale 2014, eq. 38), or the body pose's alone for a mount known exactly.
+        Composed on first use, once."""
+        # Memoised by hand: functools.cached_property takes a lock on every first access in
+        # Python 3.11, which localize would pay per detection.
+        cached = self.__dict__.get("_cov_T_w_c")
+        if cached is None:
+            if not self.cov_T_b_c.any():
+                cached = self.cov_T_w_b
+            else:
+                cached = compose_covariance(self.T_w_b, self.cov_T_w_b, self.cov_T_b_c)
+            self.__dict__["_cov_T_w_c"] = cached  # a frozen dataclass's own memo
+        return cached
 
 
 @dataclass(frozen=True)

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import contextlib
 import signal
-import tempfile
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TypeVar
@@ -89,8 +88,8 @@ def prepare_out_dir(out: str) -> Path:
     path = Path(out)
     try:
         path.mkdir(parents=True, exist_ok=True)
-        with tempfile.NamedTemporaryFile(dir=path, prefix=".vnav-write-test-"):
-            pass
+        with outputs.temporary(path / "write-test") as probe:  # a name the next run clears
+            probe.touch()
     except OSError as exc:
         reason = exc.strerror or type(exc).__name__
         raise InputError(f"output directory {out!r} cannot be written: {reason}") from None
@@ -111,7 +110,9 @@ def guarded(
     exit status 2. ``body(prepared, out_dir)`` then runs holding the directory's lock, with
     SIGTERM and SIGHUP raising ``Signalled``: a busy directory, an ``InputError`` found while
     running, or a signal end the command with one line (``kept`` says what stays on disk)
-    and exit status 2, or 128 + the signal's number.
+    and exit status 2, or 128 + the signal's number. A lock file that cannot be opened is one
+    line and exit status 2; a dead run's work in the directory that cannot be ended
+    (``scenarios.record.outputs.remove_stale_partials``) one line and exit status 3.
     """
     try:
         prepared, out_dir = validate()
@@ -119,7 +120,15 @@ def guarded(
         error(str(exc))
         return EXIT_BAD_INPUT
     try:
-        with stop_on_signals(), outputs.directory_lock(out_dir):
+        with stop_on_signals(), contextlib.ExitStack() as stack:
+            try:
+                stack.enter_context(outputs.directory_lock(out_dir))
+            except outputs.LockError as exc:  # its name taken by a directory...
+                error(str(exc))
+                return EXIT_BAD_INPUT
+            except outputs.OutputError as exc:  # a dead run's commit could not be ended
+                error(f"{exc}; nothing was written")
+                return EXIT_INCOMPLETE
             return body(prepared, out_dir)
     except BlockingIOError:
         error(f"{busy} is writing into {out_dir}; wait for it to finish")

@@ -36,6 +36,7 @@ from scenarios.commands.common import (
 )
 from scenarios.commands.console import WIDTH, say
 from scenarios.commands.console import error as _error
+from scenarios.record import outputs
 from scenarios.run.evaluate import MATCH_GATE_M
 from scenarios.scenario import builtin
 from scenarios.scenario.spec import MAX_SEED, ScenarioError, ScenarioSpec, load_toml
@@ -74,10 +75,16 @@ def resolve(targets: list[str], run_all: bool) -> list[ScenarioSpec]:
     return specs
 
 
-def check_outputs(specs: list[ScenarioSpec], out_dir: Path) -> None:
-    """Refuse outputs that could not be written: an existing directory under a file's name."""
+def check_outputs(specs: list[ScenarioSpec], out_dir: Path, export: str | None = None) -> None:
+    """Refuse outputs that could not be written: an existing directory under a file's name
+    (the recording, the report and, with ``export="tum"``, the TUM files)."""
+    from scenarios.judge import tum
+
     for spec in specs:
-        for path in pipeline.output_paths(spec, out_dir):
+        paths = pipeline.output_paths(spec, out_dir)
+        if export == "tum":
+            paths = (*paths, *tum.output_paths(spec.name, out_dir))
+        for path in paths:
             if path.is_dir():
                 raise InputError(f"{path} is a directory; the run would write a file there")
 
@@ -161,20 +168,43 @@ def _check_lines(check: dict) -> list[str]:
     return _wrap(check["name"], len(first), first) + _wrap(check["shown"], len(first))
 
 
-def summary(rep: dict, wall_s: float, rrd: Path, json_path: Path) -> str:
-    """The table printed after each scenario, ``WIDTH`` columns wide."""
+def duration_text(wall_s: float, cpu_s: float) -> str:
+    """A duration as ``run`` prints it: wall seconds, then the CPU seconds (user and system)
+    this process spent meanwhile, which other processes on the machine do not inflate."""
+    # A no-break space keeps "s CPU" on one line (``_wrap`` prints it as a space).
+    return f"{wall_s:.1f} s, {cpu_s:.1f} s\u00a0CPU"
+
+
+def summary(rep: dict, rrd: Path, json_path: Path) -> str:
+    """The table printed after each scenario, ``WIDTH`` columns wide; its first line ends with
+    the run's duration, the report's ``timing_s`` ``total`` and ``total_cpu``."""
     status = "PASSED" if rep["passed"] else "FAILED"
+    timing = rep["timing_s"]
     lines = _wrap(
         f"{rep['scenario']}: {status}  ({rep['camera_ticks']} camera ticks, "
-        f"{rep['detections']} detections, {rep['matched_detections']} matched, {wall_s:.1f} s)",
+        f"{rep['detections']} detections, {rep['matched_detections']} matched, "
+        f"{duration_text(timing['total'], timing['total_cpu'])})",
         2,
         "",
     )
     lines.append(
         f"  {'method':<13} {'count':>5} {'mean':>8} {'median':>8} {'rmse':>8} {'max':>8}  error, m"
     )
+    lines += _method_rows(rep["methods"])
+    lines += _latest_pose_lines(rep)
+    lines += _recovered_mount_lines(rep)
+    lines.append("  checks:")
+    for c in rep["checks"]:
+        lines += _check_lines(c)
+    lines += _wrap(f"wrote {rrd} and {json_path}", 2)
+    return "\n".join(lines)
+
+
+def _method_rows(methods: dict) -> list[str]:
+    """One row per method: its error statistics, or why it gave no estimate."""
+    lines = []
     for method in METHOD_NAMES:
-        entry = rep["methods"][method]
+        entry = methods[method]
         s = entry["position_error_m"]
         row = f"  {method:<13} {s['count']:>5}"
         if s["count"]:
@@ -183,13 +213,25 @@ def summary(rep: dict, wall_s: float, rrd: Path, json_path: Path) -> str:
                 f"{_fmt(s['max']):>8}"
             )
         else:  # the row says why it is empty
-            lines += _wrap(_no_estimate_text(entry["no_estimate"]), len(row) + 2, row + "  ")
-    lines += _latest_pose_lines(rep)
-    lines.append("  checks:")
-    for c in rep["checks"]:
-        lines += _check_lines(c)
-    lines += _wrap(f"wrote {rrd} and {json_path}", 2)
-    return "\n".join(lines)
+            lines += _wrap(
+                _no_estimate_text(entry.get("no_estimate", {})), len(row) + 2, row + "  "
+            )
+    return lines
+
+
+def _recovered_mount_lines(rep: dict) -> list[str]:
+    """In a calibrated run, the methods' rows again with the mount calibration recovered in
+    place of the declared one (the report's ``calibration.position_error_m``)."""
+    calibration = rep.get("calibration") or {}
+    recovered = calibration.get("position_error_m", {}).get("recovered_mount")
+    if not recovered or any(s is None for s in recovered.values()):
+        return []
+    lines = _wrap(
+        "the same images estimated again with the camera mount calibration recovered "
+        "(above: with the declared mount, which the scenario's mount error puts off):",
+        2,
+    )
+    return lines + _method_rows({m: {"position_error_m": s} for m, s in recovered.items()})
 
 
 def _latest_pose_lines(rep: dict) -> list[str]:
@@ -236,11 +278,17 @@ def rerun_command() -> str:
         return str(beside)
 
 
-def final_summary(outcomes: list[tuple[ScenarioSpec, int, Path | None]], out_dir: Path) -> str:
+def final_summary(
+    outcomes: list[tuple[ScenarioSpec, int, Path | None]],
+    out_dir: Path,
+    duration: tuple[float, float] | None = None,
+) -> str:
     """The lines after every scenario: the legend; with several scenarios, how many passed
-    and failed and where their files are; the command to open a recording.
+    and failed, how long they took together and where their files are; the command to open a
+    recording.
 
-    ``outcomes`` holds each scenario's spec, exit status and recording (None if none).
+    ``outcomes`` holds each scenario's spec, exit status and recording (None if none);
+    ``duration`` the wall and CPU seconds of them all.
     """
     lines = [legend()]
     if len(outcomes) > 1:
@@ -251,7 +299,8 @@ def final_summary(outcomes: list[tuple[ScenarioSpec, int, Path | None]], out_dir
         for status, word in ((EXIT_CHECK_FAILED, "failed"), (EXIT_INCOMPLETE, "incomplete")):
             if by_status.get(status):
                 counts.append(f"{len(by_status[status])} {word} ({', '.join(by_status[status])})")
-        lines += _wrap(f"{len(outcomes)} scenarios: {', '.join(counts)}")
+        took = f" in {duration_text(*duration)}" if duration is not None else ""
+        lines += _wrap(f"{len(outcomes)} scenarios: {', '.join(counts)}{took}")
         lines += _wrap(f"files: {out_dir}/<name>.rrd (recording), {out_dir}/<name>.json (report)")
     written = [(status, rrd) for _, status, rrd in outcomes if rrd is not None]
     if written:
@@ -265,7 +314,6 @@ def final_summary(outcomes: list[tuple[ScenarioSpec, int, Path | None]], out_dir
 def run_one(spec: ScenarioSpec, args: argparse.Namespace, out_dir: Path) -> tuple[int, Path | None]:
     """Run one scenario, write its files, print its summary; return its exit status and its
     recording (None when nothing was written)."""
-    start = time.perf_counter()
     try:
         try:
             outcome = pipeline.run(
@@ -297,8 +345,7 @@ def run_one(spec: ScenarioSpec, args: argparse.Namespace, out_dir: Path) -> tupl
         _error(f"{spec.name}: could not complete: internal error: {type(exc).__name__}: {exc}")
         return EXIT_INCOMPLETE, None
     if not args.quiet:
-        wall_s = time.perf_counter() - start
-        say(summary(outcome.report, wall_s, outcome.rrd_path, outcome.json_path))
+        say(summary(outcome.report, outcome.rrd_path, outcome.json_path))
     if getattr(args, "export", None) == "tum":
         try:
             written = _export_tum(spec, outcome, out_dir)
@@ -311,13 +358,17 @@ def run_one(spec: ScenarioSpec, args: argparse.Namespace, out_dir: Path) -> tupl
 
 
 def _export_tum(spec: ScenarioSpec, outcome: pipeline.Outcome, out_dir: Path) -> list[Path]:
-    """``NAME.truth.tum`` and ``NAME.pnp.tum`` (``scenarios.judge.tum``)."""
+    """Write ``NAME.truth.tum`` and ``NAME.pnp.tum`` (``scenarios.judge.tum``), each complete
+    or not at all (``scenarios.record.outputs.write_atomic``); return their paths."""
     from scenarios.judge import tum
     from vnav.camera import PinholeCamera
 
     cam = spec.scene.camera
     camera = PinholeCamera.from_fovy(cam.fovy_deg, cam.width, cam.height)
-    return tum.write_tum_files(outcome.result, camera, out_dir)
+    files = tum.tum_files(outcome.result, camera, out_dir)
+    for path, text in files.items():
+        outputs.write_atomic(path, lambda tmp, text=text: tmp.write_text(text, encoding="utf-8"))
+    return list(files)
 
 
 def _validate(args: argparse.Namespace) -> tuple[list[ScenarioSpec], Path]:
@@ -335,7 +386,7 @@ def _validate(args: argparse.Namespace) -> tuple[list[ScenarioSpec], Path]:
         specs = [dataclasses.replace(s, duration_s=min(args.duration, s.end_s)) for s in specs]
     check_lengths(specs, args.max_ticks)
     out_dir = prepare_out_dir(args.out)
-    check_outputs(specs, out_dir)
+    check_outputs(specs, out_dir, getattr(args, "export", None))
     return specs, out_dir
 
 
@@ -346,9 +397,11 @@ def command(args: argparse.Namespace) -> int:
 
 def _body(args: argparse.Namespace):
     def run_all(specs: list[ScenarioSpec], out_dir: Path) -> int:
+        wall_s, cpu_s = time.perf_counter(), time.process_time()
         results = [(spec, *run_one(spec, args, out_dir)) for spec in specs]
+        duration = (time.perf_counter() - wall_s, time.process_time() - cpu_s)
         if not args.quiet:
-            say(final_summary(results, out_dir))
+            say(final_summary(results, out_dir, duration))
         return max((status for _, status, _ in results), default=EXIT_PASSED)
 
     return run_all

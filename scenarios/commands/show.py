@@ -1,5 +1,5 @@
-"""``vnav-demo show NAME``: a built-in scenario as a TOML file, every key commented, to start
-one's own from."""
+"""``vnav-demo show NAME``: a built-in scenario as a TOML file, every key of the schema
+written (those at their defaults too) and commented, to start one's own from."""
 
 from __future__ import annotations
 
@@ -30,5 +30,9 @@ def command(args: argparse.Namespace) -> int:
         f"edit it, run it with `vnav-demo run FILE.toml`: it writes {scenario['name']}.rrd and "
         ".json."
     )
-    say("\n".join(header) + "\n" + toml_out.dumps(scenario, comments=True).rstrip("\n"))
+    say(
+        "\n".join(header)
+        + "\n"
+        + toml_out.dumps(toml_out.complete(scenario), comments=True).rstrip("\n")
+    )
     return 0

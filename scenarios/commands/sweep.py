@@ -4,8 +4,8 @@ Everything that can be checked before running is checked first (the extra is ins
 sweep file and every grid point parse, the options, the output directory and what it holds),
 so bad input exits with status 2 and runs nothing. Exit statuses: 0 every episode passed its
 checks, 1 some failed or diverged, 2 bad input, 3 some episode could not run (an internal
-error or a lost worker: ``--resume`` runs it again), 128 + N on signal N (what finished is
-kept: ``--resume`` goes on from there).
+error, or its worker lost on every try: ``--resume`` runs it again), 128 + N on signal N
+(what finished is kept: ``--resume`` goes on from there).
 """
 
 from __future__ import annotations
@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
+import shlex
 import signal
 import statistics
 import sys
@@ -35,8 +36,8 @@ from scenarios.commands.console import error as _error
 from scenarios.record import outputs
 from scenarios.sweep import engine as engines
 from scenarios.sweep import plots, summary
-from scenarios.sweep.plan import SweepError, SweepPlan, load
-from scenarios.sweep.rows import Episode, method_column
+from scenarios.sweep.plan import SweepError, SweepPlan, draws_from_seed, load
+from scenarios.sweep.rows import method_column
 from scenarios.sweep.store import SweepStore, pyarrow_missing
 
 __all__ = ["command"]
@@ -64,6 +65,13 @@ def _validate(args: argparse.Namespace) -> tuple[SweepPlan, Path]:
         raise InputError(f"--workers must be 0 (this process) or more, got {args.workers}")
     if args.workers == 0 and args.address:
         raise InputError("--workers 0 runs in this process; it cannot go with --address")
+    if args.workers and not args.address:
+        cpus, source = engines.usable_cpus()
+        if args.workers > cpus:  # each worker takes a CPU: more would wait, holding memory
+            raise InputError(
+                f"--workers {args.workers}: this process may use {cpus} CPUs ({source}) and "
+                f"a worker takes one: ask for at most {cpus}"
+            )
     if args.address:
         try:
             engines.check_address(args.address)
@@ -75,22 +83,30 @@ def _validate(args: argparse.Namespace) -> tuple[SweepPlan, Path]:
         plan = load(args.file)
     except SweepError as exc:
         raise InputError(str(exc)) from None
+    if args.address:  # reached before anything is written (the engine keeps the connection)
+        try:
+            engines.join_cluster(args.address, args.workers)
+        except engines.EngineError as exc:
+            raise InputError(str(exc)) from None
     out = args.out if args.out is not None else str(Path("sweeps") / Path(args.file).stem)
     return plan, prepare_out_dir(out)
 
 
 def command(args: argparse.Namespace) -> int:
     """Entry point of ``vnav-demo sweep``; returns the exit status."""
+    started_s = time.perf_counter()
     return guarded(
         lambda: _validate(args),
-        lambda plan, out_dir: _sweep_or_say(plan, out_dir, args),
+        lambda plan, out_dir: _sweep_or_say(plan, out_dir, args, started_s),
         kept="finished episodes are kept",
     )
 
 
-def _sweep_or_say(plan: SweepPlan, out_dir: Path, args: argparse.Namespace) -> int:
+def _sweep_or_say(
+    plan: SweepPlan, out_dir: Path, args: argparse.Namespace, started_s: float
+) -> int:
     try:
-        return _sweep(plan, out_dir, args)
+        return _sweep(plan, out_dir, args, started_s)
     except SweepError as exc:
         raise InputError(str(exc)) from None
     except OSError as exc:
@@ -98,11 +114,16 @@ def _sweep_or_say(plan: SweepPlan, out_dir: Path, args: argparse.Namespace) -> i
         return EXIT_INCOMPLETE
 
 
-def _sweep(plan: SweepPlan, out_dir: Path, args: argparse.Namespace) -> int:
+def _sweep(plan: SweepPlan, out_dir: Path, args: argparse.Namespace, started_s: float) -> int:
+    """The sweep; ``started_s`` is when the command started (``time.perf_counter``), for the
+    total duration printed at the end."""
     store = SweepStore.open(out_dir, plan, args.resume)
     pending = store.pending()
     if not args.quiet:
         say(_header(plan, store, pending, args))
+        for line in (_bad_entries(store), _seedless(plan)):
+            if line:
+                say(line)
     engine = _start_engine(args) if pending else None
     if engine is None and pending:
         return EXIT_BAD_INPUT  # said by _start_engine; nothing was written
@@ -118,11 +139,13 @@ def _sweep(plan: SweepPlan, out_dir: Path, args: argparse.Namespace) -> int:
     _write_summary(store, out_dir, complete, recordings)
     if not args.quiet:
         say(_final(store, out_dir, outcome, args, recordings))
+        say(_took(time.perf_counter() - started_s, engine, outcome))
     if outcome.stopped_by is not None:
         name = signal.Signals(outcome.stopped_by).name
+        finish = shlex.join(["vnav-demo", "sweep", args.file, "--out", str(out_dir), "--resume"])
         _error(
             f"stopped by {name}: {len(store.episodes)} of {len(plan.episodes)} episodes done; "
-            f"finish with: vnav-demo sweep {args.file} --out {out_dir} --resume"
+            f"finish with: {finish}"
         )
         return 128 + outcome.stopped_by
     if outcome.failures:
@@ -152,6 +175,50 @@ def _header(plan: SweepPlan, store: SweepStore, pending: list, args: argparse.Na
     )
 
 
+def _bad_entries(store: SweepStore) -> str | None:
+    """One line on the journal entries set aside (they run again), or None."""
+    bad = store.bad_entries
+    if not bad:
+        return None
+    return (
+        f"{len(bad)} journal entries do not read as this sweep's episodes and run again "
+        f"(first: {bad[0]})"
+    )
+
+
+def _seedless(plan: SweepPlan) -> str | None:
+    """One line where some grid points' seeds all give the same result, or None."""
+    if len(plan.seeds) < 2:
+        return None
+    idle = [p.index for p in plan.points if not draws_from_seed(p.spec)]
+    n = len(plan.seeds)
+    if len(idle) == len(plan.points):
+        return (
+            f"no draw depends on the seed: {n} seeds give one result (every [noise] figure "
+            "and timing.jitter_s are zero)"
+        )
+    if not idle:
+        return None
+    shown = ", ".join(f"p{i}" for i in idle[:5]) + (", ..." if len(idle) > 5 else "")
+    return (
+        f"no draw depends on the seed at {len(idle)} of {len(plan.points)} grid points "
+        f"({shown}): {n} seeds give one result there"
+    )
+
+
+def _took(total_s: float, engine, run: _Run) -> str:
+    """The sweep's whole duration, wall clock, from the command's start, and its parts: the
+    engine's start (Ray's), the episodes, and the rest (planning, tables, plots, recordings)."""
+    parts = []
+    startup_s = getattr(engine, "startup_s", None)
+    if startup_s:
+        parts.append(f"Ray start {startup_s:.1f} s")
+    parts.append(f"episodes {run.wall_s:.1f} s")
+    rest_s = total_s - run.wall_s - (startup_s or 0.0)
+    parts.append(f"planning, tables, plots and recordings {max(rest_s, 0.0):.1f} s")
+    return f"took {total_s:.1f} s in all, wall clock ({', '.join(parts)})"
+
+
 def _start_engine(args: argparse.Namespace):
     """The engine the options ask for, or None (said in one line) if Ray cannot be joined."""
     if args.workers == 0:
@@ -171,8 +238,9 @@ def _run_pending(store: SweepStore, pending: list, engine, args: argparse.Namesp
     out = _Run()
     if not pending:
         return out
-    tasks = [engines.Task(p, s, store.plan.points[p].scenario_toml) for p, s in pending]
-    bar = _Progress(len(tasks), enabled=not args.quiet)
+    # Made as the engine takes them: a million tasks made up front take seconds.
+    tasks = (engines.Task(p, s, store.plan.points[p].scenario_toml) for p, s in pending)
+    bar = _Progress(len(pending), enabled=not args.quiet)
     start = time.perf_counter()
     bar(0, 0.0)
     try:
@@ -244,14 +312,12 @@ def _write_summary(
     """``plots/*.png`` and then ``summary.json``, from every finished episode."""
     import json
 
-    import numpy as np
-
     episodes = store.sorted_episodes()
     plots_dir = out_dir / "plots"
     plots_dir.mkdir(exist_ok=True)
     for name, key in plots.plot_names(store.plan).items():
         if key is None:
-            png = plots.error_vs_range_png(store.plan, _estimate_arrays(episodes, np))
+            png = plots.error_vs_range_png(store.plan, episodes)
         else:
             png = plots.error_vs_key_png(store.plan, episodes, key)
         outputs.write_atomic(plots_dir / name, lambda tmp, png=png: tmp.write_bytes(png))
@@ -265,14 +331,6 @@ def _write_summary(
     )
     text = json.dumps(doc, indent=1, allow_nan=False) + "\n"
     outputs.write_atomic(out_dir / "summary.json", lambda tmp: tmp.write_text(text))
-
-
-def _estimate_arrays(episodes: list[Episode], np) -> dict:
-    return {
-        "method": np.array([m for e in episodes for m in e.estimates["method"]], dtype=str),
-        "range_m": np.array([r for e in episodes for r in e.estimates["range_m"]], dtype=float),
-        "error_m": np.array([r for e in episodes for r in e.estimates["error_m"]], dtype=float),
-    }
 
 
 def _final(
@@ -314,9 +372,10 @@ def _final(
             "worst: " + summary.replay_command(str(out_dir), store.point_file(w.point), w.seed)
         )
     if recordings:
+        first = shlex.join(["rerun", f"{out_dir}/{next(iter(recordings.values()))}"])
         lines.append(
             f"recorded the {len(recordings)} worst episodes in {out_dir}/worst/ "
-            f"(open one with: rerun {out_dir}/{next(iter(recordings.values()))})"
+            f"(open one with: {first})"
         )
     elif args.record_worst and store.pending():
         lines.append("--record-worst waits for a complete sweep: finish it with --resume")

@@ -14,15 +14,25 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from scenarios.run.records import CalibrationRecord, RunResult
+from scenarios.run.evaluate import reevaluate
+from scenarios.run.records import CalibrationRecord, RunResult, TickRecord
 from vnav import so3
 from vnav.calibration import CalibrationError, CalibrationResult, calibrate_camera
 from vnav.camera import PinholeCamera
 from vnav.cone import TRAFFIC_CONE
 from vnav.frames import ExtrapolationError
+from vnav.localize import Localizer
+from vnav.sensor_noise import mount_covariance
 from vnav.silhouette import SilhouetteView
 
-__all__ = ["CalibrationInputs", "Truth", "calibrate_run", "errors_against", "inputs_from_run"]
+__all__ = [
+    "CalibrationInputs",
+    "Truth",
+    "calibrate_run",
+    "errors_against",
+    "estimate_with_mount",
+    "inputs_from_run",
+]
 
 
 @dataclass(frozen=True)
@@ -122,7 +132,9 @@ def calibrate_run(result: RunResult) -> CalibrationRecord:
 
     Two passes: the detector's pose-free apexes give a first mount; the apexes re-fitted along
     the image vertical that mount gives (unbiased) give the answer. (A recording holds the
-    detector's apexes only: ``vnav-demo calibrate`` makes the first pass.)
+    detector's apexes only: ``vnav-demo calibrate`` makes the first pass.) Then every tick is
+    estimated again with the recovered mount (``estimate_with_mount``): the estimates after
+    calibration, beside the run's own, made with the declared mount.
     """
     cam = result.spec.scene.camera
     camera = PinholeCamera.from_fovy(cam.fovy_deg, cam.width, cam.height)
@@ -150,6 +162,21 @@ def calibrate_run(result: RunResult) -> CalibrationRecord:
             "time_offset_s": errors["time_offset_ms"] * 1e-3,
         },
         **mounts,
+        ticks_recovered=estimate_with_mount(result, camera, solved.T_b_c),
+    )
+
+
+def estimate_with_mount(
+    result: RunResult, camera: PinholeCamera, T_b_c: np.ndarray
+) -> list[TickRecord]:
+    """Every tick of ``result`` estimated again with the camera mount ``T_b_c`` in place of
+    the declared one, by a new ``vnav.localize.Localizer`` configured as the run's (camera,
+    far plane, the noise it is told, the declared mount's covariance), on the same detections,
+    depth and poses (``scenarios.run.evaluate.reevaluate``)."""
+    spec = result.spec
+    localizer = Localizer(camera, far_m=spec.scene.zfar_m, noise=spec.noise)
+    return reevaluate(
+        result.ticks, result.cones_w, localizer, T_b_c, cov_T_b_c=mount_covariance(spec.noise)
     )
 
 

@@ -28,7 +28,7 @@ from vnav import metrics
 from vnav.methods import METHOD_NAMES, NEWEST_POSE_METHOD
 from vnav.uncertainty import nees_band
 
-REPORT_VERSION = 7
+REPORT_VERSION = 8
 """2: ``camera_ticks`` (was ``frames``): the word frame means a coordinate frame only;
 ``recording`` names the ``.rrd`` file and its Rerun recording id.
 3: each check has an ``outcome`` (passed, failed, no data, skipped), a ``unit``, the figure
@@ -45,7 +45,13 @@ offset recovered from the flight, their reprojection RMS, images used, errors ag
 truth, or why the flight was refused; ``camera_mount_error``, the scenario's true mount's
 error from the declared one.
 7: ``noise`` holds ``intensity_std_grey`` (was ``pixel_std_px``, the same figure: the image
-noise in 8-bit grey levels); its keys are ``vnav.noise_model.NoiseModel``'s fields."""
+noise in 8-bit grey levels); its keys are ``vnav.noise_model.NoiseModel``'s fields.
+8: ``calibration.position_error_m``: per method, the error statistics of the run's estimates
+made with the declared mount (``declared_mount``, the same as ``methods``) and of the same
+images estimated again with the recovered mount (``recovered_mount``): what calibrating
+gives. ``timing_s`` adds ``calibrate`` (the calibration and that second estimate), ``judge``
+(the checks), ``total`` (the whole run, from its start to its report, wall seconds) and
+``total_cpu`` (the process's CPU time, user and system, over the same span)."""
 
 
 def _calibration(run: RunResult) -> dict[str, Any] | None:
@@ -54,12 +60,19 @@ def _calibration(run: RunResult) -> dict[str, Any] | None:
         return None
     if c.refused is not None:
         return {"refused": c.refused}
+    recovered = run.with_recovered_mount()
     return {
         "T_b_c": [[round(float(v), 9) for v in row] for row in c.T_b_c],
         "time_offset_s": _finite_or_none(c.time_offset_s),
         "reprojection_rms_px": _finite_or_none(c.reprojection_rms_px),
         "frames_used": c.frames_used,
         "errors": {k: _finite_or_none(v) for k, v in c.errors.items()},
+        "position_error_m": {
+            "declared_mount": {m: _stats(run.errors(m)) for m in METHOD_NAMES},
+            "recovered_mount": {
+                m: None if recovered is None else _stats(recovered.errors(m)) for m in METHOD_NAMES
+            },
+        },
     }
 
 

@@ -13,7 +13,6 @@ world) and the stamp the image's exposure stamp on the camera clock.
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
@@ -23,7 +22,7 @@ from vnav import quat
 from vnav.camera import PinholeCamera
 from vnav.multiview import camera_pose_from_cones
 
-__all__ = ["pnp_trajectory", "truth_trajectory", "tum_text", "write_tum_files"]
+__all__ = ["output_paths", "pnp_trajectory", "truth_trajectory", "tum_files", "tum_text"]
 
 
 def _stamp(tick) -> float:
@@ -65,22 +64,17 @@ def tum_text(stamps_s: np.ndarray, T_w_c: np.ndarray) -> str:
     )
 
 
-def write_tum_files(result: RunResult, camera: PinholeCamera, out_dir: Path) -> list[Path]:
-    """Write ``NAME.truth.tum`` and ``NAME.pnp.tum`` into ``out_dir``, each complete or not at
-    all (a temporary name, synced, renamed); return their paths."""
-    name = result.spec.name
-    files = {
-        out_dir / f"{name}.truth.tum": tum_text(*truth_trajectory(result)),
-        out_dir / f"{name}.pnp.tum": tum_text(*pnp_trajectory(result, camera)),
+def output_paths(name: str, out_dir: Path) -> tuple[Path, Path]:
+    """Where a scenario's TUM files go: ``NAME.truth.tum`` and ``NAME.pnp.tum`` in
+    ``out_dir``."""
+    return Path(out_dir) / f"{name}.truth.tum", Path(out_dir) / f"{name}.pnp.tum"
+
+
+def tum_files(result: RunResult, camera: PinholeCamera, out_dir: Path) -> dict[Path, str]:
+    """The text of ``NAME.truth.tum`` and ``NAME.pnp.tum`` by their paths in ``out_dir``
+    (``output_paths``), for the caller to write."""
+    truth, pnp = output_paths(result.spec.name, out_dir)
+    return {
+        truth: tum_text(*truth_trajectory(result)),
+        pnp: tum_text(*pnp_trajectory(result, camera)),
     }
-    for path, text in files.items():
-        tmp = path.with_name(f".{path.name}.{os.getpid()}.partial")
-        try:
-            with open(tmp, "w", encoding="utf-8") as f:
-                f.write(text)
-                f.flush()
-                os.fsync(f.fileno())
-            os.replace(tmp, path)
-        finally:
-            tmp.unlink(missing_ok=True)
-    return list(files)

@@ -1,4 +1,5 @@
-"""Static plots as PNG (matplotlib): error against range, and the depth image's colour scale.
+"""Static plots as PNG (matplotlib): error against range, the depth image's colour scale and
+the legend of the 3D views' colours.
 
 Rerun's time-series views plot against time only; "how does each method's error grow with
 range" needs range on the x axis, so it is drawn here once per run and logged as an image.
@@ -12,10 +13,11 @@ import io
 
 import numpy as np
 
+from scenarios.record.viewer import LegendEntry
 from scenarios.run.records import RunResult
 from vnav.methods import CONTRACT_DOMAIN, METHODS
 
-__all__ = ["depth_scale_png", "error_against_range_png"]
+__all__ = ["depth_scale_png", "error_against_range_png", "legend_png"]
 
 _BACKGROUND = "#1b1b1f"
 _FOREGROUND = "#d0d0d0"
@@ -45,17 +47,34 @@ def _png(fig) -> bytes:
     return buffer.getvalue()
 
 
-def error_against_range_png(result: RunResult) -> bytes:
+RECOVERED_MOUNT_COLOR = (0.0, 225 / 255, 225 / 255)
+"""Cyan, as the recovered mount is drawn in the recording (``viewer.RECOVERED_MOUNT_COLOR``)."""
+
+
+def error_against_range_png(result: RunResult, recovered: RunResult | None = None) -> bytes:
     """One panel per method: each matched detection's error against its range, own y scale.
 
     Filled dots are detections inside the accuracy contract's domain, hollow ones outside it;
     the grey line is the method's bound ``max(floor, fraction * range)`` and the shaded band
-    the contract's range domain.
+    the contract's range domain. ``recovered``, the same run estimated again with the mount
+    calibration recovered (``RunResult.with_recovered_mount``), adds its errors as cyan
+    crosses.
     """
     columns = 2
     rows = -(-len(METHODS) // columns)
-    fig = _figure(7.2, 2.8 * rows)
-    axes = fig.subplots(rows, columns).ravel()
+    width_in, height_in = 7.2, 2.8 * rows
+    fig = _figure(width_in, height_in)
+    # Fixed margins in inches, not tight_layout: measuring every label costs an extra draw,
+    # a third of the plot's time, paid by every run.
+    margins = {
+        "left": 0.7 / width_in,
+        "right": 1.0 - 0.45 / width_in,
+        "bottom": 0.5 / height_in,
+        "top": 1.0 - 0.62 / height_in,
+        "wspace": 0.45,
+        "hspace": 0.5,
+    }
+    axes = fig.subplots(rows, columns, gridspec_kw=margins).ravel()
     for ax in axes[len(METHODS) :]:
         ax.set_visible(False)
     for ax, m in zip(axes, METHODS, strict=False):
@@ -66,6 +85,15 @@ def error_against_range_png(result: RunResult) -> bytes:
         all_r, all_e = result.ranges_for(m.name), result.errors(m.name)
         ax.scatter(all_r, all_e, s=10, facecolors="none", edgecolors=[color], linewidths=0.7)
         ax.scatter(inside_r, inside_e, s=10, color=[color])
+        if recovered is not None:
+            ax.scatter(
+                recovered.ranges_for(m.name),
+                recovered.errors(m.name),
+                s=9,
+                marker="x",
+                color=[RECOVERED_MOUNT_COLOR],
+                linewidths=0.6,
+            )
         domain = (CONTRACT_DOMAIN.min_range_m, CONTRACT_DOMAIN.max_range_m)
         ax.axvspan(*domain, color="#ffffff", alpha=0.04, linewidth=0)
         top_r = max(float(all_r.max()) if all_r.size else 0.0, 1.0) * 1.1
@@ -88,12 +116,16 @@ def error_against_range_png(result: RunResult) -> bytes:
                 color=_FOREGROUND,
                 fontsize=9,
             )
+    title = "error against range (filled: inside the contract's domain; grey: the bound)"
+    if recovered is not None:
+        title = title[:-1] + "; cyan crosses: with the recovered mount)"
     fig.suptitle(
-        "error against range (filled: inside the contract's domain; grey: the bound)",
+        title,
         color=_FOREGROUND,
         fontsize=9.5,
+        y=1.0 - 0.12 / height_in,
+        va="top",
     )
-    fig.tight_layout()
     return _png(fig)
 
 
@@ -108,4 +140,51 @@ def depth_scale_png(depth_max_m: float, colormap: str = "viridis") -> bytes:
     bar = fig.colorbar(ScalarMappable(Normalize(0.0, depth_max_m), colormaps[colormap]), cax=ax)
     bar.set_label("planar depth z (m)", color=_FOREGROUND, fontsize=8)
     bar.ax.tick_params(colors=_FOREGROUND, labelsize=8)
+    return _png(fig)
+
+
+LEGEND_SIZE_IN = (8.4, 0.42)
+"""The legend strip, inches at 100 dpi: as wide as the viewer's two 3D views side by side in
+a 1400-point window, two lines high."""
+
+
+def legend_png(rows: list[list[LegendEntry]], note: str, dpi: float = 200.0) -> bytes:
+    """A strip naming each colour of the 3D views: one line per row of entries, each a dot or
+    a line of its colour before its text, and ``note`` closing the last line; drawn at
+    ``dpi`` so that the viewer's scaling keeps the text sharp."""
+    from matplotlib.lines import Line2D
+
+    fig = _figure(*LEGEND_SIZE_IN)
+    fig.set_dpi(dpi)
+    for i, row in enumerate(rows):
+        handles = [
+            Line2D(
+                [],
+                [],
+                color=np.array(e.color_rgb) / 255.0,
+                marker="o" if e.mark == "dot" else None,
+                markersize=5.5,
+                linestyle="-" if e.mark == "line" else "none",
+                linewidth=2.0,
+            )
+            for e in row
+        ]
+        labels = [e.text for e in row]
+        if i == len(rows) - 1:
+            handles.append(Line2D([], [], linestyle="none"))
+            labels.append(note)
+        fig.legend(
+            handles,
+            labels,
+            loc="upper left",
+            bbox_to_anchor=(0.0, 1.0 - i / len(rows)),
+            ncol=len(labels),
+            frameon=False,
+            fontsize=8.0,
+            labelcolor=_FOREGROUND,
+            handlelength=1.3,
+            handletextpad=0.4,
+            columnspacing=1.1,
+            borderaxespad=0.1,
+        )
     return _png(fig)

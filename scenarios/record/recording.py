@@ -10,6 +10,8 @@ docs/CONVENTIONS.md; "in F" is the named transform frame an entity is drawn in):
     world/body/camera              Transform3D T_b_c (body <- camera), camera axes, Pinhole
                                    (image -> camera, true intrinsics, RDF) (static; T_b_c
                                    every tick in a scenario that slides the camera)
+    world/body/camera/axes, name   in camera: the camera's axes, thin arrows, and its name on a
+                                   dot past the tip of z (static)
     world/body/camera/image        in image: JPEG-compressed RGB
     world/body/camera/depth        in image: planar z-depth, PNG 16-bit mm, every 5th tick
     world/body/camera/detections   in image: Boxes2D + Points2D (apex, base keypoints)
@@ -18,6 +20,8 @@ docs/CONVENTIONS.md; "in F" is the named transform frame an entity is drawn in):
     world/body/camera_recovered    calibrated runs: Transform3D T_b_c_recovered (body <- the
                                    mount calibration recovered), static; its axes (cyan)
     world/cones/mesh, truth        in world: the cones' MuJoCo geoms; true base centres
+    world/cones/pins, pins/heads   in world: a line from each cone's apex up to PIN_TOP_M and a
+                                   head of fixed size on screen, cone 0's named (static)
     world/cones/estimate/<method>  in world: Points3D per method, every tick
     world/cones/error/<method>     in world: segment from the true cone to each estimate
     world/cones/uncertainty/<method>  in world: Ellipsoids3D, each checked estimate's
@@ -30,10 +34,14 @@ docs/CONVENTIONS.md; "in F" is the named transform frame an entity is drawn in):
     world/depth_cloud, trajectory  in world: depth image back-projected; the flown path
     metrics/error/<method>         Scalars, metres (NaN, a gap, where a method gave nothing)
     metrics/allowed/<method>       Scalars: the contract's bound at the matched ranges
+    metrics/error_recovered_mount/<method>  calibrated runs: Scalars, metres: the error of the
+                                   same images estimated again with the recovered mount
     metrics/newest_pose/error      Scalars, metres: that estimate's error (latency only)
     metrics/range_m                Scalars, metres
     metrics/nees/<method>          Scalars: the mean NEES of the tick's matched estimates
                                    (expected: their degrees of freedom, 3; ground_plane 2)
+    metrics/nees_clipped/<method>  Scalars: a mark just under the NEES plot's top where the
+                                   tick's NEES is above it (NaN elsewhere)
     attitude/rpy_deg, quat_xyzw    roll/pitch/yaw (deg), sign-continuous quaternion of R_w_b
     attitude/gimbal_lock, quat_sign  StateChange lanes
     coordinates/cone0_<frame>      cone 0 in world, body, camera (truth) and its estimate
@@ -46,6 +54,9 @@ docs/CONVENTIONS.md; "in F" is the named transform frame an entity is drawn in):
                                    and recovered mounts (its rows are sent at the end)
     plots/error_vs_range           image (matplotlib), logged at the end (static)
     plots/depth_scale              the depth colour scale, logged at the end (static)
+    plots/legend                   the 3D views' colours named, an image (static)
+    moment                         AnyValues (static): camera_tick and sim_time_s the 3D views
+                                   are framed for (scenario's show_at_s, else the last tick)
     description                    TextDocument (markdown), logged again at the end with
                                    every check's verdict and what calibration recovered
     estimator/pose_stream          sim_time only: Transform3D T_w_b of every pose sample the
@@ -87,33 +98,48 @@ import rerun as rr
 
 from scenarios.judge.checks import CheckResult
 from scenarios.record.panel import mount_lines, state_text
-from scenarios.record.plots import depth_scale_png, error_against_range_png
+from scenarios.record.plots import depth_scale_png, error_against_range_png, legend_png
 from scenarios.record.viewer import (
+    AXES_NOTE,
     AXIS_COLORS,
     AXIS_LENGTH_M,
+    CAMERA_AXES_UI_POINTS,
+    CAMERA_NAME_Z_M,
     CONE0_SERIES,
     DECLARED_MOUNT_COLOR,
+    DEPTH_CLOUD_COLOR,
     EXPOSURE_POSE_COLOR,
     FRAME,
     IMAGE_PLANE_M,
     MOUNT_AXIS_LENGTH_M,
+    NEES_CLIP_MARK,
+    NEES_TOP,
     NEWEST_POSE_COLOR,
     NEWEST_POSE_METHOD,
+    PIN_COLOR,
+    PIN_HEAD_UI_POINTS,
+    PIN_LINE_UI_POINTS,
+    PIN_TOP_M,
     POSE_SAMPLE_COLOR,
     RAY_COLOR,
     RECOVERED_MOUNT_COLOR,
     STREAM_QUANTITIES,
+    TRAJECTORY_COLOR,
     TRUTH_COLOR,
     blueprint,
     checks_summary,
     describe,
     entity,
     eye_for,
+    legend_entries,
+    shown_tick,
 )
 from scenarios.run.records import CalibrationRecord, PoseStream, RunResult, TickRecord
+from scenarios.scenario.builtin import mount_error_text
 from scenarios.scenario.spec import ScenarioSpec
 from vnav import quat, so3
 from vnav.camera import PinholeCamera, depth_to_world_points
+from vnav.cone import TRAFFIC_CONE
 from vnav.methods import METHOD_NAMES, METHODS, NAIVE, PREFERENCE, method
 from vnav.uncertainty import nees_band
 
@@ -124,6 +150,7 @@ __all__ = [
     "Recording",
     "continuous_sign",
     "depth_for_display_mm",
+    "nees_off_top",
     "rerun_image_from_camera",
     "rerun_uv",
 ]
@@ -153,10 +180,10 @@ LINE_UI_POINTS = rr.Radius.ui_points(0.9)
 thin in the close-up and visible in the wide view."""
 RAY_UI_POINTS = rr.Radius.ui_points(0.7)
 MOUNT_ARROW_UI_POINTS = {
-    "declared": rr.Radius.ui_points(1.5),
-    "recovered": rr.Radius.ui_points(0.8),
+    "declared": rr.Radius.ui_points(CAMERA_AXES_UI_POINTS),
+    "recovered": rr.Radius.ui_points(0.5 * CAMERA_AXES_UI_POINTS),
 }
-"""The declared mount's axes are about as thick on screen as the true camera's; the recovered
+"""The declared mount's axes are as thick on screen as the true camera's; the recovered
 mount's thinner, so that where they coincide with the true axes those stay in sight."""
 
 ELLIPSOID_LINE = rr.Radius.ui_points(1.8)
@@ -378,18 +405,22 @@ class Recording:
         _in_frame(rec, entity.TRAJECTORY, FRAME.WORLD)
         rec.log(
             entity.TRAJECTORY,
-            rr.LineStrips3D([result.trajectory_w], colors=[(170, 170, 185)], radii=0.03),
+            rr.LineStrips3D([result.trajectory_w], colors=[TRAJECTORY_COLOR], radii=0.03),
             static=True,
         )
         rec.log(
             entity.ERROR_VS_RANGE,
-            rr.EncodedImage(contents=error_against_range_png(result), media_type="image/png"),
+            rr.EncodedImage(
+                contents=error_against_range_png(result, result.with_recovered_mount()),
+                media_type="image/png",
+            ),
             static=True,
         )
         _log_run_inputs(rec, result, self._latency)
         _log_outcome(rec, self._spec, self._seed, result, judged)
         if result.calibration is not None:
             _log_mounts(rec, result.calibration)
+            _send_recovered_mount_errors(rec, result)
         self._send_waiting_state(result)
         depth_max_m = _depth_scale_m(result, self._depth_p95_m)
         rec.log(
@@ -407,6 +438,26 @@ class Recording:
             ),
             static=True,
         )
+        mounts = result.calibration is not None
+        rec.log(
+            entity.LEGEND,
+            rr.EncodedImage(
+                contents=legend_png(
+                    legend_entries(latency=self._latency, mounts=mounts), AXES_NOTE
+                ),
+                media_type="image/png",
+            ),
+            static=True,
+        )
+        shown = result.ticks[shown_tick(self._spec, result)] if result.ticks else None
+        if shown is not None:
+            # Where the 3D views are framed: a screenshot (scripts/screenshots.sh) moves the
+            # viewer's time cursor here.
+            rec.log(
+                entity.MOMENT,
+                rr.AnyValues(camera_tick=shown.tick, sim_time_s=shown.t_s),
+                static=True,
+            )
         eye_w, look_target_w = eye_for(self._spec, result)
         close_up_cone_w = self._spec.scene.cones_w[0] if self._spec.close_up == "cone" else None
         rec.send_blueprint(
@@ -414,13 +465,13 @@ class Recording:
                 eye_w,
                 look_target_w,
                 self._spec.view,
-                T_w_b=result.ticks[-1].T_w_b if result.ticks else None,
+                T_w_b=shown.T_w_b if shown is not None else None,
                 close_up_cone_w=close_up_cone_w,
                 error_top_m=_error_tops_m(result, self._latency),
                 cone0_top_m=_cone0_top_m(result, self._cones_w[0]),
                 latency=self._latency,
                 verdict=checks_summary(judged),
-                mounts_T_w_c=_last_T_w_c(result) if result.calibration is not None else None,
+                mounts_T_w_c=shown.T_w_b @ shown.T_b_c if mounts and shown is not None else None,
             )
         )
         self._close()
@@ -499,12 +550,6 @@ class Recording:
 def _state_columns(texts: list[str]) -> rr.ComponentColumnList:
     """``TextDocument`` columns of the state panel's markdown, one per tick."""
     return rr.TextDocument.columns(text=texts, media_type=["text/markdown"] * len(texts))
-
-
-def _last_T_w_c(result: RunResult) -> np.ndarray:
-    """The true camera's pose at the run's last tick (the mounts close-up looks at it)."""
-    last = result.ticks[-1]
-    return last.T_w_b @ last.T_b_c
 
 
 def _depth_scale_m(result: RunResult, depth_p95_m: list[float]) -> float:
@@ -587,8 +632,8 @@ def _mesh(mesh: TriangleMesh) -> rr.Mesh3D:
 def _log_mounts(rec: rr.RecordingStream, calibration: CalibrationRecord) -> None:
     """A calibrated run's declared and recovered camera mounts beside the true one, each a
     named frame on the body (``T_b_c_declared``, ``T_b_c_recovered``) with its axes drawn in
-    one colour and named once (the declared mount on its x axis, the recovered one on its
-    optical axis z), static."""
+    one colour and named once (the declared mount on its x axis, the recovered one on its y
+    axis: the true camera is named on its optical axis z), static."""
     mounts = (
         (
             entity.CAMERA_DECLARED,
@@ -606,7 +651,7 @@ def _log_mounts(rec: rr.RecordingStream, calibration: CalibrationRecord) -> None
             calibration.T_b_c,
             RECOVERED_MOUNT_COLOR,
             "recovered",
-            ["", "", "recovered"],
+            ["", "recovered", ""],
         ),
     )
     for path, axes_path, frame, T_b_c, color, which, labels in mounts:
@@ -627,6 +672,56 @@ def _log_mounts(rec: rr.RecordingStream, calibration: CalibrationRecord) -> None
             ),
             static=True,
         )
+
+
+def _send_recovered_mount_errors(rec: rr.RecordingStream, result: RunResult) -> None:
+    """A calibrated run's ticks estimated again with the recovered mount: per method, the mean
+    error of each tick's matched detections (NaN, a gap, where none), plotted with the run's
+    own in the recovered mount's colour."""
+    recovered = result.with_recovered_mount()
+    if recovered is None:
+        return
+    send = _Sender(rec)
+    for m in METHODS:
+        rec.log(
+            entity.error_recovered(m.name),
+            rr.SeriesLines(
+                colors=[RECOVERED_MOUNT_COLOR], names=[f"{m.name} error, recovered mount"]
+            ),
+            static=True,
+        )
+        errors = [t.mean_error_m(m.name) for t in recovered.ticks]
+        send.records(
+            entity.error_recovered(m.name),
+            recovered.ticks,
+            rr.Scalars.columns(scalars=[np.nan if e is None else e for e in errors]),
+        )
+
+
+def recovered_mount_text(result: RunResult) -> str:
+    """Markdown: what the declared mount's error does to the estimates, and what the
+    recovered mount gives on the same images (empty for a run not calibrated)."""
+    recovered = result.with_recovered_mount()
+    if recovered is None:
+        return ""
+    lines = []
+    for m in METHODS:
+        if m.bound is None:
+            continue
+        before, after = result.errors(m.name), recovered.errors(m.name)
+        if before.size and after.size:
+            lines.append(
+                f"- {m.name}: mean {float(np.mean(before)):.3f} m with the declared mount, "
+                f"{float(np.mean(after)):.3f} m with the recovered one"
+            )
+    error = result.spec.scene.camera.mount_error
+    return (
+        "## Before and after calibration\n\nThe declared mount is the true one with the "
+        f"scenario's mount error ({mount_error_text(error)}): every estimate made through it "
+        "is off by what that error swings the cone through, beyond the methods' bounds. The "
+        "same images estimated again with the recovered mount (cyan in the error plots, "
+        "crosses in error against range):\n\n" + "\n".join(lines)
+    )
 
 
 def calibration_text(c: CalibrationRecord) -> str:
@@ -672,7 +767,6 @@ def _log_static(
         )
     rec.log(
         entity.CAMERA,
-        rr.TransformAxes3D(AXIS_LENGTH_M[FRAME.CAMERA], show_frame=True),
         rr.Pinhole(
             image_from_camera=rerun_image_from_camera(camera),
             resolution=[camera.width, camera.height],
@@ -685,6 +779,31 @@ def _log_static(
     )
     for path in (entity.IMAGE, entity.DEPTH, entity.DETECTIONS, entity.KEYPOINTS):
         _in_frame(rec, path, FRAME.IMAGE)
+    # The camera's axes thin and its name past the tip of its optical axis
+    # (``CAMERA_NAME_Z_M``), where the world's and the body's axes are thick and named at
+    # their origins: 15 cm from the body's origin, the camera's name there sat on the body's.
+    _in_frame(rec, entity.CAMERA_AXES, FRAME.CAMERA)
+    rec.log(
+        entity.CAMERA_AXES,
+        rr.Arrows3D(
+            vectors=AXIS_LENGTH_M[FRAME.CAMERA] * np.eye(3),
+            colors=AXIS_COLORS,
+            radii=rr.Radius.ui_points(CAMERA_AXES_UI_POINTS),
+        ),
+        static=True,
+    )
+    _in_frame(rec, entity.CAMERA_NAME, FRAME.CAMERA)
+    rec.log(
+        entity.CAMERA_NAME,
+        rr.Points3D(
+            [[0.0, 0.0, CAMERA_NAME_Z_M]],
+            colors=[AXIS_COLORS[2]],
+            radii=rr.Radius.ui_points(1.5),
+            labels=["camera"],
+            show_labels=True,
+        ),
+        static=True,
+    )
     _log_world_contents(rec, spec, scenery)
     rec.log(
         entity.DESCRIPTION,
@@ -699,6 +818,8 @@ def _log_world_contents(rec: rr.RecordingStream, spec: ScenarioSpec, scenery: Sc
     world_paths = [
         entity.CONES,
         entity.TRUTH,
+        entity.CONE_PINS,
+        entity.CONE_PIN_HEADS,
         entity.RAYS,
         entity.GROUND_HITS,
         entity.NAIVE_OFFSET,
@@ -711,13 +832,34 @@ def _log_world_contents(rec: rr.RecordingStream, spec: ScenarioSpec, scenery: Sc
         _in_frame(rec, path, FRAME.WORLD)
     rec.log(entity.CONES, _mesh(scenery.cones_w), static=True)
     cones_w = np.array(spec.scene.cones_w, dtype=np.float64).reshape(-1, 3)
+    rec.log(entity.TRUTH, rr.Points3D(cones_w, colors=[TRUTH_COLOR], radii=0.05), static=True)
+    _log_pins(rec, cones_w)
+
+
+def _log_pins(rec: rr.RecordingStream, cones_w: np.ndarray) -> None:
+    """Each cone's pin: a line from its apex to ``PIN_TOP_M`` and a head of fixed size on
+    screen, so that a cone a few pixels tall is found from afar; only cone 0, the one the
+    state panel and the coordinate plots follow, is named (eight names from afar pile up)."""
+    apex_w = cones_w + np.array([0.0, 0.0, TRAFFIC_CONE.height_m])
+    top_w = cones_w.copy()
+    top_w[:, 2] = PIN_TOP_M
     rec.log(
-        entity.TRUTH,
+        entity.CONE_PINS,
+        rr.LineStrips3D(
+            [np.array([a, t]) for a, t in zip(apex_w, top_w, strict=True)],
+            colors=[PIN_COLOR],
+            radii=rr.Radius.ui_points(PIN_LINE_UI_POINTS),
+        ),
+        static=True,
+    )
+    rec.log(
+        entity.CONE_PIN_HEADS,
         rr.Points3D(
-            cones_w,
-            colors=[TRUTH_COLOR],
-            radii=0.05,
-            labels=[f"cone {i}" for i in range(len(cones_w))],
+            top_w,
+            colors=[PIN_COLOR],
+            radii=rr.Radius.ui_points(PIN_HEAD_UI_POINTS),
+            labels=["cone 0"] + [""] * (len(top_w) - 1),
+            show_labels=True,
         ),
         static=True,
     )
@@ -757,6 +899,16 @@ def _log_styles(rec: rr.RecordingStream) -> None:
             static=True,
         )
         rec.log(
+            entity.nees_clipped(m.name),
+            rr.SeriesPoints(
+                colors=[m.color_rgb],
+                markers=["up"],
+                marker_sizes=[6.0],
+                names=[f"{m.name} NEES above {NEES_TOP:g}"],
+            ),
+            static=True,
+        )
+        rec.log(
             entity.nees_band(m.name),
             rr.SeriesLines(
                 colors=[(160, 160, 160)] * 2,
@@ -792,7 +944,9 @@ def _log_state_lanes(rec: rr.RecordingStream) -> None:
         entity.GIMBAL_LOCK,
         rr.StateConfiguration(
             values=["free", "locked"],
-            labels=["no lock", "LOCKED"],
+            # "lock" fits a short stretch (the gimbal-lock built-in ends with half a second
+            # of it); a longer word was cut at the stretch's end.
+            labels=["no lock", "lock"],
             colors=[0x3A7D44FF, 0xD04040FF],
         ),
         static=True,
@@ -812,7 +966,7 @@ def _log_3d_styles(rec: rr.RecordingStream) -> None:
     """Colours and sizes of the 3D and image entities logged every tick."""
     rec.log(
         entity.DEPTH_CLOUD,
-        rr.Points3D.from_fields(colors=[(150, 150, 200)], radii=0.04),
+        rr.Points3D.from_fields(colors=[DEPTH_CLOUD_COLOR], radii=0.04),
         static=True,
     )
     rec.log(
@@ -959,6 +1113,8 @@ def _log_outcome(
     text = describe(spec, seed, judged)
     if result.calibration is not None:
         text += "\n\n" + calibration_text(result.calibration)
+        if (before_after := recovered_mount_text(result)) != "":
+            text += "\n\n" + before_after
     rec.log(entity.DESCRIPTION, rr.TextDocument(text, media_type="text/markdown"), static=True)
 
 
@@ -1110,8 +1266,15 @@ def _send_uncertainty(
                 running.append(np.nan)
                 bands.append((np.nan, np.nan))
         send(entity.nees(name), rows, rr.Scalars.columns(scalars=values))
+        send(entity.nees_clipped(name), rows, rr.Scalars.columns(scalars=nees_off_top(values)))
         send(entity.nees_mean(name), rows, rr.Scalars.columns(scalars=running))
         send(entity.nees_band(name), rows, rr.Scalars.columns(scalars=np.array(bands)))
+
+
+def nees_off_top(values: Sequence[float]) -> list[float]:
+    """Per NEES value, ``NEES_CLIP_MARK`` if it is above the NEES plot's top (``NEES_TOP``),
+    else NaN (no mark): above the top a value would leave the plot unmarked."""
+    return [NEES_CLIP_MARK if v > NEES_TOP else np.nan for v in values]
 
 
 def _send_errors(send: _Sender, rows: list[_Buffered]) -> None:

@@ -6,11 +6,13 @@ Everything here is a viewer concern, declared once and shared by the recording
 - ``entity``: every Rerun entity path;
 - ``FRAME``: the named transform frames (the same names as ``vnav.frames`` and
   docs/CONVENTIONS.md: world, body, camera, and the image plane);
-- ``AXIS_LENGTH_M``: how long each frame's drawn axes are (world > body > camera);
+- ``AXIS_LENGTH_M``: how long each frame's drawn axes are (world > body > camera), the
+  camera's drawn thin (``CAMERA_AXES_UI_POINTS``); each cone's pin (``PIN_TOP_M``);
 - colours: each method's from ``vnav.methods``, the truth's, the rays', the x/y/z axes',
   the newest pose's (runs with latency: ``NEWEST_POSE_COLOR``);
 - ``STREAM_*``: the pose stream's plots against the image stamps (runs with latency);
-- ``blueprint``: the default layout; ``eye_for``: where the 3D view looks from;
+- ``blueprint``: the default layout; ``eye_for``: where the 3D view looks from, at the tick
+  ``shown_tick`` picks; ``legend_entries``: the 3D views' colours, named in a strip over them;
 - ``describe``: the markdown shown beside the recording, with the checks' verdicts
   (``checks_text``) once the run is judged.
 """
@@ -18,6 +20,7 @@ Everything here is a viewer concern, declared once and shared by the recording
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 from types import SimpleNamespace
 from typing import TYPE_CHECKING
 
@@ -36,31 +39,45 @@ if TYPE_CHECKING:
     from scenarios.run.records import RunResult
 
 __all__ = [
+    "AXES_NOTE",
     "AXIS_COLORS",
     "AXIS_LENGTH_M",
+    "CAMERA_AXES_UI_POINTS",
+    "CAMERA_NAME_Z_M",
     "CONE0_SERIES",
     "DECLARED_MOUNT_COLOR",
+    "DEPTH_CLOUD_COLOR",
     "EXPOSURE_POSE_COLOR",
     "FRAME",
     "IMAGE_PLANE_M",
     "MOUNT_AXIS_LENGTH_M",
+    "NEES_CLIP_MARK",
+    "NEES_TOP",
     "NEWEST_POSE_COLOR",
     "NEWEST_POSE_METHOD",
+    "PIN_COLOR",
+    "PIN_HEAD_UI_POINTS",
+    "PIN_LINE_UI_POINTS",
+    "PIN_TOP_M",
     "POSE_SAMPLE_COLOR",
     "RAY_COLOR",
     "RECOVERED_MOUNT_COLOR",
     "STREAM_QUANTITIES",
     "STREAM_SERIES",
     "STREAM_WINDOW_S",
+    "TRAJECTORY_COLOR",
     "TRUTH_COLOR",
     "VERDICT_WORDS",
     "VIEWS",
+    "LegendEntry",
     "blueprint",
     "checks_summary",
     "checks_text",
     "describe",
     "entity",
     "eye_for",
+    "legend_entries",
+    "shown_tick",
 ]
 
 
@@ -70,6 +87,10 @@ def _error(method: str) -> str:
 
 def _allowed(method: str) -> str:
     return f"metrics/allowed/{method}"
+
+
+def _error_recovered(method: str) -> str:
+    return f"metrics/error_recovered_mount/{method}"
 
 
 def _estimate(method: str) -> str:
@@ -96,6 +117,10 @@ def _nees_band(method: str) -> str:
     return f"metrics/nees_band/{method}"
 
 
+def _nees_clipped(method: str) -> str:
+    return f"metrics/nees_clipped/{method}"
+
+
 def _cone0(frame_name: str) -> str:
     return f"coordinates/cone0_{frame_name}"
 
@@ -109,6 +134,8 @@ entity = SimpleNamespace(
     BODY="world/body",
     DRONE="world/body/drone",
     CAMERA="world/body/camera",
+    CAMERA_AXES="world/body/camera/axes",
+    CAMERA_NAME="world/body/camera/name",
     CAMERA_DECLARED="world/body/camera_declared",
     CAMERA_DECLARED_AXES="world/body/camera_declared/axes",
     CAMERA_RECOVERED="world/body/camera_recovered",
@@ -119,6 +146,8 @@ entity = SimpleNamespace(
     KEYPOINTS="world/body/camera/detections/keypoints",
     CONES="world/cones/mesh",
     TRUTH="world/cones/truth",
+    CONE_PINS="world/cones/pins",
+    CONE_PIN_HEADS="world/cones/pins/heads",
     RAYS="world/rays",
     GROUND_HITS="world/rays/ground_hits",
     NAIVE_OFFSET="world/naive_offset",
@@ -135,6 +164,8 @@ entity = SimpleNamespace(
     STATE="state",
     ERROR_VS_RANGE="plots/error_vs_range",
     DEPTH_SCALE="plots/depth_scale",
+    LEGEND="plots/legend",
+    MOMENT="moment",
     DESCRIPTION="description",
     POSE_STREAM="estimator/pose_stream",
     MOUNT_DECLARED="estimator/mount",
@@ -142,12 +173,14 @@ entity = SimpleNamespace(
     TRUTH_VALUES="truth",
     error=_error,
     allowed=_allowed,
+    error_recovered=_error_recovered,
     estimate=_estimate,
     error_segment=_error_segment,
     ellipsoid=_ellipsoid,
     nees=_nees,
     nees_mean=_nees_mean,
     nees_band=_nees_band,
+    nees_clipped=_nees_clipped,
     cone0=_cone0,
     stream=_stream,
 )
@@ -173,6 +206,24 @@ the true one."""
 
 AXIS_LENGTH_M = {FRAME.WORLD: 2.0, FRAME.BODY: 1.0, FRAME.CAMERA: 0.5}
 """Drawn axis length per frame: the lengths tell the three frames apart where they overlap."""
+CAMERA_AXES_UI_POINTS = 1.0
+"""The camera's axes are thin arrows (``Arrows3D``, this radius on screen) where the world's
+and the body's are drawn thick (``TransformAxes3D``): the camera sits centimetres from the
+body's origin, and length alone did not tell their axes apart."""
+CAMERA_NAME_Z_M = 0.65
+"""The camera's name sits on a small dot of its z axis' colour this far along its optical axis
+z, m, past the axis' tip (``entity.CAMERA_NAME``): the body's name is at the body's origin, and
+in a calibrated run the declared mount's on its x axis and the recovered one's on its y axis.
+Half-way along z, a camera looking 80 deg down put its name just under the body's in the
+close-up."""
+
+PIN_TOP_M = 1.7
+"""Each cone has a pin: an orange line from its apex up to this height above the ground, m,
+topped by a head of fixed size on screen. Seen from the world view's tens of metres a 0.7 m
+cone is a few pixels: the pin shows where it stands; cone 0's name sits on its head, a metre
+above the world frame's name where cone 0 stands at the origin."""
+PIN_HEAD_UI_POINTS = 3.5
+PIN_LINE_UI_POINTS = 0.8
 IMAGE_PLANE_M = 0.2
 """Distance of the drawn image plane from the camera centre (the frustum's depth): small
 enough that the frustum does not hide the drone in the close-up."""
@@ -203,6 +254,47 @@ method uses it; a pipeline ignoring stamps would)."""
 EXPOSURE_POSE_COLOR = method(NEWEST_POSE_METHOD).color_rgb
 """The pose looked up at the exposure stamp: the colour of the estimate it makes."""
 POSE_SAMPLE_COLOR = (190, 190, 190)
+PIN_COLOR = tuple(round(255 * c) for c in TRAFFIC_CONE.color_rgb)
+"""A cone's pin (``PIN_TOP_M``) has the cone's own colour."""
+DEPTH_CLOUD_COLOR = (150, 150, 200)
+TRAJECTORY_COLOR = (170, 170, 185)
+
+
+@dataclass(frozen=True)
+class LegendEntry:
+    """One line of the 3D views' legend: what is drawn, in which colour, and how (``dot``: a
+    point, with a segment from the true cone for an estimate; ``line``: a line)."""
+
+    text: str
+    color_rgb: tuple[int, int, int]
+    mark: str
+
+
+AXES_NOTE = "axes x y z: red green blue; body thick, camera thin"
+"""The legend's last line: how the frames' axes read."""
+
+
+def legend_entries(*, latency: bool = False, mounts: bool = False) -> list[list[LegendEntry]]:
+    """Every colour of the 3D views, in the legend's two rows (``entity.LEGEND``): the truth
+    and each method's estimate (``vnav.methods.METHODS``), with ``latency`` the newest-pose
+    estimate and with ``mounts`` the declared and recovered camera mounts; then the rays, the
+    cones' pins, the depth cloud and the flown path (and ``AXES_NOTE``)."""
+    estimates = [LegendEntry("truth", TRUTH_COLOR, "dot")]
+    estimates += [LegendEntry(m.name, m.color_rgb, "dot") for m in METHODS]
+    if latency:
+        estimates.append(LegendEntry("newest pose", NEWEST_POSE_COLOR, "dot"))
+    if mounts:
+        estimates += [
+            LegendEntry("declared mount", DECLARED_MOUNT_COLOR, "line"),
+            LegendEntry("recovered mount", RECOVERED_MOUNT_COLOR, "line"),
+        ]
+    drawn = [
+        LegendEntry("ray to the ground", RAY_COLOR, "line"),
+        LegendEntry("cone pin", PIN_COLOR, "line"),
+        LegendEntry("depth image", DEPTH_CLOUD_COLOR, "dot"),
+        LegendEntry("flown path", TRAJECTORY_COLOR, "line"),
+    ]
+    return [estimates, drawn]
 
 
 STREAM_QUANTITIES: tuple[str, ...] = ("yaw_deg", "position_m")
@@ -246,8 +338,9 @@ def blueprint(
     view : {"errors", "coordinates", "attitude", "nees"}
         The tab shown first in the lower left panel (see ``VIEWS``).
     T_w_b : array_like, shape (4, 4), optional
-        The drone's pose at the last tick: the close-up view starts behind it, to its left
-        and above (``CLOSE_UP_EYE_B``).
+        The drone's pose at the tick the views are framed for (``shown_tick``: the scenario's
+        ``show_at_s``, else the last): the close-up view starts behind it, to its left and
+        above (``CLOSE_UP_EYE_B``).
     close_up_cone_w : array_like, shape (3,), optional
         A cone's base centre: the close-up looks at it instead of the drone, from its side
         (``cone_close_up``), to show the estimates around it and their ellipsoids.
@@ -264,9 +357,10 @@ def blueprint(
         The run's verdict in a few words (``checks_summary``): the scenario document's tab
         names it, so that it shows without opening the tab.
     mounts_T_w_c : array_like, shape (4, 4), optional
-        The true camera's pose at the last tick of a calibrated run: the close-up then looks
-        at the declared, true and recovered camera mounts (``mounts_close_up``), and the state
-        panel gets the room its mounts block needs.
+        The true camera's pose at that tick of a calibrated run: the close-up then looks
+        at the declared, true and recovered camera mounts (``mounts_close_up``), the state
+        panel gets the room its mounts block needs, and each error plot also draws the error
+        with the recovered mount (``entity.error_recovered``).
     """
     if view not in VIEWS:
         raise ValueError(f"view must be one of {list(VIEWS)}, got {view!r}")
@@ -282,7 +376,13 @@ def blueprint(
             # With latency the plots and the state panel (its time block) get more room.
             rrb.Vertical(
                 _image_tabs(),
-                _lower_tabs(view, error_top_m or {}, cone0_top_m, latency),
+                _lower_tabs(
+                    view,
+                    error_top_m or {},
+                    cone0_top_m,
+                    latency,
+                    recovered_mount=mounts_T_w_c is not None,
+                ),
                 row_shares=[4, 6] if latency else [3, 5],
             ),
             _right_column(
@@ -310,11 +410,15 @@ def _world_view(eye_w, look_target_w) -> rrb.Spatial3DView:
         # The depth image would also be drawn back-projected in 3D; the world-frame cloud
         # computed by vnav (world/depth_cloud) is the one to look at here. The mounts are
         # centimetres apart: seen from metres away they are one frame with three labels.
-        contents=["+ $origin/**", f"- /{entity.DEPTH}", *_NO_MOUNTS],
-        eye_controls=eye,
-        # Seen from metres away the camera's label would sit on the body's (they are 15 cm
+        # Seen from metres away the camera's name would sit on the body's (they are 15 cm
         # apart): the close-up names both.
-        overrides={entity.CAMERA: rr.TransformAxes3D.from_fields(show_frame=False)},
+        contents=[
+            "+ $origin/**",
+            f"- /{entity.DEPTH}",
+            f"- /{entity.CAMERA_NAME}",
+            *_NO_MOUNTS,
+        ],
+        eye_controls=eye,
     )
 
 
@@ -326,10 +430,14 @@ def _right_column(
     latency: bool,
     mounts: bool,
 ) -> rrb.Vertical:
-    """The world and the close-up above, the state panel and the scenario document below.
-    With latency (the time block) or a calibrated run's mounts the panel gets half the
-    height."""
+    """The legend of the 3D views' colours (``entity.LEGEND``) over the world and the
+    close-up, the state panel and the scenario document below. With latency (the time block)
+    or a calibrated run's mounts the panel gets half the height."""
+    views_share = 1 if latency or mounts else 3
+    panel_share = 1 if latency or mounts else 2
     return rrb.Vertical(
+        # A strip as wide as the two 3D views: a legend drawn in 3D would move with the eye.
+        rrb.Spatial2DView(name="legend", origin=entity.LEGEND, titlebar=False),
         # A calibrated run's lesson is in the mounts close-up: it gets half the width.
         rrb.Horizontal(world, close_up, column_shares=[1, 1] if mounts else [3, 2]),
         rrb.Tabs(
@@ -339,9 +447,13 @@ def _right_column(
                 origin=entity.DESCRIPTION,
             ),
         ),
-        row_shares=[1, 1] if latency or mounts else [3, 2],
+        row_shares=[LEGEND_SHARE * (views_share + panel_share), views_share, panel_share],
     )
 
+
+LEGEND_SHARE = 0.055
+"""The legend strip's height as a fraction of the 3D views' and the panel's together: two
+lines of text in a window 900 points high."""
 
 _NO_MOUNTS = [f"- /{entity.CAMERA_DECLARED}/**", f"- /{entity.CAMERA_RECOVERED}/**"]
 """Views that show the world leave out the declared and recovered mounts (calibrated runs)."""
@@ -421,6 +533,9 @@ def cone_close_up(cone_w, T_w_b=None) -> rrb.Spatial3DView:
         origin=entity.WORLD,
         contents=_CLOSE_UP_CONTENTS,
         eye_controls=rrb.EyeControls3D(position=eye_w, look_target=target_w, eye_up=[0, 0, 1]),
+        # The world's name would sit on a cone at the origin, among its estimates: here the
+        # cone's pin is named, the world's axes are not.
+        overrides={entity.WORLD: rr.TransformAxes3D.from_fields(show_frame=False)},
     )
 
 
@@ -449,6 +564,8 @@ def mounts_close_up(T_w_c: np.ndarray) -> rrb.Spatial3DView:
     return rrb.Spatial3DView(
         name="camera mounts (true: rgb axes)",
         origin=entity.WORLD,
+        # The true camera's axes and name only: its frustum and the drone's rotors would hide
+        # the centimetres between the mounts.
         contents=[
             f"+ /{entity.BODY}/**",
             f"- /{entity.DRONE}",
@@ -456,9 +573,11 @@ def mounts_close_up(T_w_c: np.ndarray) -> rrb.Spatial3DView:
             f"- /{entity.DEPTH}",
             f"- /{entity.DETECTIONS}/**",
         ],
-        # The true camera's axes and name only: its frustum and the drone's rotors would hide
-        # the centimetres between the mounts.
-        overrides={entity.CAMERA: rr.TransformAxes3D.from_fields(show_frame=True)},
+        overrides={
+            entity.CAMERA: rrb.EntityBehavior(visible=False),
+            entity.CAMERA_AXES: rrb.EntityBehavior(visible=True),
+            entity.CAMERA_NAME: rrb.EntityBehavior(visible=True),
+        },
         eye_controls=rrb.EyeControls3D(
             position=se3.apply(T_w_c, MOUNTS_EYE_C),
             look_target=se3.apply(T_w_c, MOUNTS_TARGET_C),
@@ -506,19 +625,29 @@ def _gave_none(tops_m: dict[str, float | None], name: str) -> bool:
 
 
 def _error_plot(
-    name: str, tops_m: dict[str, float | None], newest_pose: bool = False
+    name: str,
+    tops_m: dict[str, float | None],
+    newest_pose: bool = False,
+    recovered_mount: bool = False,
 ) -> rrb.TimeSeriesView:
     """One checked method's mean error per tick, with the contract's bound in grey (and, if
-    ``newest_pose``, the newest-pose estimate's error in violet)."""
+    ``newest_pose``, the newest-pose estimate's error in violet; if ``recovered_mount``, the
+    error of the same images estimated again with the mount calibration recovered, in
+    ``RECOVERED_MOUNT_COLOR``)."""
     top_m = tops_m.get(name)
     paths = [entity.error(name), entity.allowed(name)]
     if _gave_none(tops_m, name):
         title = f"{name} error (m): no estimate in this run"
     else:
         title = f"{name} error (m), grey: the contract's bound"
+    if recovered_mount and not _gave_none(tops_m, name):
+        paths.append(entity.error_recovered(name))
+        title = f"{name} error (m), grey: bound, cyan: with the recovered mount"
     if newest_pose:
         paths.append(entity.NEWEST_ERROR)
         title = f"{name} error (m), grey: bound, violet: with the newest pose"
+        if recovered_mount:
+            title += ", cyan: recovered mount"
     return _series(title, paths, y_range=(0.0, top_m) if top_m is not None else None)
 
 
@@ -560,21 +689,29 @@ def _from_zero(tops: dict[str, float | None], key: str) -> tuple[float, float] |
 
 NEES_TOP = 11.2
 """Top of the NEES plots: above 10 (a labelled tick) and between three and six times the
-degrees of freedom; single ticks above it are clipped, the mean is what the ``consistent``
-check judges."""
+degrees of freedom; the mean is what the ``consistent`` check judges. A tick's NEES above it
+would leave the plot unmarked: it is marked at ``NEES_CLIP_MARK`` (``entity.nees_clipped``)."""
+NEES_CLIP_MARK = 0.96 * NEES_TOP
+"""Where a NEES above ``NEES_TOP`` is marked, an upward triangle just under the plot's top."""
 
 
 def _nees_tab(error_top_m: dict[str, float | None]) -> rrb.Vertical:
     """Each checked method's NEES per tick (thin), its mean over the run so far (thick) and
     that mean's 95% chi-square band (grey), which narrows around the method's degrees of
-    freedom (``vnav.methods.Method.dof``) as estimates add up.
+    freedom (``vnav.methods.Method.dof``) as estimates add up; a tick above the plot's top
+    (``NEES_TOP``) is marked with a triangle at its top.
     A method that gave no estimate keeps only its title."""
     plots, shares = [], []
     for name in PREFERENCE:
         dof = method(name).dof
         none = _gave_none(error_top_m, name)
-        title = f"{name} NEES, thick: mean so far, grey: 95% band around {dof}"
-        paths = [entity.nees(name), entity.nees_mean(name), entity.nees_band(name)]
+        title = f"{name} NEES; thick: mean; grey: 95% band around {dof}; ▲ off top"
+        paths = [
+            entity.nees(name),
+            entity.nees_mean(name),
+            entity.nees_band(name),
+            entity.nees_clipped(name),
+        ]
         plots.append(
             _series(
                 f"{name} NEES: no estimate in this run" if none else title,
@@ -621,7 +758,11 @@ def _attitude_tab() -> rrb.Vertical:
 
 
 def _lower_tabs(
-    view: str, error_top_m: dict[str, float | None], cone0_top_m: float | None, latency: bool
+    view: str,
+    error_top_m: dict[str, float | None],
+    cone0_top_m: float | None,
+    latency: bool,
+    recovered_mount: bool = False,
 ) -> rrb.Tabs:
     """The tabs below the images: ``VIEWS`` first (in order), then the other plots.
 
@@ -633,18 +774,27 @@ def _lower_tabs(
     extra = []
     if latency:
         errors = rrb.Vertical(
-            _error_plot(NEWEST_POSE_METHOD, error_top_m, newest_pose=True),
+            _error_plot(
+                NEWEST_POSE_METHOD, error_top_m, newest_pose=True, recovered_mount=recovered_mount
+            ),
             *[_stream_plot(q) for q in STREAM_QUANTITIES],
             name="position error, time",
         )
         extra.append(
             rrb.Vertical(
-                *[_error_plot(name, error_top_m) for name in others], name=", ".join(others)
+                *[
+                    _error_plot(name, error_top_m, recovered_mount=recovered_mount)
+                    for name in others
+                ],
+                name=", ".join(others),
             )
         )
     else:
         errors = rrb.Vertical(
-            *[_error_plot(name, error_top_m) for name in PREFERENCE],
+            *[
+                _error_plot(name, error_top_m, recovered_mount=recovered_mount)
+                for name in PREFERENCE
+            ],
             # A method without an estimate keeps only its title ("no estimate in this run"):
             # the others get the height their axes need to be read.
             row_shares=[1 if _gave_none(error_top_m, name) else 4 for name in PREFERENCE],
@@ -673,18 +823,27 @@ def _lower_tabs(
     )
 
 
+def shown_tick(spec: ScenarioSpec, result: RunResult) -> int:
+    """Index in ``result.ticks`` of the tick the 3D views are framed for: the last at or before
+    the scenario's ``show_at_s``, or the last tick of the run."""
+    if spec.show_at_s is None or not result.ticks:
+        return len(result.ticks) - 1
+    at_or_before = [i for i, t in enumerate(result.ticks) if t.t_s <= spec.show_at_s + 1e-9]
+    return at_or_before[-1] if at_or_before else 0
+
+
 def eye_for(spec: ScenarioSpec, result: RunResult | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Where the 3D view's eye starts and what it looks at, world frame, each (3,).
 
-    The eye frames the lesson at the last tick (where the viewer opens): the cones, the drone
-    and, if ``result`` is given, every estimate of that tick, the naive one included, seen
-    from behind the drone's heading, to the side and above.
+    The eye frames the lesson at the tick shown (``shown_tick``: the scenario's ``show_at_s``
+    or the last): the cones, the drone and, if ``result`` is given, every estimate of that
+    tick, the naive one included, seen from behind the drone's heading, to the side and above.
     """
     cones_w = np.array(spec.scene.cones_w, dtype=np.float64).reshape(-1, 3)
     drone_w = np.asarray(spec.scene.start_position_w, dtype=np.float64)
     points = [cones_w]
     if result is not None and result.ticks:
-        last = result.ticks[-1]
+        last = result.ticks[shown_tick(spec, result)]
         drone_w = last.T_w_b[:3, 3]
         points += [last.estimates_w(m.name) for m in METHODS]
     points.append(drone_w[None, :])
@@ -759,14 +918,24 @@ def describe(spec: ScenarioSpec, seed: int, judged: Sequence[CheckResult] | None
         f"- cones (base centres, world): {[list(c) for c in spec.scene.cones_w]}",
         "",
         "Drawn: the world, body and camera frames (axes 2 m, 1 m, 0.5 m; x red, y green, "
-        "z blue), the drone and cones as built in MuJoCo, the ray from the camera through "
+        "z blue; the camera's thin, named past the tip of its optical axis), the drone and "
+        "cones as built "
+        "in MuJoCo, each cone with an orange pin up to "
+        f"{PIN_TOP_M:g} m (cone 0's named), the ray from the camera through "
         "each detection's base pixel to the ground (yellow), each method's estimate with a "
-        "segment from the true cone, and a line from the drone to the naive estimate.",
+        "segment from the true cone, and a line from the drone to the naive estimate. The "
+        "strip over the 3D views names their colours.",
         "",
         f"Estimates: {estimates}. Truth: white.",
         "",
         _describe_timing(spec),
     ]
+    if spec.show_at_s is not None:
+        lines += [
+            "",
+            f"The 3D views are framed at t = {spec.show_at_s:g} s, where the lesson shows (the "
+            "screenshot's instant); the viewer opens at the end: move the time cursor there.",
+        ]
     if spec.checks_calibration:
         lines += ["", _describe_mounts()]
     return "\n".join(lines)

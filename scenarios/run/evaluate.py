@@ -15,6 +15,9 @@ was told and its output is compared::
              image arrived (what a pipeline ignoring stamps does; Localizer.estimate_with_pose),
              its error and the first-order prediction of that error from the body's true
              motion, |dp| + range |dtheta|
+
+``reevaluate`` runs a finished run's ticks through a new ``Localizer`` again, with another
+camera mount (the one calibration recovered), on the same detections, depth and poses.
 """
 
 from __future__ import annotations
@@ -32,7 +35,7 @@ from vnav.localize import ConeEstimates, Localizer
 from vnav.methods import CONTRACT_DOMAIN, NEWEST_POSE_METHOD
 from vnav.uncertainty import nees
 
-__all__ = ["MATCH_GATE_M", "TickTruth", "evaluate_tick"]
+__all__ = ["MATCH_GATE_M", "TickTruth", "evaluate_tick", "reevaluate"]
 
 MATCH_GATE_M = 3.0
 """An estimate farther than this from every true cone is reported unmatched."""
@@ -79,6 +82,7 @@ def evaluate_tick(
     T_b_c_est: np.ndarray | None = None,
     cov_T_w_b: np.ndarray | None = None,
     cov_T_b_c: np.ndarray | None = None,
+    keep_depth: bool = False,
 ) -> TickRecord:
     """Localise every detection with what the estimator was told and compare with the truth.
 
@@ -104,6 +108,9 @@ def evaluate_tick(
         The camera mount the estimator is told (the truth's, ``truth.T_b_c``, by default).
     cov_T_w_b, cov_T_b_c : ndarray, shape (6, 6), optional
         The covariances the estimator is told for ``T_w_b_est`` and ``T_b_c_est``.
+    keep_depth : bool
+        Keep each detection's depth under its mask (``DetectionRecord.depth_under_mask_m``),
+        so that ``reevaluate`` can estimate the tick again (a calibrated run's).
 
     Returns
     -------
@@ -134,6 +141,11 @@ def evaluate_tick(
             _with_latest(r, timing, T_w_b_est, T_b_c_est, truth, localizer, depth_m)
             for r in records
         ]
+    if keep_depth and depth_m is not None:
+        records = [
+            dataclasses.replace(r, depth_under_mask_m=_under_mask(r.detection, depth_m))
+            for r in records
+        ]
     return TickRecord(
         tick=truth.tick,
         t_s=truth.t_s,
@@ -148,7 +160,83 @@ def evaluate_tick(
         detections=records,
         reference_error_m=truth.reference_error_m,
         timing=timing,
+        cov_T_w_b_est=cov_T_w_b,
     )
+
+
+def _under_mask(detection: ConeDetection, depth_m: np.ndarray) -> np.ndarray:
+    """The depth image's values under ``detection``'s mask, in its dtype (a copy)."""
+    x0, y0, w, h = detection.bbox
+    return depth_m[y0 : y0 + h, x0 : x0 + w][detection.mask]
+
+
+def _depth_of(record: TickRecord, camera_shape: tuple[int, int]) -> np.ndarray | None:
+    """A depth image holding the tick's kept depth under every detection's mask (NaN
+    elsewhere, which no method reads: ``vnav.estimators.depth_under_mask`` refuses a NaN under
+    a mask); None if the tick kept none (no depth, or not kept)."""
+    kept = [d.depth_under_mask_m for d in record.detections]
+    if not kept or any(k is None for k in kept):
+        return None
+    depth_m = np.full(camera_shape, np.nan, dtype=kept[0].dtype)
+    for d, values in zip(record.detections, kept, strict=True):
+        x0, y0, w, h = d.detection.bbox
+        depth_m[y0 : y0 + h, x0 : x0 + w][d.detection.mask] = values
+    return depth_m
+
+
+def reevaluate(
+    ticks: list[TickRecord],
+    cones_w: np.ndarray,
+    localizer: Localizer,
+    T_b_c_est: np.ndarray,
+    cov_T_b_c: np.ndarray | None = None,
+) -> list[TickRecord]:
+    """A run's ticks estimated again with the camera mount ``T_b_c_est`` (``evaluate_tick``).
+
+    Each tick is given what it was given in the run: its detections, the depth under their
+    masks (kept by ``evaluate_tick(keep_depth=True)``; a tick without it has no depth), the
+    body pose looked up at its exposure stamp and that pose's covariance. Only the mount
+    differs. The newest-pose estimate (``DetectionRecord.latest_w``) is not made again.
+
+    Parameters
+    ----------
+    ticks : list of TickRecord
+        The run's ticks, in the order they were evaluated.
+    cones_w : ndarray, shape (N, 3)
+        True base centres of the cones, metres.
+    localizer : vnav.localize.Localizer
+        A new estimator, configured as the run's (its camera, far plane and noise).
+    T_b_c_est : ndarray, shape (4, 4)
+        The mount to estimate with, in place of each tick's ``T_b_c_est``.
+    cov_T_b_c : ndarray, shape (6, 6), optional
+        Its covariance.
+
+    Returns
+    -------
+    list of TickRecord
+        One per tick, in order, with ``T_b_c_est`` the given mount.
+    """
+    shape = (localizer.camera.height, localizer.camera.width)
+    out = []
+    for t in ticks:
+        truth = TickTruth(
+            t.tick, t.t_s, t.T_w_b, t.T_b_c, t.quat_xyzw, cones_w, t.reference_error_m
+        )
+        timing = None if t.timing is None else dataclasses.replace(t.timing, T_w_b_latest=None)
+        out.append(
+            evaluate_tick(
+                truth,
+                [d.detection for d in t.detections],
+                _depth_of(t, shape),
+                localizer,
+                t.T_w_b_est,
+                timing,
+                T_b_c_est=T_b_c_est,
+                cov_T_w_b=t.cov_T_w_b_est,
+                cov_T_b_c=cov_T_b_c,
+            )
+        )
+    return out
 
 
 def _with_latest(

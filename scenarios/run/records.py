@@ -62,6 +62,11 @@ class DetectionRecord:
     nees : dict of str to tuple of (float, int)
         Per method with an error: the normalised estimation error squared against the matched
         cone and its degrees of freedom, the covariance's rank (``vnav.uncertainty.nees``).
+    depth_under_mask_m : ndarray, shape (area_px,), or None
+        The depth image's values under the detection's mask, in the image's dtype and in
+        ``detection.pixels_uv()`` order: all the depth any method reads of it, kept (only when
+        the run asks, ``scenarios.run.evaluate.evaluate_tick``) so that the run's images can
+        be estimated again with another camera mount (``reevaluate``).
     """
 
     detection: ConeDetection
@@ -77,6 +82,7 @@ class DetectionRecord:
     predicted_latest_error_m: float | None = None
     covariances_w: dict[str, np.ndarray] = field(default_factory=dict)
     nees: dict[str, tuple[float, int]] = field(default_factory=dict)
+    depth_under_mask_m: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -178,6 +184,8 @@ class TickRecord:
     timing : ImageTiming or None
         The image's stamps and arrival and the poses used (None for a tick not made by the
         runner's streams, e.g. in a unit test).
+    cov_T_w_b_est : ndarray, shape (6, 6), or None
+        The covariance the estimator was told for ``T_w_b_est`` (None: exact).
     """
 
     tick: int
@@ -193,6 +201,7 @@ class TickRecord:
     detections: list[DetectionRecord]
     reference_error_m: float | None = None
     timing: ImageTiming | None = None
+    cov_T_w_b_est: np.ndarray | None = None
 
     def estimates_w(self, method: str) -> np.ndarray:
         """Every estimate of ``method`` at this tick, one row per detection giving one, (K, 3)."""
@@ -254,6 +263,10 @@ class CalibrationRecord:
     T_b_c_declared, T_b_c_true : ndarray, shape (4, 4), or None
         The mount the estimator was told (calibration's first guess) and the simulator's, which
         the errors are against; kept so that the three can be shown side by side.
+    ticks_recovered : list of TickRecord or None
+        Every camera tick estimated again with the recovered mount in place of the declared
+        one, on the same images and poses (``scenarios.run.evaluate.reevaluate``): what
+        calibrating gives the estimates. None when refused.
     """
 
     T_b_c: np.ndarray | None
@@ -264,6 +277,7 @@ class CalibrationRecord:
     refused: str | None = None
     T_b_c_declared: np.ndarray | None = None
     T_b_c_true: np.ndarray | None = None
+    ticks_recovered: list[TickRecord] | None = None
 
 
 @dataclass
@@ -278,8 +292,11 @@ class RunResult:
     timing_s : dict of str to float
         Seconds spent per stage (``physics``, ``streams``, ``render``, ``detect``,
         ``localize``, ``log``) and once per run (``setup``: the world, the GL context and the
-        recording's start and finish, ``scenarios.run.runner.STAGES``); the only figures that
-        depend on the machine.
+        recording's start and finish, ``scenarios.run.runner.STAGES``); ``scenarios.pipeline``
+        adds ``calibrate`` (the calibration and the second estimate with its mount, 0 when
+        none), ``judge`` (the checks), ``total`` (wall seconds from the run's start to its
+        report) and ``total_cpu`` (the process's user and system seconds over the same span,
+        every thread's); the only figures that depend on the machine.
     poses : PoseStream or None
         The pose stream the estimator was sent (set when the run ends).
     calibration : CalibrationRecord or None
@@ -298,6 +315,16 @@ class RunResult:
     def cones_w(self) -> np.ndarray:
         """(N, 3) the true cones' base centres in the world, metres."""
         return np.array(self.spec.scene.cones_w, dtype=np.float64).reshape(-1, 3)
+
+    def with_recovered_mount(self) -> RunResult | None:
+        """This run with its ticks estimated again with the camera mount calibration
+        recovered (``CalibrationRecord.ticks_recovered``), or None if it was not calibrated or
+        calibration was refused. Its statistics (``errors``, ``ranges_for``...) are the
+        estimates after calibration, as this run's are before it."""
+        c = self.calibration
+        if c is None or c.ticks_recovered is None:
+            return None
+        return RunResult(self.spec, self.seed, c.ticks_recovered, poses=self.poses)
 
     @property
     def trajectory_w(self) -> np.ndarray:

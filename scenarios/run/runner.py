@@ -388,6 +388,8 @@ class _Flow:
             T_b_c_est=self.mount_error @ image.truth.T_b_c @ self.true_to_declared,
             cov_T_w_b=self.pose_covariance(d),
             cov_T_b_c=self.cov_T_b_c,
+            # A calibrated run is estimated again with the mount it recovers: keep its depth.
+            keep_depth=self.spec.checks_calibration,
         )
 
     def pose_covariance(self, d: Delivered) -> np.ndarray:

@@ -14,6 +14,7 @@ from typing import Any
 
 from scenarios.scenario.check_kinds import KINDS, default_checks
 from scenarios.scenario.spec import ScenarioError, ScenarioSpec, from_dict
+from sim.config import MountError
 from vnav.methods import METHODS, PREFERENCE, method
 
 Scenario = dict[str, Any]
@@ -155,6 +156,9 @@ def transform_composer() -> Scenario:
     return {
         "name": "transform-composer",
         "view": "coordinates",
+        # Framed where body translation, yaw and camera offset are all away from the start
+        # (the flight ends back there).
+        "show_at_s": 4.0,
         "description": "Chapter 8: body translation, yaw and camera offset swept; the cone "
         "in world, body and camera frames side by side.",
         "lesson": "T_w_c = T_w_b T_b_c: the composer of chapter 8, running on a simulated drone.",
@@ -323,6 +327,8 @@ def latency() -> Scenario:
         "ignoring stamps does) is off by what the drone moved in between: |v| dt + "
         "range |omega| dt, half a metre at 6 m while yawing 100 deg/s.",
         "camera_rate_hz": 10.0,
+        # Framed in the middle of the fast yaw, where the newest pose is furthest off.
+        "show_at_s": 0.5,
         "camera": {"pitch_down_deg": 15.0},
         "cones": [{"position_w": [6.0, 0.0, 0.0]}],
         "flight": {"mode": "kinematic", "keyframes": keyframes},
@@ -387,11 +393,23 @@ def uncertainty() -> Scenario:
     }
 
 
+CALIBRATION_MOUNT_ERROR = MountError(position_m=(0.02, -0.015, 0.015), rpy_deg=(1.0, -1.5, 1.5))
+"""The ``calibration`` built-in's true mount's error from the declared one."""
+
+
+def mount_error_text(error: MountError) -> str:
+    """How far a mount is off, as the built-in's description, the README and the recording
+    say it: the rotation's angle to 0.01 deg (``MountError.angle_deg``) and the camera
+    centre's offset to the millimetre."""
+    return f"{error.angle_deg:.2f} deg and {1e3 * error.offset_m:.0f} mm"
+
+
 def calibration() -> Scenario:
-    # Calibration: the camera sits 2.5 deg and 3 cm off where it is declared and its clock runs
-    # 30 ms off the pose clock. Eight cones in view and a flight that rolls, pitches and yaws
-    # (all three rotation axes, so that every axis of the mount and the offset shows in the
-    # images) let vnav.calibration recover both from the apexes' reprojection error.
+    # Calibration: the camera sits off where it is declared (CALIBRATION_MOUNT_ERROR) and its
+    # clock runs 30 ms off the pose clock. Eight cones in view and a flight that rolls,
+    # pitches and yaws (all three rotation axes, so that every axis of the mount and the offset
+    # shows in the images) let vnav.calibration recover both from the apexes' reprojection
+    # error.
     swings = [(8.0, -5.0, 12.0), (-8.0, 6.0, -10.0), (6.0, 5.0, 8.0), (-6.0, -6.0, -12.0)]
     keyframes = [{"t": 0.0, "position_w": [0.0, 0.0, 3.0], "rpy_deg": [0.0, 0.0, 0.0]}]
     for k in range(16):
@@ -416,19 +434,27 @@ def calibration() -> Scenario:
     ]
     return {
         "name": "calibration",
-        "description": "Calibration: a camera mounted 2.5 deg and 3 cm off its declared pose, "
-        "its clock 30 ms off; both recovered from the flight's cone apexes.",
+        "description": "Calibration: a camera mounted "
+        f"{mount_error_text(CALIBRATION_MOUNT_ERROR)} off its declared pose, its clock 30 ms "
+        "off; both recovered from the flight's cone apexes, and the estimates made again with "
+        "the recovered mount.",
         "lesson": "The declared camera mount T_b_c is a measurement, and so is the camera's "
         "clock: when either is wrong every estimate through p_w = T_w_b T_b_c p_c is wrong. "
         "With a map of cones, each apex the camera sees must project where T_c_b "
         "T_b_w(t_cam + offset) says; over a flight that turns about every axis, least squares "
         "on those reprojection errors recovers the mount (here to a few thousandths of a "
-        "degree) and the clock offset (to a fraction of a millisecond). `vnav-demo calibrate` "
-        "does the same from any recording.",
+        "degree) and the clock offset (to a fraction of a millisecond). The estimates made with "
+        "the declared mount are off by what its error swings the cones through (depth_image "
+        "by decimetres, beyond its bound: the mount error, not the method); the same images "
+        "estimated again with the recovered mount are back within the accuracy contract. "
+        "`vnav-demo calibrate` does the same from any recording.",
         "camera_rate_hz": 20.0,
         "camera": {
             "pitch_down_deg": 20.0,
-            "mount_error": {"position_m": [0.02, -0.015, 0.015], "rpy_deg": [1.0, -1.5, 1.5]},
+            "mount_error": {
+                "position_m": list(CALIBRATION_MOUNT_ERROR.position_m),
+                "rpy_deg": list(CALIBRATION_MOUNT_ERROR.rpy_deg),
+            },
         },
         "cones": [{"position_w": [x, y, 0.0]} for x, y in cones],
         "flight": {"mode": "kinematic", "keyframes": keyframes},

@@ -225,6 +225,14 @@ TOP: tuple[Key, ...] = (
         "drone",
         choices=CLOSE_UP_NAMES,
     ),
+    Key(
+        "show_at_s",
+        "number",
+        "the recording's 3D views frame this instant, s (screenshots show it); default: the end",
+        None,
+        0.0,
+        MAX_S,
+    ),
     Key("camera", "table", "table: the onboard camera", None),
     Key("cones", "tables", "array of tables: the cones", REQUIRED),
     Key("flight", "table", "table: how the drone flies", REQUIRED),
@@ -398,6 +406,7 @@ def comment(path: str, table: dict[str, Any] | None = None) -> str | None:
     keys = {
         "": TOP,
         "camera": CAMERA,
+        "camera.mount_error": MOUNT_ERROR,
         "noise": NOISE,
         "timing": TIMING,
         "flight": tuple(k for mode in FLIGHT_MODES.values() for k in mode),

@@ -188,6 +188,9 @@ class ScenarioSpec:
     """The recording's first tab below the error plot: errors, coordinates, attitude or nees."""
     close_up: str = "drone"
     """What the recording's second 3D view looks at: the drone, or the first cone."""
+    show_at_s: float | None = None
+    """The instant the recording's 3D views are framed for and its screenshot shows, simulated
+    seconds (the camera tick at or before it); None: the last tick."""
 
     @property
     def end_s(self) -> float:
@@ -420,7 +423,7 @@ def from_dict(data: dict[str, Any], where: str = "<scenario>") -> ScenarioSpec:
     _at_most_physics_rate(1.0 / scene.timestep_s, top["camera_rate_hz"], timing, where)
     if not isinstance(top["lesson"], str):
         raise _err(where, "lesson", f"must be a string, got {type(top['lesson']).__name__}")
-    return ScenarioSpec(
+    spec = ScenarioSpec(
         name=name,
         description=top["description"] or name,
         scene=scene,
@@ -433,7 +436,15 @@ def from_dict(data: dict[str, Any], where: str = "<scenario>") -> ScenarioSpec:
         lesson=top["lesson"],
         view=top["view"],
         close_up=top["close_up"],
+        show_at_s=top["show_at_s"],
     )
+    if spec.show_at_s is not None and spec.show_at_s > spec.end_s:
+        raise _err(
+            where,
+            "show_at_s",
+            f"must be at most the run's end, {spec.end_s:g} s, got {spec.show_at_s:g}",
+        )
+    return spec
 
 
 def load_toml(path: str | Path) -> ScenarioSpec:

@@ -9,6 +9,12 @@ back to the same scenario within that rounding), a long string becomes a multi-l
 whose line-ending backslashes join it back exactly, a comment that does not fit after its key
 goes on the line above, and a list of inline tables with a line too long (TOML 1.0 keeps an
 inline table on one line) is written as an array of tables (``[[flight.keyframes]]``).
+With comments, a table inside a table is written as a table of its own
+(``[camera.mount_error]``), so that each of its keys has its comment too.
+
+``complete`` fills a scenario in with every key the schema has for it, at its default, so
+that ``vnav-demo show`` writes them all; an optional key without a value (``OMITTED``) is
+written as a comment naming it.
 """
 
 from __future__ import annotations
@@ -21,6 +27,7 @@ from contextvars import ContextVar
 from typing import Any
 
 from scenarios.scenario import schema
+from scenarios.scenario.check_kinds import KINDS
 
 WIDTH = 80
 """Columns the text fits in, where a value allows (a single word longer cannot be split)."""
@@ -57,6 +64,66 @@ def _value(v: Any) -> str:
     if isinstance(v, list | tuple):
         return "[" + ", ".join(_value(x) for x in v) + "]"
     raise ValueError(f"cannot write {type(v).__name__} as TOML: {v!r}")
+
+
+OMITTED = type("Omitted", (), {"__repr__": lambda self: "OMITTED"})()
+"""The value ``complete`` gives an optional key the scenario leaves out (no default to
+write): ``dumps`` writes a comment naming it instead of a value."""
+
+_ENTRY_KEYS = {"flight.keyframes": schema.KEYFRAME, "flight.waypoints": schema.WAYPOINT}
+"""The keys of the inline tables of a list, named in the list's comment (an inline table has
+no room for comments)."""
+
+
+def _filled(table: dict[str, Any], keys: tuple[schema.Key, ...]) -> dict[str, Any]:
+    """``table``'s keys in the schema's order, each absent one at its default (``OMITTED``
+    where it has none)."""
+    out = {}
+    for key in keys:
+        if key.name in table:
+            out[key.name] = table[key.name]
+        elif key.default is None or key.default is schema.REQUIRED:
+            out[key.name] = OMITTED
+        else:
+            out[key.name] = list(key.default) if isinstance(key.default, tuple) else key.default
+    return out
+
+
+def _check_keys(kind: str) -> tuple[schema.Key, ...]:
+    """The ``[[checks]]`` keys that apply to a check of ``kind``: its kind, its method where
+    the kind uses one, the limit in its unit, its name."""
+    spec = KINDS.get(kind)
+    keys = {k.name: k for k in schema.CHECK}
+    names = ["kind"]
+    if spec is None or spec.uses_method:
+        names.append("method")
+    names += [spec.limit_key if spec is not None else "limit", "name"]
+    return tuple(keys[n] for n in names)
+
+
+def complete(data: dict[str, Any]) -> dict[str, Any]:
+    """A scenario with every key the schema has for it, in the schema's order: the given
+    values, the defaults of the keys left out, and ``OMITTED`` for an optional key without a
+    default. It parses to the same scenario as ``data``.
+
+    Every table's keys (``[camera]`` and its ``mount_error``, ``[flight]`` for its mode,
+    ``[noise]``, ``[timing]``, each cone), and each check's that apply to its kind. The inline
+    tables of ``flight.keyframes`` and ``flight.waypoints`` are kept as given (their keys are
+    named in the list's comment).
+    """
+    out = _filled(data, schema.TOP)
+    camera = data.get("camera") or {}
+    out["camera"] = _filled(camera, schema.CAMERA)
+    out["camera"]["mount_error"] = _filled(camera.get("mount_error") or {}, schema.MOUNT_ERROR)
+    flight = data["flight"]
+    mode_keys = schema.FLIGHT_MODES.get(flight.get("mode"), ())
+    out["flight"] = {"mode": flight.get("mode"), **_filled(flight, mode_keys)}
+    out["noise"] = _filled(data.get("noise") or {}, schema.NOISE)
+    out["timing"] = _filled(data.get("timing") or {}, schema.TIMING)
+    out["cones"] = [_filled(c, schema.CONE) for c in data["cones"]]
+    if data.get("checks"):
+        out["checks"] = [_filled(c, _check_keys(c.get("kind"))) for c in data["checks"]]
+    return out
 
 
 def _is_table_array(v: Any) -> bool:
@@ -110,6 +177,13 @@ def _table_body(
     for key, v in table.items():
         if v is None:  # an optional key left out
             continue
+        if v is OMITTED:  # named, with its meaning, where a value would be
+            doc = schema.comment(prefix + key, table) if comments else None
+            lines += comment_lines(f"{key}: not set here" + (f"; {doc}" if doc else ""))
+            continue
+        if comments and isinstance(v, dict):  # a table of its own: a comment per key
+            deferred.append((prefix + key, v))
+            continue
         if _is_table_array(v):  # e.g. keyframes: one inline table per line
             rows = [f"  {_value(x)}," for x in v]
             if any(len(r) > WIDTH for r in rows):
@@ -117,6 +191,8 @@ def _table_body(
                 continue
             opening = f"{key} = ["
             doc = schema.comment(prefix + key, table) if comments else None
+            if doc and prefix + key in _ENTRY_KEYS:
+                doc += "; each " + _entry_keys(_ENTRY_KEYS[prefix + key])
             if doc and len(f"{opening}  # {doc}") <= WIDTH:
                 lines.append(f"{opening}  # {doc}")
             else:
@@ -130,12 +206,28 @@ def _table_body(
     return lines, deferred
 
 
+def _entry_keys(keys: tuple[schema.Key, ...]) -> str:
+    """``{ t, position_w, ... }``: the keys of an inline table, the optional ones marked."""
+    names = [k.name if k.default is schema.REQUIRED else f"{k.name} (optional)" for k in keys]
+    return "{ " + ", ".join(names) + " }"
+
+
 def _section(header: str, table: dict[str, Any], path: str, comments: bool) -> list[str]:
-    """``header`` and the table's keys, then its deferred lists as arrays of tables."""
+    """``header`` and the table's keys, then its deferred tables and arrays of tables."""
     body, deferred = _table_body(table, path, comments)
-    lines = ["", header, *body]
-    for sub_path, entries in deferred:
-        for entry in entries:
+    return ["", header, *body, *_deferred(deferred, comments)]
+
+
+def _deferred(deferred: list[tuple[str, Any]], comments: bool) -> list[str]:
+    """Tables (``[path]``) and lists of tables (``[[path]]``) written after their parent."""
+    lines = []
+    for sub_path, v in deferred:
+        if isinstance(v, dict):  # its meaning under its header
+            section = _section(f"[{sub_path}]", v, sub_path, comments)
+            doc = schema.comment(sub_path) if comments else None
+            lines += section[:2] + (comment_lines(doc) if doc else []) + section[2:]
+            continue
+        for entry in v:
             lines += _section(f"[[{sub_path}]]", entry, sub_path, comments)
     return lines
 
@@ -160,9 +252,7 @@ def _dumps(data: dict[str, Any], comments: bool) -> str:
     arrays = {k: v for k, v in data.items() if _is_table_array(v)}
     top = {k: v for k, v in data.items() if k not in tables and k not in arrays}
     lines, deferred = _table_body(top, comments=comments)
-    for path, entries in deferred:  # top-level lists of inline tables (none in the schema)
-        for entry in entries:
-            lines += _section(f"[[{path}]]", entry, path, comments)
+    lines += _deferred(deferred, comments)  # top-level lists of inline tables (none in the schema)
     for key, table in tables.items():
         lines += _section(f"[{key}]", table, key, comments)
     for key, entries in arrays.items():

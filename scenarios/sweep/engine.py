@@ -8,17 +8,27 @@ Ray for one CPU and runs with one rendering thread (Mesa's llvmpipe: ``LP_NUM_TH
 single-threaded BLAS and OpenCV, so N workers keep N cores busy instead of fighting over them.
 
 Results come back in the order episodes finish; the episode, not the order, fixes the numbers.
+
+A worker whose process dies (killed, out of memory, a crash in a native library) is restarted
+by Ray (``max_restarts``: ``MAX_RESTARTS`` times) and the episodes lost with it run again, each
+at most ``EPISODE_RETRIES`` more times and alone on its worker (so that an episode that kills
+its worker every time takes no other with it); a worker Ray cannot restart is dropped and the
+others run its episodes. An episode is a pure function of its grid point and seed, so one run
+again gives the row it would have given. An episode that raises is not run again: the error is
+its own, and costs that episode only.
 """
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
+import re
 import signal
 import socket
 import time
 from collections import deque
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -34,7 +44,9 @@ __all__ = [
     "Task",
     "check_address",
     "default_workers",
+    "join_cluster",
     "ray_missing",
+    "usable_cpus",
 ]
 
 logger = logging.getLogger(__name__)
@@ -49,6 +61,16 @@ WORKER_ENV = {
 
 IN_FLIGHT_PER_WORKER = 2
 """Episodes queued on each actor: the next starts as soon as one ends."""
+
+MAX_RESTARTS = 3
+"""Times Ray restarts a worker whose process died (its ``max_restarts``); then it is dropped."""
+
+EPISODE_RETRIES = 2
+"""Times an episode lost with its worker's process runs again before it counts as one that
+could not run (``--resume`` runs it again)."""
+
+_QUIET: dict[str, Any] = {"logging_level": logging.ERROR, "log_to_driver": False}
+"""``ray.init``'s options: Ray's own logging and the workers' output kept off the terminal."""
 
 
 class EngineError(Exception):
@@ -66,20 +88,30 @@ class Task:
 
 @dataclass(frozen=True)
 class Failure:
-    """An episode that could not run (an internal error or a lost worker): not a result;
-    ``--resume`` runs it again."""
+    """An episode that could not run (an internal error, or its worker lost on every try):
+    not a result; ``--resume`` runs it again."""
 
     point: int
     seed: int
     error: str
 
 
-def default_workers() -> int:
-    """The cores this process may use."""
+def usable_cpus() -> tuple[int, str]:
+    """The CPUs this process may use, and where that number comes from (for messages): its
+    CPU affinity where the system has one (a container or ``taskset`` may allow fewer than the
+    machine has), else the machine's count."""
+    process_cpu_count = getattr(os, "process_cpu_count", None)  # Python 3.13
+    if process_cpu_count is not None and process_cpu_count():
+        return process_cpu_count(), "os.process_cpu_count"
     try:
-        return len(os.sched_getaffinity(0))
+        return len(os.sched_getaffinity(0)), "os.sched_getaffinity"
     except AttributeError:  # not Linux
-        return os.cpu_count() or 1
+        return os.cpu_count() or 1, "os.cpu_count"
+
+
+def default_workers() -> int:
+    """The CPUs this process may use (``usable_cpus``)."""
+    return usable_cpus()[0]
 
 
 def ray_missing() -> str | None:
@@ -139,8 +171,9 @@ class RayEngine:
         Actors to start; None: one per core of this machine, or per CPU of the cluster.
     address : str or None
         None starts a local Ray instance with ``workers`` CPUs (stopped by ``close``);
-        ``"auto"`` or ``"ray://host:port"`` joins an existing cluster, whose nodes must have
-        vnav-sim installed.
+        ``"auto"`` or ``"ray://host:port"`` joins an existing cluster (``join_cluster``; a
+        cluster this process has joined already is kept), whose nodes must have vnav-sim
+        installed.
     env : dict, optional
         The workers' environment variables (default ``WORKER_ENV``; the benchmark compares).
 
@@ -148,25 +181,38 @@ class RayEngine:
     ----------
     startup_s : float
         Seconds to start (or join) Ray and get every actor ready.
+
+    Raises
+    ------
+    EngineError
+        The cluster cannot be joined, or has fewer CPUs than ``workers``.
     """
 
     def __init__(
         self, workers: int | None, address: str | None = None, env: dict[str, str] | None = None
     ) -> None:
-        if address is not None:
-            _probe(_resolve_auto() if address == "auto" else address, address)
         import ray
 
         self._ray = ray
         self._actors: list[Any] = []
         self._owns_ray = address is None
+        self._unquiet = _quiet_lost_worker_messages()
         start = time.perf_counter()
         try:
-            self.workers = self._connect(workers, address)
-            # No restarts or retries: a lost worker's episodes come back as failures, which
-            # the command reports and --resume runs again.
+            if address is None:
+                self.workers = self._start_local(workers)
+            else:
+                self.workers = join_cluster(address, workers)
             env = WORKER_ENV if env is None else env
-            actor = ray.remote(num_cpus=1, runtime_env={"env_vars": env})(_Worker)
+            # Ray restarts a worker whose process died; the engine, not Ray, runs the episodes
+            # lost with it again (no max_task_retries), so that it can bound their tries, run
+            # them alone, and give them to another worker when one cannot be restarted.
+            actor = ray.remote(
+                num_cpus=1,
+                max_restarts=MAX_RESTARTS,
+                max_task_retries=0,
+                runtime_env={"env_vars": env},
+            )(_Worker)
             self._actors = [actor.remote() for _ in range(self.workers)]
             ray.get([a.ready.remote() for a in self._actors])
         except BaseException:
@@ -174,60 +220,69 @@ class RayEngine:
             raise
         self.startup_s = time.perf_counter() - start
 
-    def _connect(self, workers: int | None, address: str | None) -> int:
-        """Start or join Ray; the number of workers to start."""
-        ray = self._ray
-        quiet: dict[str, Any] = {"logging_level": logging.ERROR, "log_to_driver": False}
-        # Ray's core installs its own SIGTERM handler (it exits at once); the command's own
-        # handlers stop a sweep cleanly, keeping what finished, so they are put back.
-        handlers = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
-        try:
-            if address is None:
-                # "local": a new instance even where a cluster started by `ray start` is
-                # running (which a bare ray.init() would join).
-                workers = workers or default_workers()
-                ray.init(address="local", num_cpus=workers, include_dashboard=False, **quiet)
-                return workers
-            try:
-                _init_retrying_client(ray, address, quiet)
-            except ConnectionError as exc:
-                raise EngineError(f"cannot join the Ray cluster at {address}: {exc}") from None
-            except (ImportError, ValueError) as exc:  # Ray Client's packages missing
-                raise EngineError(
-                    f"cannot join the Ray cluster at {address}: {_one_line(exc)} (pip install "
-                    "'vnav-sim[sweep]' installs ray[client])"
-                ) from None
-            cpus = int(ray.cluster_resources().get("CPU", 0))
-            if workers and workers > cpus:
-                ray.shutdown()
-                raise EngineError(
-                    f"the Ray cluster at {address} has {cpus} CPUs: {workers} workers (one CPU "
-                    "each) would wait for more; ask for fewer with --workers"
-                )
-            return workers or max(1, cpus)
-        finally:
-            for signum, handler in handlers.items():
-                signal.signal(signum, handler)
+    def _start_local(self, workers: int | None) -> int:
+        """Start a local Ray instance; the number of workers to start."""
+        workers = workers or default_workers()
+        with _signals_kept():
+            # "local": a new instance even where a cluster started by `ray start` is
+            # running (which a bare ray.init() would join).
+            self._ray.init(address="local", num_cpus=workers, include_dashboard=False, **_QUIET)
+        return workers
 
     def run(self, tasks: Iterable[Task]) -> Iterator[Episode | Failure]:
-        """Run ``tasks``, yielding each result as it comes (in the order episodes finish)."""
+        """Run ``tasks``, yielding each result as it comes (in the order episodes finish).
+
+        An episode lost with its worker's process runs again (at most ``EPISODE_RETRIES``
+        times, alone on a worker), then comes back as a ``Failure``; so do the episodes left
+        once no worker can be restarted.
+        """
         ray = self._ray
-        queue = deque(tasks)
-        free = [a for a in self._actors for _ in range(IN_FLIGHT_PER_WORKER)]
-        pending: dict[Any, tuple[Task, Any]] = {}
+        queue = deque(_Attempt(task) for task in tasks)
+        seats = [_Seat(actor) for actor in self._actors]
+        pending: dict[Any, tuple[_Seat, _Attempt | None]] = {}  # None: a probe of the seat
         while queue or pending:
-            while queue and free:
-                task, actor = queue.popleft(), free.pop(0)
-                ref = actor.run.remote(task.scenario_toml, task.point, task.seed)
-                pending[ref] = (task, actor)
-            done, _ = ray.wait(list(pending), num_returns=1)
-            for ref in done:
-                task, actor = pending.pop(ref)
-                free.append(actor)
-                try:
-                    yield ray.get(ref)
-                except ray.exceptions.RayError as exc:
-                    yield Failure(task.point, task.seed, _one_line(exc))
+            _submit(queue, seats, pending)
+            if not pending:  # no worker left to run them
+                for attempt in queue:
+                    lost = "every Ray worker was lost and could not be restarted"
+                    yield Failure(attempt.task.point, attempt.task.seed, lost)
+                return
+            (ref,), _ = ray.wait(list(pending), num_returns=1)
+            seat, attempt = pending.pop(ref)
+            if attempt is None:
+                self._probed(ref, seat)
+                continue
+            seat.load -= attempt.weight
+            task = attempt.task
+            try:
+                result: Episode | Failure = ray.get(ref)
+            except ray.exceptions.RayActorError as exc:  # the worker's process died
+                logger.debug("a worker was lost", exc_info=True)
+                if seat.state == "up":  # the first of its episodes to say so: wait for Ray
+                    seat.state = "restarting"  # to restart it before giving it more
+                    pending[_probe_restarted(seat.actor)] = (seat, None)
+                    logger.warning("a Ray worker's process died: its episodes run again")
+                if attempt.lost < EPISODE_RETRIES:
+                    queue.appendleft(_Attempt(task, attempt.lost + 1))
+                    continue
+                # Ray's own text is a paragraph on the OOM killer: the name says enough here
+                why = f"lost its Ray worker {attempt.lost + 1} times ({type(exc).__name__})"
+                result = Failure(task.point, task.seed, why)
+            except ray.exceptions.RayError as exc:  # the episode raised: its own error
+                result = Failure(task.point, task.seed, _one_line(exc))
+            yield result
+
+    def _probed(self, ref: Any, seat: _Seat) -> None:
+        """A probe of a worker that lost its process has come back: running again, or gone
+        (Ray's restarts used up, its node gone)."""
+        try:
+            self._ray.get(ref)
+        except self._ray.exceptions.RayError:
+            logger.debug("a worker could not be restarted", exc_info=True)
+            logger.warning("a Ray worker could not be restarted: the others run its episodes")
+            seat.state = "gone"
+        else:
+            seat.state = "up"
 
     def close(self) -> None:
         """Stop the actors (on a cluster) and leave Ray (stopping it if this engine started it:
@@ -240,6 +295,156 @@ class RayEngine:
                     logger.debug("could not kill a worker", exc_info=True)
         self._actors = []
         self._ray.shutdown()
+        self._unquiet()
+
+
+@dataclass(frozen=True)
+class _Attempt:
+    """An episode to run, and the times it was lost with its worker's process."""
+
+    task: Task
+    lost: int = 0
+
+    @property
+    def weight(self) -> int:
+        """The worker's slots it takes: all of them once it was lost (it runs alone, so that
+        an episode that kills its worker every time takes no other episode with it)."""
+        return IN_FLIGHT_PER_WORKER if self.lost else 1
+
+
+@dataclass
+class _Seat:
+    """A worker as ``RayEngine.run`` schedules it: the slots its episodes take (at most
+    ``IN_FLIGHT_PER_WORKER``), and its state: ``up``, ``restarting`` (its process died; a probe
+    waits for Ray to restart it) or ``gone`` (not restarted: nothing more is given to it)."""
+
+    actor: Any
+    load: int = 0
+    state: str = "up"
+
+
+def _probe_restarted(actor: Any) -> Any:
+    """A call that returns once Ray has restarted ``actor`` (an ``ActorDiedError`` if it
+    cannot: its restarts used up). Tried again for as long as the actor is restarting (it
+    says ``ActorUnavailableError`` meanwhile): ``max_task_retries=-1``, which Ray bounds by the
+    actor's ``max_restarts``."""
+    return actor.ready.options(max_task_retries=-1).remote()
+
+
+def _submit(
+    queue: deque[_Attempt], seats: list[_Seat], pending: dict[Any, tuple[_Seat, Any]]
+) -> None:
+    """Start the episodes at the head of ``queue`` on the least loaded workers with room for
+    them, in order, until one does not fit (it waits for a worker to become free)."""
+    while queue:
+        attempt = queue[0]
+        room = [
+            s for s in seats if s.state == "up" and s.load + attempt.weight <= IN_FLIGHT_PER_WORKER
+        ]
+        if not room:
+            return
+        seat = min(room, key=lambda s: s.load)
+        queue.popleft()
+        task = attempt.task
+        pending[seat.actor.run.remote(task.scenario_toml, task.point, task.seed)] = (seat, attempt)
+        seat.load += attempt.weight
+
+
+def join_cluster(address: str, workers: int | None) -> int:
+    """Join the Ray cluster at ``address`` (``auto``, ``host:port`` or ``ray://host:port``),
+    unless this process has joined it already; the number of workers to start there.
+
+    Parameters
+    ----------
+    address : str
+        Where the cluster is (``check_address``'s forms).
+    workers : int or None
+        Workers asked for; None: one per CPU of the cluster.
+
+    Raises
+    ------
+    EngineError
+        Nothing answers at ``address`` as a Ray cluster, Ray cannot join it, or it has fewer
+        CPUs than ``workers`` (Ray is left again).
+    """
+    import ray
+
+    if not ray.is_initialized():
+        _probe(_resolve_auto() if address == "auto" else address, address)
+        try:
+            with _signals_kept():
+                _init_retrying_client(ray, address, _QUIET)
+        except ConnectionError as exc:
+            raise EngineError(f"cannot join the Ray cluster at {address}: {exc}") from None
+        except (ImportError, ValueError) as exc:  # Ray Client's packages missing
+            raise EngineError(
+                f"cannot join the Ray cluster at {address}: {_one_line(exc)} (pip install "
+                "'vnav-sim[sweep]' installs ray[client])"
+            ) from None
+    cpus = int(ray.cluster_resources().get("CPU", 0))
+    if workers and workers > cpus:
+        ray.shutdown()
+        raise EngineError(
+            f"the Ray cluster at {address} has {cpus} CPUs: {workers} workers (one CPU "
+            "each) would wait for more; ask for fewer with --workers"
+        )
+    return workers or max(1, cpus)
+
+
+_LOST_WORKER_MESSAGE = re.compile(
+    r"A worker died or was killed while executing a task"
+    r"|Task \S+ failed\. There are \S+ retries remaining"
+)
+"""What Ray's driver prints on stdout when a worker's process dies (a paragraph each, with
+advice on the OOM killer), whatever ``log_to_driver`` says; the engine handles that and says
+so in one line."""
+
+
+def _quiet_lost_worker_messages() -> Callable[[], None]:
+    """Send Ray's messages about a lost worker (``_LOST_WORKER_MESSAGE``) to this module's
+    debug log instead of stdout, where the sweep's own output goes; Ray's other messages are
+    printed as before. Returns what undoes it.
+
+    Ray's driver prints the errors its raylets publish through the private
+    ``ray._private.worker.print_to_stdstream``; where a Ray version has no such function,
+    nothing is changed (the messages are printed).
+    """
+    try:
+        from ray._private import worker as ray_worker
+    except ImportError:
+        return lambda: None
+    printer = getattr(ray_worker, "print_to_stdstream", None)
+    if printer is None:
+        return lambda: None
+
+    def print_others(data: dict[str, Any], *args: Any, **kwargs: Any) -> None:
+        lines = data.get("lines") or []
+        if data.get("pid") == "raylet" and all(_LOST_WORKER_MESSAGE.match(s) for s in lines):
+            for line in lines:
+                logger.debug("Ray: %s", line)
+        else:
+            printer(data, *args, **kwargs)
+
+    ray_worker.print_to_stdstream = print_others
+
+    def undo() -> None:
+        ray_worker.print_to_stdstream = printer
+
+    return undo
+
+
+@contextlib.contextmanager
+def _signals_kept() -> Iterator[None]:
+    """Put this process's SIGINT, SIGTERM and SIGHUP handlers back after the block: Ray's core
+    installs its own SIGTERM handler (it exits at once), where the command's stop a sweep
+    cleanly, keeping what finished."""
+    signums = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+    handlers = {s: signal.getsignal(s) for s in signums}
+    try:
+        yield
+    finally:
+        for signum, handler in handlers.items():
+            signal.signal(signum, handler)
 
 
 CLIENT_ATTEMPTS = 2

@@ -38,7 +38,7 @@ def _row(run: RunResult, report: dict[str, Any], judged: list[checks.CheckResult
     row: dict[str, Any] = {
         "status": "passed" if report["passed"] else "failed",
         "passed": bool(report["passed"]),
-        "failed_checks": "; ".join(failed),
+        "failed_checks": failed,
         "message": "",
         "camera_ticks": int(report["camera_ticks"]),
         "detections": int(report["detections"]),
@@ -78,7 +78,7 @@ def _diverged(spec: ScenarioSpec, exc: SimulationError) -> dict[str, Any]:
     row.update(
         status="diverged",
         passed=False,
-        failed_checks="",
+        failed_checks=[],
         message=f"the simulation diverged: {exc}",
         camera_ticks=0,
         detections=0,

@@ -18,19 +18,22 @@ for the whole sweep. Grid points are numbered in row-major order of the keys as 
 Every grid point is written out as a scenario file (``toml_out.dumps(exact=True)``) and parsed
 back by the scenario parser before anything runs: a bad value stops the sweep with a message
 naming the grid point and the key, and each point's file is what ``vnav-demo run FILE --seed S``
-replays, number for number.
+replays, number for number. That takes a few milliseconds a point, so a sweep holds at most
+``MAX_POINTS`` grid points (planned in seconds); statistics come from seeds, which cost nothing
+to plan (``MAX_EPISODES`` episodes in all).
 """
 
 from __future__ import annotations
 
 import copy
+import functools
 import hashlib
 import itertools
 import json
 import math
 import re
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -44,11 +47,26 @@ from scenarios.scenario.spec import (
     read_toml,
 )
 from vnav.methods import METHOD_NAMES, PREFERENCE
+from vnav.noise_model import SENSORS
 
-__all__ = ["MAX_EPISODES", "GridPoint", "SweepError", "SweepPlan", "label", "load", "plan"]
+__all__ = [
+    "MAX_EPISODES",
+    "MAX_POINTS",
+    "GridPoint",
+    "SweepError",
+    "SweepPlan",
+    "draws_from_seed",
+    "label",
+    "load",
+    "plan",
+]
 
 MAX_EPISODES = 1_000_000
 """Most episodes one sweep may hold (grid points x seeds)."""
+MAX_POINTS = 1_000
+"""Most grid points one sweep may hold. Each is written out, parsed back and checked before
+anything runs, 2-5 ms a point: a thousand take seconds, a million would take an hour (and
+write a million scenario files) before the first episode."""
 _TOP_KEYS = ("scenario", "seeds", "grid", "rank_by")
 _INDEX = re.compile(r"[0-9]+")
 """A part of a grid key that indexes a list."""
@@ -71,12 +89,20 @@ class GridPoint:
     scenario_toml : str
         The scenario as a file, floats in full: parsed, it gives ``spec`` exactly.
     spec : ScenarioSpec
+    scenario_sha256 : str
+        The SHA-256 of ``scenario_toml`` (hex): what the journal holds to tell this point's
+        episodes from another sweep's.
     """
 
     index: int
     values: dict[str, Any]
     scenario_toml: str
     spec: ScenarioSpec
+    scenario_sha256: str = field(init=False)
+
+    def __post_init__(self) -> None:
+        digest = hashlib.sha256(self.scenario_toml.encode()).hexdigest()
+        object.__setattr__(self, "scenario_sha256", digest)
 
     @property
     def label(self) -> str:
@@ -114,12 +140,23 @@ class SweepPlan:
         """Every ``(point index, seed)``, point by point (a worker then mostly keeps its scene)."""
         return [(p.index, s) for p in self.points for s in self.seeds]
 
-    @property
+    @functools.cached_property
     def fingerprint(self) -> str:
         """A hash of what the sweep runs (every point's scenario, the seeds): ``--resume``
-        refuses a directory whose sweep has another."""
+        refuses a directory, or a journal entry, whose sweep has another."""
         text = json.dumps([[p.scenario_toml for p in self.points], list(self.seeds)])
         return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def draws_from_seed(spec: ScenarioSpec) -> bool:
+    """Whether a run of ``spec`` draws anything from its seed.
+
+    The seed feeds every random draw of a run (``scenarios.run.runner``): the pose, image,
+    depth and mount noise (``sim.noise``: each drawn only where a figure of that sensor is
+    above zero) and the arrival jitter (``scenarios.run.streams``: only where ``jitter_s`` is
+    above zero). Where none is, every seed gives the same run, number for number.
+    """
+    return any(spec.noise.noisy(s) for s in SENSORS) or spec.timing.jitter_s > 0.0
 
 
 def label(values: dict[str, Any]) -> str:
@@ -165,6 +202,12 @@ def plan(data: dict[str, Any], where: str, base_dir: Path = Path()) -> SweepPlan
         raise SweepError(f"{where}: grid: must be a table of key = [values]")
     _check_grid(grid, where)
     n_points = math.prod(len(v) for v in grid.values())
+    if n_points > MAX_POINTS:
+        raise SweepError(
+            f"{where}: grid: {n_points} grid points is more than {MAX_POINTS} (each is checked "
+            "and written as a scenario file before anything runs); sweep fewer values, in "
+            "several sweeps, and raise seeds for statistics"
+        )
     if n_points * len(seeds) > MAX_EPISODES:
         raise SweepError(
             f"{where}: {n_points} grid points x {len(seeds)} seeds is more than "

@@ -2,16 +2,43 @@
 
 The columns are declared here, apart from running (``scenarios.sweep.episode``), so that the
 tables, the summary and the plots are made without MuJoCo.
+
+Every column name is a plain identifier (letters, digits, ``_``), so that SQL (DuckDB),
+Polars and pandas (``df.camera__pitch_down_deg``) read it without quoting. A name made of
+parts joins them with ``__``, as dlt and Django do for nested names: a grid key's dots become
+``__`` (``camera.pitch_down_deg`` -> ``camera__pitch_down_deg``, ``grid_column``), and a
+method's statistic is ``<method>__<stat>`` (``depth_image__median_m``, ``method_column``).
+The parts themselves contain single ``_`` only, so the name reads back into its parts. The
+columns are flat scalars rather than struct columns: a struct reaches pandas as one dict per
+cell and needs unnesting in Polars, while scalar columns group, filter and plot the same in
+every tool.
 """
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from typing import Any
 
 from vnav.methods import METHOD_NAMES
 
-__all__ = ["ESTIMATE_COLUMNS", "STATS", "Episode", "method_column", "row_columns"]
+__all__ = [
+    "ESTIMATE_COLUMNS",
+    "STATS",
+    "STATUSES",
+    "TABLES_VERSION",
+    "Episode",
+    "grid_column",
+    "method_column",
+    "row_columns",
+]
+
+TABLES_VERSION = 2
+"""Version of the tables' columns (2: names with ``__``, ``failed_checks`` a list; 1 had dots
+and one joined string)."""
+
+STATUSES = ("passed", "failed", "diverged")
+"""An episode's ``status``: every check passed, one failed or had no data, the flight diverged."""
 
 STATS = ("count", "mean", "median", "rmse", "max")
 """Per-method error statistics in each row (``scenarios.judge.report``'s, metres but ``count``)."""
@@ -20,9 +47,33 @@ ESTIMATE_COLUMNS = ("tick", "t_s", "cone", "method", "range_m", "error_m")
 """Columns of an episode's estimates: one row per matched detection and method."""
 
 
+_KEY_PART = re.compile(r"[A-Za-z0-9]+(?:_[A-Za-z0-9]+)*")
+"""A grid key's part that joins with ``__`` into an identifier and splits back."""
+
+
 def method_column(method: str, stat: str) -> str:
-    """A row's column for ``method``'s statistic: ``depth_image.median_m``, ``naive.count``."""
-    return f"{method}.{stat}" if stat == "count" else f"{method}.{stat}_m"
+    """A row's column for ``method``'s statistic: ``depth_image__median_m``, ``naive__count``."""
+    return f"{method}__{stat}" if stat == "count" else f"{method}__{stat}_m"
+
+
+def grid_column(key: str) -> str:
+    """The tables' column for the grid key ``key``: its dots become ``__``.
+
+    ``camera.pitch_down_deg`` -> ``camera__pitch_down_deg``, ``flight.waypoints.2.position_w``
+    -> ``flight__waypoints__2__position_w``, ``duration_s`` -> ``duration_s``.
+
+    Raises
+    ------
+    ValueError
+        The column would not be a plain identifier, or would not read back into ``key`` (a
+        part with characters other than ASCII letters, digits and single inner ``_``, or a
+        key not starting with a letter): the scenario parser accepts no such key.
+    """
+    parts = key.split(".")
+    if not (key[:1].isalpha() and all(_KEY_PART.fullmatch(p) for p in parts)):
+        raise ValueError(f"grid key {key!r}: no plain column name for it")
+    column = "__".join(parts)
+    return column
 
 
 def row_columns() -> list[str]:
@@ -42,7 +93,7 @@ class Episode:
     point, seed : int
     row : dict
         One value per ``row_columns()``: ``status`` is ``passed``, ``failed`` (a check failed
-        or had no data; ``failed_checks`` names them) or ``diverged`` (the flight diverged;
+        or had no data; ``failed_checks``, a list, names them) or ``diverged`` (the flight diverged;
         ``message`` says when); errors are NaN where a method gave none.
     estimates : dict of str to list
         ``ESTIMATE_COLUMNS``, one entry per matched detection and method with an estimate.

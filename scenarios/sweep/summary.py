@@ -12,6 +12,7 @@ beside it (the tests recompute them from the files).
 from __future__ import annotations
 
 import math
+import shlex
 from typing import Any
 
 import numpy as np
@@ -23,7 +24,8 @@ from vnav.methods import METHOD_NAMES
 
 __all__ = ["SUMMARY_VERSION", "build", "rank_key", "replay_command", "worst"]
 
-SUMMARY_VERSION = 1
+SUMMARY_VERSION = 2
+"""2: ``failed_checks`` a list, the rank figure named as its column (``depth_image__median_m``)."""
 _STATUS_ORDER = {"diverged": 0, "failed": 1, "passed": 2}
 
 
@@ -48,8 +50,10 @@ def worst(episodes: list[Episode], rank_by: str, k: int) -> list[Episode]:
 
 
 def replay_command(out_dir: str, point_file: str, seed: int) -> str:
-    """The command that runs an episode again, with its recording."""
-    return f"vnav-demo run {out_dir.rstrip('/')}/{point_file} --seed {seed}"
+    """The command that runs an episode again, with its recording: shell words, each quoted
+    where it needs to be (a space in the directory's name)."""
+    path = f"{out_dir.rstrip('/')}/{point_file}"
+    return shlex.join(["vnav-demo", "run", path, "--seed", str(seed)])
 
 
 def _spread(values: list[float]) -> dict[str, float | None]:
@@ -116,7 +120,7 @@ def _worst_entry(plan: SweepPlan, e: Episode, out_dir: str, point_file: str) -> 
         "seed": e.seed,
         "status": e.row["status"],
         "failed_checks": e.row["failed_checks"],
-        f"{plan.rank_by}.median_m": _num(e.row[method_column(plan.rank_by, "median")]),
+        method_column(plan.rank_by, "median"): _num(e.row[method_column(plan.rank_by, "median")]),
         "replay": replay_command(out_dir, point_file, e.seed),
     }
 
