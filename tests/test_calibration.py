@@ -209,3 +209,12 @@ def test_first_mount_through_the_declared_mount_equals_the_search() -> None:
         assert matches_guessed == matches_searched
         np.testing.assert_array_equal(guessed.T_w_c, searched.T_w_c)
         np.testing.assert_array_equal(problem._pnp(i), guessed.T_w_c)
+
+
+def test_an_offset_beyond_the_bound_is_refused_not_extrapolated() -> None:
+    """A camera clock 0.3 s off, searched within +-0.1 s: the solver keeps every pose it asks
+    for inside the stream (no ExtrapolationError) and refuses the answer at the bound."""
+    rng = np.random.default_rng(3)
+    flight = _flight(rng, DECLARED, 0.3, pixel_std=0.0)
+    with pytest.raises(CalibrationError, match="bound"):
+        calibrate_camera(CAMERA, *flight, APEX_W, DECLARED, max_offset_s=0.1)

@@ -182,7 +182,7 @@ def calibrate_camera(
         for i in np.flatnonzero(inside)
     ]
     images = [(t, uv) for t, uv in images if len(uv)]
-    problem = _Problem(camera, buffer, images, P, T_b_c_guess)
+    problem = _Problem(camera, buffer, images, P, T_b_c_guess, max_offset_s=max_offset_s)
     x = np.zeros(7)
     x[:6] = problem.first_mount()
     for gate in GATES_PX:
@@ -210,9 +210,12 @@ def calibrate_camera(
 class _Problem:
     """The matched observations and the residual function of ``x = [xi, offset]``."""
 
-    def __init__(self, camera, buffer, images, apex_w, T_b_c_guess) -> None:
+    def __init__(
+        self, camera, buffer, images, apex_w, T_b_c_guess, *, max_offset_s: float = math.inf
+    ) -> None:
         self.camera, self.buffer, self.images = camera, buffer, images
         self.apex_w, self.T_b_c_guess = apex_w, T_b_c_guess
+        self.max_offset_s = max_offset_s
         self.t = np.array([t for t, _ in images])
         self.obs_image = np.zeros(0, dtype=np.int64)
         self.obs_cone = np.zeros(0, dtype=np.int64)
@@ -286,7 +289,10 @@ class _Problem:
 
     def _poses(self, x: np.ndarray) -> np.ndarray:
         """``T_w_c`` of every image under ``x``, (N, 4, 4)."""
-        T_w_b = self.buffer.lookup("world", "body", self.t + x[6])
+        # The offset held within +-max_offset_s, where every image's pose lies inside the
+        # stream: a Levenberg-Marquardt step (or a difference step) beyond it would extrapolate.
+        offset = min(max(float(x[6]), -self.max_offset_s), self.max_offset_s)
+        T_w_b = self.buffer.lookup("world", "body", self.t + offset)
         return T_w_b @ self.T_b_c(x)
 
     def residuals(self, x: np.ndarray) -> np.ndarray:
@@ -312,6 +318,11 @@ class _Problem:
             std = np.full(7, np.inf)
         std_rot_deg = math.degrees(float(std[3:6].max()))
         std_t_m, std_offset = float(std[:3].max()), float(std[6])
+        if abs(float(x[6])) >= self.max_offset_s - 1e-6:
+            raise CalibrationError(
+                f"the clock offset reaches the bound of the offsets tried (+-{self.max_offset_s:g}"
+                " s): the true one may lie beyond it; try a larger max_offset_s"
+            )
         missing = []
         if not std_offset <= MAX_STD_OFFSET_S:
             missing.append(
