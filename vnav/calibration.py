@@ -311,6 +311,13 @@ class _Problem:
         J = _jacobian(self.residuals, x)
         rms = float(np.sqrt(np.mean(r**2) * 2.0))  # per apex: sqrt(du^2 + dv^2)
         sigma = max(float(np.sqrt(r @ r / max(r.size - 7, 1))), PIXEL_STD_FLOOR)
+        if abs(float(x[6])) >= self.max_offset_s - 1e-6:
+            # Held at its bound, the offset has no derivative: no standard error to give.
+            raise CalibrationError(
+                f"the flight does not determine the clock offset within +-{self.max_offset_s:g} s "
+                "(the answer reached that bound): it needs rotation or faster motion, or the "
+                "true offset lies beyond the bound (a larger max_offset_s)"
+            )
         try:
             cov = sigma**2 * np.linalg.inv(J.T @ J)
             std = np.sqrt(np.maximum(np.diag(cov), 0.0))
@@ -318,11 +325,6 @@ class _Problem:
             std = np.full(7, np.inf)
         std_rot_deg = math.degrees(float(std[3:6].max()))
         std_t_m, std_offset = float(std[:3].max()), float(std[6])
-        if abs(float(x[6])) >= self.max_offset_s - 1e-6:
-            raise CalibrationError(
-                f"the clock offset reaches the bound of the offsets tried (+-{self.max_offset_s:g}"
-                " s): the true one may lie beyond it; try a larger max_offset_s"
-            )
         missing = []
         if not std_offset <= MAX_STD_OFFSET_S:
             missing.append(
