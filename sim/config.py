@@ -46,6 +46,14 @@ RENDER_QUALITY: dict[str, RenderQuality] = {
 RENDER_QUALITIES: tuple[str, ...] = tuple(RENDER_QUALITY)
 
 MAX_IMAGE_SIZE_PX = 8192
+MIN_FOVY_DEG = 1.0
+"""Narrowest vertical field of view: below it OpenGL's single precision misplaces what it
+draws (a point off by 0.08 px at 0.1 deg, 0.8 px at 0.01 deg: measured against the
+projection), and a field of view that rounds to zero is no camera at all."""
+MAX_FOVY_DEG = 170.0
+"""Widest vertical field of view a pinhole (rectilinear) camera is given: beyond it the
+focal length falls under 21 px per 480 rows and a lens would be a fisheye, which vnav does
+not model (and towards 180 deg MuJoCo draws nothing)."""
 SKY_MARGIN = 5.0
 """zfar_m >= SKY_MARGIN * ground_size_m: MuJoCo's sky dome lies about 0.7 zfar from the
 camera, and the far corner of the ground is at most 2 sqrt(2) ground_size_m away."""
@@ -159,7 +167,7 @@ class CameraConfig:
         Tilt of the optical axis below the body's x axis, degrees, in [-90, 90]
         (``R_b_c = rot_y(pitch_down) @ R_FLU_RDF``).
     fovy_deg : float
-        Vertical field of view, degrees, in (0, 180).
+        Vertical field of view, degrees, in [``MIN_FOVY_DEG``, ``MAX_FOVY_DEG``] = [1, 170].
     width, height : int
         Image size in pixels.
     mount_error : MountError
@@ -182,8 +190,11 @@ class CameraConfig:
             raise ValueError(f"CameraConfig.pitch_down_deg must be in [-90, 90], got {pitch}")
         set_(self, "pitch_down_deg", pitch)
         fovy = _finite(self.fovy_deg, "CameraConfig.fovy_deg")
-        if not 0.0 < fovy < 180.0:
-            raise ValueError(f"CameraConfig.fovy_deg must be in (0, 180) degrees, got {fovy}")
+        if not MIN_FOVY_DEG <= fovy <= MAX_FOVY_DEG:
+            raise ValueError(
+                f"CameraConfig.fovy_deg must be in [{MIN_FOVY_DEG:g}, {MAX_FOVY_DEG:g}] degrees, "
+                f"got {fovy!r}"
+            )
         set_(self, "fovy_deg", fovy)
         set_(self, "width", _size(self.width, "CameraConfig.width"))
         set_(self, "height", _size(self.height, "CameraConfig.height"))

@@ -30,6 +30,19 @@ SKY_DOME_MIN_FRACTION = 0.696
 """Nearest ray distance of MuJoCo's skybox, as a fraction of zfar (measured, mujoco 4.0)."""
 SKY_THRESHOLD_FRACTION = 0.65
 """Depth pixels whose ray is longer than this fraction of zfar are sky: set to zfar."""
+DECORATION_GEOMS = 100
+"""Room in the scene's geom buffer beyond the model's own geoms, sites, cameras and lights,
+for what MuJoCo adds to draw (none with the options used here; a margin, not a limit)."""
+
+
+def scene_geoms(model: mujoco.MjModel) -> int:
+    """Size of the scene's geom buffer (``maxgeom`` of ``mujoco.MjvScene``) for ``model``.
+
+    MuJoCo drops whatever does not fit a full buffer (with a warning, not an error): a fixed
+    size would leave out cones of a large scene. Every geom, site, camera and light of the
+    model fits, and ``DECORATION_GEOMS`` more.
+    """
+    return model.ngeom + model.nsite + model.ncam + model.nlight + DECORATION_GEOMS
 
 
 @dataclass(frozen=True)
@@ -119,7 +132,7 @@ class Renderer:
         mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN.value, self._con)
         self._con.readDepthMap = mujoco.mjtDepthMap.mjDEPTH_ZEROFAR
 
-        self._scene = mujoco.MjvScene(model, maxgeom=2000)
+        self._scene = mujoco.MjvScene(model, maxgeom=scene_geoms(model))
         self._rect = mujoco.MjrRect(0, 0, self.width, self.height)
         self._rgb = np.empty((self.height, self.width, 3), dtype=np.uint8)
         self._depth = np.empty((self.height, self.width), dtype=np.float32)
@@ -230,6 +243,12 @@ class Renderer:
         mujoco.mjv_updateScene(
             model, data, option, None, cam, mujoco.mjtCatBit.mjCAT_ALL.value, scene
         )
+        while scene.ngeom >= scene.maxgeom:  # full: something may be left out; grow, redraw
+            logger.warning("scene geom buffer of %d full: doubled", scene.maxgeom)
+            self._scene = scene = mujoco.MjvScene(model, maxgeom=2 * scene.maxgeom)
+            mujoco.mjv_updateScene(
+                model, data, option, None, cam, mujoco.mjtCatBit.mjCAT_ALL.value, scene
+            )
         scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = self._shadows
         scene.flags[mujoco.mjtRndFlag.mjRND_SEGMENT] = False
         scene.flags[mujoco.mjtRndFlag.mjRND_IDCOLOR] = False

@@ -3,8 +3,12 @@
 
 from __future__ import annotations
 
+import json
 import math
+import os
 import re
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -133,3 +137,50 @@ def test_calibration_with_image_noise_stays_within_the_noisy_targets():
     assert errors["rotation_deg"] < 0.2
     assert errors["translation_m"] < 0.02
     assert errors["time_offset_s"] < 0.003
+
+
+@pytest.mark.parametrize(("duration_s", "ticks"), [("0.001", 1), ("0.5", 11)])
+def test_a_flight_too_short_to_calibrate_is_no_data_with_its_reason(
+    tmp_path, capsys, duration_s, ticks
+):
+    """The built-in cut to one camera tick (one pose sample) or to half a second (the clock
+    offset's search left the 0.5 s pose stream): the calibration checks have no data and say
+    why, the run is not an internal error (exit 1: a check did not pass), and ``calibrate`` on
+    its recording refuses it in one line."""
+    out = tmp_path / "out"
+    status = main(["run", "calibration", "--duration", duration_s, "--out", str(out), "--quiet"])
+    assert status == 1, capsys.readouterr().err
+    assert "internal error" not in capsys.readouterr().err
+    report = json.loads((out / "calibration.json").read_text())
+    assert report["camera_ticks"] == ticks
+    judged = [c for c in report["checks"] if c["kind"].startswith("calibration_")]
+    assert len(judged) == 3
+    for check in judged:
+        assert check["outcome"] == "no data"
+        assert check["reason"].startswith("calibration refused: the flight ")
+    assert main(["calibrate", str(out / "calibration.rrd")]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "cannot calibrate: the flight " in err, err
+
+
+def test_a_truncated_recording_is_refused_in_one_line(tmp_path):
+    """A recording cut short (no footer: Rerun warns on two lines before reading it) through
+    the real command line: exit 2 and one line on stderr."""
+    out = tmp_path / "out"
+    assert main(["run", "frame-problem", "--duration", "0.2", "--out", str(out), "--quiet"]) in (
+        0,
+        1,
+    )
+    whole = (out / "frame-problem.rrd").read_bytes()
+    cut = tmp_path / "cut.rrd"
+    cut.write_bytes(whole[: len(whole) // 2])
+    proc = subprocess.run(
+        [sys.executable, "-m", "scenarios", "calibrate", str(cut)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={**os.environ, "PYTHONWARNINGS": "default"},
+    )
+    assert proc.returncode == 2, proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1, proc.stderr
+    assert "not a readable Rerun recording" in proc.stderr

@@ -142,6 +142,40 @@ def test_refuses_malformed_input() -> None:
         )
 
 
+@pytest.mark.parametrize(
+    ("argument", "message"),
+    [
+        ("apex_uv", r"apex_uv\[3\] must be finite"),
+        ("apex_w", r"apex_w must be finite"),
+        ("pose_stamps_s", r"pose_stamps_s must be finite"),
+        ("image_stamps_cam_s", r"image_stamps_cam_s must be finite"),
+        ("max_offset_s", r"max_offset_s must be a finite number >= 0, got nan"),
+    ],
+)
+def test_a_nan_input_is_a_value_error_naming_it(argument: str, message: str) -> None:
+    """A NaN anywhere (an apex: it reached OpenCV's PnP, a raw ``cv2.error``) is refused up
+    front, by name."""
+    rng = np.random.default_rng(11)
+    stamps, T_w_b, t_cam, apex_uv = _flight(rng, DECLARED, 0.0, duration_s=2.0)
+    kwargs = {}
+    apex_w = APEX_W.copy()
+    if argument == "apex_uv":
+        apex_uv[3] = apex_uv[3].copy()
+        apex_uv[3][0, 0] = np.nan
+    elif argument == "apex_w":
+        apex_w[2, 1] = np.nan
+    elif argument == "pose_stamps_s":
+        stamps = stamps.copy()
+        stamps[-1] = np.nan
+    elif argument == "image_stamps_cam_s":
+        t_cam = t_cam.copy()
+        t_cam[0] = np.nan
+    else:
+        kwargs["max_offset_s"] = math.nan
+    with pytest.raises(ValueError, match=message):
+        calibrate_camera(CAMERA, stamps, T_w_b, t_cam, apex_uv, apex_w, DECLARED, **kwargs)
+
+
 def test_a_declared_mount_far_off_is_searched_without_a_prior() -> None:
     """A declared mount 25 deg off the true one projects the map nowhere near the apexes: the
     first mount then comes from the search over every choice of cones, and the answer is still
@@ -175,3 +209,12 @@ def test_first_mount_through_the_declared_mount_equals_the_search() -> None:
         assert matches_guessed == matches_searched
         np.testing.assert_array_equal(guessed.T_w_c, searched.T_w_c)
         np.testing.assert_array_equal(problem._pnp(i), guessed.T_w_c)
+
+
+def test_an_offset_beyond_the_bound_is_refused_not_extrapolated() -> None:
+    """A camera clock 0.3 s off, searched within +-0.1 s: the solver keeps every pose it asks
+    for inside the stream (no ExtrapolationError) and refuses the answer at the bound."""
+    rng = np.random.default_rng(3)
+    flight = _flight(rng, DECLARED, 0.3, pixel_std=0.0)
+    with pytest.raises(CalibrationError, match="bound"):
+        calibrate_camera(CAMERA, *flight, APEX_W, DECLARED, max_offset_s=0.1)

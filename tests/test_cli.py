@@ -261,7 +261,7 @@ def test_bad_usage_exit_2_one_line(tmp_path, capsys, args, message):
         ('name = "x"\n[camera\n', r"bad\.toml: invalid TOML: .*line 2"),
         (
             PITCH_90_TOML.replace("fovy_deg = 60.0", "fovy_deg = 200.0"),
-            r"bad\.toml: camera: CameraConfig.fovy_deg must be in \(0, 180\)",
+            r"bad\.toml: camera: CameraConfig.fovy_deg must be in \[1, 170\] degrees",
         ),
         (
             PITCH_90_TOML.replace("fovy_deg = 60.0", 'fovy_deg = "60"'),
@@ -755,6 +755,100 @@ def test_a_second_run_into_the_same_directory_is_refused(tmp_path, capsys):
     with outputs.directory_lock(tmp_path):  # another run holds it (flock is per open file)
         assert main(["run", "frame-problem", "--out", str(tmp_path), "--duration", "0.5"]) == 2
     assert "another vnav-demo command is writing into" in capsys.readouterr().err
+
+
+DEEP = "[" * 3000 + "]" * 3000
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "message"),
+    [
+        (
+            'mode = "kinematic"',
+            'mode = ["kinematic"]',
+            r"flight\.mode: must be \"kinematic\", .* or \"orbit\", got \['kinematic'\]",
+        ),
+        ('mode = "kinematic"', "mode = { a = 1 }", r"flight\.mode: must be .*, got \{'a': 1\}"),
+        (
+            'kind = "detection_rate"',
+            'kind = ["detection_rate"]',
+            r"checks\[1\]\.kind: must be one of \['max_error', .*got \['detection_rate'\]",
+        ),
+        ('kind = "detection_rate"', "kind = { x = 1 }", r"checks\[1\]\.kind: must be one of"),
+        (
+            'method = "depth_image"',
+            'method = ["depth_image"]',
+            r"checks\[0\]\.method: must be one of \['depth_image', .*got \['depth_image'\]",
+        ),
+        # An empty array where a table belongs was read as the empty table.
+        ("camera_rate_hz = 5.0", "camera_rate_hz = 5.0\nnoise = []", r"noise: must be a table"),
+        ("camera_rate_hz = 5.0", "camera_rate_hz = 5.0\ntiming = 0", r"timing: must be a table"),
+        (
+            'description = "nose straight down over a cone"',
+            f"description = {DEEP}",
+            r"s\.toml: line 2: description: tables and arrays nested more than 16 deep$",
+        ),
+        (
+            "limit = 0.95",
+            "limit = 0.95\nx = " + "{ a = " * 400 + "1" + " }" * 400,
+            r"s\.toml: line \d+: checks\.x: tables and arrays nested more than 16 deep$",
+        ),
+        (
+            'description = "nose straight down over a cone"',
+            "description = " + "[" * 20 + "]" * 20,
+            r"s\.toml: description(\[0\]){16}: tables and arrays nested more than 16 deep$",
+        ),
+        (
+            "fovy_deg = 60.0",
+            "fovy_deg = 1e-300",
+            r"camera: CameraConfig\.fovy_deg must be in \[1, 170\] degrees, got 1e-300$",
+        ),
+        ("fovy_deg = 60.0", "fovy_deg = 179.9999", r"CameraConfig\.fovy_deg must be in \[1, 170\]"),
+    ],
+)
+def test_wrong_types_and_deep_nesting_exit_2_naming_the_key_in_run_and_sweep(
+    tmp_path, capsys, old, new, message
+):
+    """The same scenario file through ``run`` and as a sweep's scenario: one line, exit 2."""
+    path = _file_with(tmp_path, old, new)
+    out = tmp_path / "out"
+    assert main(["run", str(path), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and re.search(message, err.rstrip("\n")), err
+    assert not out.exists()
+    sweep = tmp_path / "sweep.toml"
+    sweep.write_text('scenario = "s.toml"\n')
+    assert main(["sweep", str(sweep), "--out", str(out), "--workers", "0"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and re.search(message, err.rstrip("\n")), err
+    assert "sweep.toml: scenario: " in err and not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("grid", "message"),
+    [
+        (
+            '"flight.keyframes.1.t" = [1979-05-27]',
+            r"grid\.flight\.keyframes\.1\.t\[0\]: a TOML date",
+        ),
+        ('"duration_s" = [2.0, 07:32:00]', r"grid\.duration_s\[1\]: a TOML time is not"),
+        (
+            '"flight.keyframes.².t" = [1.0]',
+            r"flight\.keyframes\.²\.t: flight\.keyframes is a list of 3; index it with a number",
+        ),
+        (f'"duration_s" = {DEEP}', r"line 3: grid\.\"duration_s\": tables and arrays nested"),
+        (f'"noise.{".a" * 3000}" = [1.0]', r"a path of 3002 parts; a scenario nests at most 16"),
+    ],
+)
+def test_bad_sweep_grids_exit_2_in_one_line(tmp_path, capsys, grid, message):
+    (tmp_path / "s.toml").write_text(PITCH_90_TOML)
+    sweep = tmp_path / "sweep.toml"
+    sweep.write_text(f'scenario = "s.toml"\n[grid]\n{grid}\n')
+    out = tmp_path / "out"
+    assert main(["sweep", str(sweep), "--out", str(out), "--workers", "0"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and re.search(message, err), err
+    assert not out.exists()
 
 
 def test_a_lock_file_taken_by_a_directory_is_one_line_exit_2(tmp_path):

@@ -243,3 +243,69 @@ def test_bad_input_is_a_value_error_that_names_the_problem():
     for bad in (0.0, -1.0, np.inf, "10", True):
         with pytest.raises(ValueError, match="cache_s"):
             FrameBuffer(cache_s=bad)
+
+
+def _screw_pose(t: float) -> np.ndarray:
+    """The writer's pose at ``t``: a constant-rate turn about z and a straight line, which the
+    buffer's interpolation (slerp, linear) reproduces exactly between any two samples."""
+    return se3.make(so3.rot_z(0.3 * t), [t, -2.0 * t, 0.5])
+
+
+def test_one_writer_and_three_readers_never_see_a_torn_edge():
+    """One thread appends samples at 1 kHz of simulated time (trimming a 0.5 s cache as it
+    goes), three look up single times and arrays of times inside the interval they last
+    saw. Every lookup is either the true pose or an ``ExtrapolationError`` (the time was
+    trimmed meanwhile): never another exception, never a pose mixed from two states."""
+    import sys
+    import threading
+
+    buf = FrameBuffer(cache_s=0.5)
+    dt = 1e-3
+    buf.set_transform("world", "body", 0.0, _screw_pose(0.0))
+    stop = threading.Event()
+    errors: list[str] = []
+    counts = [0, 0, 0]
+
+    def write() -> None:
+        k = 1
+        while not stop.is_set():
+            stamps = (k + np.arange(3)) * dt
+            buf.set_transform("world", "body", stamps, np.stack([_screw_pose(s) for s in stamps]))
+            k += 3
+
+    def read(slot: int) -> None:
+        rng = np.random.default_rng(slot)
+        while not stop.is_set():
+            try:
+                first, last = buf.interval("world", "body")
+                if counts[slot] % 4:
+                    t = float(rng.uniform(first, last))
+                    got, want = buf.lookup("world", "body", t), _screw_pose(t)
+                else:
+                    t = np.sort(rng.uniform(first, last, 8))
+                    got = buf.lookup("world", "body", t)
+                    want = np.stack([_screw_pose(s) for s in t])
+                if not np.allclose(got, want, atol=1e-9):
+                    errors.append(f"wrong pose at t = {t}")
+            except ExtrapolationError:
+                pass
+            except Exception as exc:  # the failure this test looks for
+                errors.append(f"{type(exc).__name__}: {exc}")
+            counts[slot] += 1
+
+    switch = sys.getswitchinterval()
+    sys.setswitchinterval(1e-6)  # switch threads as often as possible: races show quickly
+    threads = [threading.Thread(target=write)] + [
+        threading.Thread(target=read, args=(i,)) for i in range(3)
+    ]
+    try:
+        for thread in threads:
+            thread.start()
+        stop.wait(3.0)
+    finally:
+        stop.set()
+        for thread in threads:
+            thread.join()
+        sys.setswitchinterval(switch)
+    assert min(counts) > 100, counts
+    assert not errors, f"{len(errors)} of {sum(counts)} lookups: {errors[:3]}"

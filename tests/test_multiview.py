@@ -15,6 +15,7 @@ from vnav.camera import PinholeCamera
 from vnav.cone import TRAFFIC_CONE
 from vnav.detect import ConeDetection, detect_cones
 from vnav.multiview import (
+    camera_pose_from_apexes,
     camera_pose_from_cones,
     camera_pose_from_points,
     parallax_deg,
@@ -243,3 +244,45 @@ def test_camera_pose_from_three_rendered_cones(seed: int) -> None:
     R_err = result.T_w_c[:3, :3].T @ world.T_w_c[:3, :3]
     assert np.degrees(np.linalg.norm(so3.log(R_err))) < 1.0
     assert np.linalg.norm(result.T_w_c[:3, 3] - world.T_w_c[:3, 3]) < 0.2
+
+
+@pytest.mark.parametrize("u_px", [1e155, 1e200, 1e300])
+def test_triangulate_refuses_a_pixel_whose_ray_lies_in_the_image_plane(u_px: float) -> None:
+    """A finite pixel so far out that its ray is 90 deg off the axis to rounding: the squares
+    of its coordinates overflowed to a zero "ray", and the answer was a point at a camera's
+    centre ([1, 0, 0] here); now a ValueError naming uv. The ray itself is unit."""
+    T_w_c = np.stack([se3.make(np.eye(3), [0.0, 0.0, 0.0]), se3.make(np.eye(3), [1.0, 0.0, 0.0])])
+    uv = np.array([[u_px, CAMERA.cy], [300.0, 240.0]])
+    ray = CAMERA.rays(uv[:1])[0]
+    assert np.linalg.norm(ray) == pytest.approx(1.0) and ray[0] == pytest.approx(1.0)
+    with pytest.raises(ValueError, match=r"uv\[0\] = \(1e\+\d+, 240\) px is 90 deg off"):
+        triangulate(CAMERA, T_w_c, uv)
+
+
+def test_pose_searches_refuse_non_finite_or_degenerate_input_with_value_errors() -> None:
+    """NaN, inf, repeated map points or pixels, bad seeds: OpenCV's SQPnP asserted on each
+    (a raw ``cv2.error``) or numpy raised IndexError; now every one is a ValueError."""
+    rng = np.random.default_rng(5)
+    p_w = rng.uniform([-2.0, -2.0, 6.0], [2.0, 2.0, 9.0], (6, 3))
+    uv = CAMERA.project(p_w)
+    cases = []
+    for bad in (np.nan, np.inf):
+        p_bad, uv_bad = p_w.copy(), uv.copy()
+        p_bad[1, 2], uv_bad[2, 0] = bad, bad
+        cases += [
+            ((p_bad, uv, None), "apex_w must be finite"),
+            ((p_w, uv_bad, None), "uv must be finite"),
+        ]
+    cases += [
+        ((np.repeat(p_w[:1], 6, axis=0), uv, None), "no pose|ambiguous"),
+        ((p_w, np.repeat(uv[:1], 6, axis=0), None), "no pose|ambiguous"),
+        ((p_w, uv, [0, 1, 2, 99]), r"seeds must be 4 distinct pixel indices in \[0, 6\)"),
+        ((p_w, uv, [0, 1, 2]), "seeds must be 4 distinct"),
+    ]
+    for (points, pixels, seeds), message in cases:
+        with pytest.raises(ValueError, match=message):
+            camera_pose_from_apexes(CAMERA, points, pixels, seeds)
+    with pytest.raises(ValueError, match="found no pose"):
+        camera_pose_from_points(CAMERA, p_w, np.where(np.arange(6)[:, None] == 0, 1e300, uv))
+    with pytest.raises(ValueError, match="cones_w must be finite"):
+        camera_pose_from_cones(CAMERA, np.full((4, 3), np.nan), [])

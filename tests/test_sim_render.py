@@ -10,8 +10,9 @@ import pytest
 from helpers import mujoco_T_w_c
 from scipy.spatial.transform import Rotation
 
+import sim.render
 from sim import names
-from sim.config import CameraConfig, SceneConfig
+from sim.config import MAX_FOVY_DEG, MIN_FOVY_DEG, CameraConfig, SceneConfig
 from sim.gl import mujoco
 from sim.render import Renderer
 from sim.world import World, build_spec
@@ -36,7 +37,14 @@ def _back_project_w(world: World, depth: np.ndarray, mask: np.ndarray) -> np.nda
 
 @pytest.mark.parametrize(
     ("width", "height", "fovy_deg"),
-    [(640, 480, 45.0), (320, 240, 60.0), (641, 479, 50.0), (640, 360, 90.0), (1024, 769, 70.0)],
+    [
+        (640, 480, 45.0),
+        (320, 240, 60.0),
+        (641, 479, 50.0),
+        (640, 360, 90.0),
+        (1024, 769, 70.0),
+        (640, 480, MIN_FOVY_DEG),  # the narrowest accepted: still within 0.05 px
+    ],
 )
 def test_sphere_centroids_match_projection(width: int, height: int, fovy_deg: float) -> None:
     cfg = SceneConfig(
@@ -158,6 +166,50 @@ def test_depth_back_projects_onto_ground_and_cone_surfaces() -> None:
         dist = _cone_surface_distance_m(p_k)
         # The rendered body is a 64-sided pyramid: at most R (1 - cos(pi/64)) = 0.2 mm inside.
         assert np.median(dist) < 0.002 and np.max(dist) < 0.01, (np.median(dist), dist.max())
+
+
+def test_the_widest_field_of_view_still_renders_the_ground_where_it_is() -> None:
+    """At ``MAX_FOVY_DEG``, looking down from 3 m: every pixel sees the ground, and its depth
+    back-projects through the pinhole intrinsics onto z = 0."""
+    cfg = SceneConfig(
+        camera=CameraConfig(pitch_down_deg=89.0, fovy_deg=MAX_FOVY_DEG),
+        cones_w=(),
+        start_position_w=(0.0, 0.0, 3.0),
+    )
+    world = World.from_config(cfg)
+    with Renderer(world) as renderer:
+        frame = renderer.render(segmentation=True)
+    ground = frame.segmentation == world.model.geom(names.GROUND_GEOM).id
+    assert ground.all()
+    z_w = _back_project_w(world, frame.depth, ground)[:, 2]
+    assert np.max(np.abs(z_w)) < 1e-4, f"ground z off by up to {np.max(np.abs(z_w)):.2e} m"
+
+
+@pytest.mark.parametrize("decoration_geoms", [sim.render.DECORATION_GEOMS, -30])
+def test_a_thousand_and_one_cones_are_all_drawn(monkeypatch, decoration_geoms: int) -> None:
+    """1,001 cones (2,002 geoms) on a grid under a camera looking straight down from 50 m:
+    each one's shell is in the segmentation. A fixed buffer of 2,000 geoms left the last
+    out; a buffer sized too small (a negative margin) grows until the scene fits."""
+    monkeypatch.setattr(sim.render, "DECORATION_GEOMS", decoration_geoms)
+    x_w, y_w = np.meshgrid((np.arange(33) - 16) * 1.6, (np.arange(31) - 15) * 1.6)
+    cones_w = tuple(
+        (float(x), float(y), 0.0) for x, y in zip(x_w.ravel(), y_w.ravel(), strict=True)
+    )[:1001]
+    cfg = SceneConfig(
+        camera=CameraConfig(pitch_down_deg=90.0, position_b=(0.0, 0.0, 0.0)),
+        cones_w=cones_w,
+        start_position_w=(0.0, 0.0, 50.0),
+    )
+    world = World.from_config(cfg)
+    # Every cone is in the image by the projection of its base centre (independent of MuJoCo).
+    T_c_w = np.linalg.inv(world.T_w_b @ world.T_b_c)
+    p_c = np.asarray(cones_w) @ T_c_w[:3, :3].T + T_c_w[:3, 3]
+    uv = p_c[:, :2] / p_c[:, 2:] * world.camera.fx + [world.camera.cx, world.camera.cy]
+    assert np.all((uv > 5.0) & (uv < [634.0, 474.0]))
+    with Renderer(world) as renderer:
+        seg = renderer.render(depth=False, segmentation=True).segmentation
+    drawn = np.isin(world.cone_geom_ids[:, 1], seg)
+    assert drawn.all(), f"cones not drawn: {np.flatnonzero(~drawn).tolist()}"
 
 
 def test_sky_depth_reads_the_far_plane() -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import datetime as dt
 import itertools
 import tomllib
 
@@ -103,6 +104,25 @@ def test_scenario_file_relative_to_the_sweep_file(tmp_path):
         (
             {"scenario": "approach", "grid": {"camera_rate_hz.x": [1.0]}},
             "camera_rate_hz is a value, not a table",
+        ),
+        # Digits that are not ASCII: "²" (int() refuses it) and "١" (int() takes it as 1).
+        ({"scenario": "approach", "grid": {"flight.waypoints.².t": [1.0]}}, "list of 3; index"),
+        ({"scenario": "approach", "grid": {"flight.waypoints.١.t": [1.0]}}, "list of 3; index"),
+        ({"scenario": "approach", "grid": {"camera..pitch_down_deg": [1.0]}}, "an empty part"),
+        (
+            {
+                "scenario": "approach",
+                "grid": {"noise": [{"attitude_std_deg": dt.date(2024, 1, 2)}]},
+            },
+            "grid.noise[0].attitude_std_deg: a TOML date is not a scenario value, got 2024-01-02",
+        ),
+        (
+            {"scenario": "approach", "grid": {"flight.mode": [["orbit"]]}},
+            'grid point 0 (flight.mode = ["orbit"]): flight.mode: must be',
+        ),
+        (
+            {"scenario": "approach", "grid": {"checks.0.kind": [{"a": 1}]}},
+            "checks[0].kind: must be one of ['max_error'",
         ),
     ],
 )

@@ -144,7 +144,8 @@ def calibrate_camera(
     Raises
     ------
     ValueError
-        On malformed input.
+        On malformed input: shapes that do not match, a stamp, apex or pixel that is not
+        finite (named), ``max_offset_s`` not a finite number >= 0.
     CalibrationError
         Too few matched apexes or images, or a mount or offset the flight does not determine
         (its standard error above ``MAX_STD_*``): the message names what is missing.
@@ -157,6 +158,21 @@ def calibrate_camera(
     if t_cam.ndim != 1 or len(apex_uv) != t_cam.size:
         raise ValueError("image_stamps_cam_s (N,) and apex_uv (N arrays) must match")
     P = np.asarray(apex_w, dtype=np.float64).reshape(-1, 3)
+    # Checked here, by name: past this point NaN reaches OpenCV's PnP (a cv2.error) or the
+    # pose buffer's interval tests (which NaN passes silently).
+    for name, values in (("pose_stamps_s", stamps), ("image_stamps_cam_s", t_cam), ("apex_w", P)):
+        if not np.isfinite(values).all():
+            raise ValueError(f"{name} must be finite; it holds NaN or inf")
+    for i, uv in enumerate(apex_uv):
+        uv = np.asarray(uv, dtype=np.float64)
+        if uv.size and (uv.ndim != 2 or uv.shape[1] != 2):
+            raise ValueError(f"apex_uv[{i}] must have shape (K, 2), got {uv.shape}")
+        if not np.isfinite(uv).all():
+            raise ValueError(f"apex_uv[{i}] must be finite; it holds NaN or inf")
+    if isinstance(max_offset_s, bool) or not (
+        isinstance(max_offset_s, int | float) and 0.0 <= max_offset_s < math.inf
+    ):
+        raise ValueError(f"max_offset_s must be a finite number >= 0, got {max_offset_s!r}")
     T_b_c_guess = se3.check_pose(T_b_c_guess, "T_b_c_guess")
     buffer = FrameBuffer(cache_s=max(float(stamps[-1] - stamps[0]) + 1.0, 1.0))
     buffer.set_transform("world", "body", stamps, T_w_b)
@@ -166,7 +182,7 @@ def calibrate_camera(
         for i in np.flatnonzero(inside)
     ]
     images = [(t, uv) for t, uv in images if len(uv)]
-    problem = _Problem(camera, buffer, images, P, T_b_c_guess)
+    problem = _Problem(camera, buffer, images, P, T_b_c_guess, max_offset_s=max_offset_s)
     x = np.zeros(7)
     x[:6] = problem.first_mount()
     for gate in GATES_PX:
@@ -194,9 +210,12 @@ def calibrate_camera(
 class _Problem:
     """The matched observations and the residual function of ``x = [xi, offset]``."""
 
-    def __init__(self, camera, buffer, images, apex_w, T_b_c_guess) -> None:
+    def __init__(
+        self, camera, buffer, images, apex_w, T_b_c_guess, *, max_offset_s: float = math.inf
+    ) -> None:
         self.camera, self.buffer, self.images = camera, buffer, images
         self.apex_w, self.T_b_c_guess = apex_w, T_b_c_guess
+        self.max_offset_s = max_offset_s
         self.t = np.array([t for t, _ in images])
         self.obs_image = np.zeros(0, dtype=np.int64)
         self.obs_cone = np.zeros(0, dtype=np.int64)
@@ -270,7 +289,10 @@ class _Problem:
 
     def _poses(self, x: np.ndarray) -> np.ndarray:
         """``T_w_c`` of every image under ``x``, (N, 4, 4)."""
-        T_w_b = self.buffer.lookup("world", "body", self.t + x[6])
+        # The offset held within +-max_offset_s, where every image's pose lies inside the
+        # stream: a Levenberg-Marquardt step (or a difference step) beyond it would extrapolate.
+        offset = min(max(float(x[6]), -self.max_offset_s), self.max_offset_s)
+        T_w_b = self.buffer.lookup("world", "body", self.t + offset)
         return T_w_b @ self.T_b_c(x)
 
     def residuals(self, x: np.ndarray) -> np.ndarray:
@@ -289,6 +311,13 @@ class _Problem:
         J = _jacobian(self.residuals, x)
         rms = float(np.sqrt(np.mean(r**2) * 2.0))  # per apex: sqrt(du^2 + dv^2)
         sigma = max(float(np.sqrt(r @ r / max(r.size - 7, 1))), PIXEL_STD_FLOOR)
+        if abs(float(x[6])) >= self.max_offset_s - 1e-6:
+            # Held at its bound, the offset has no derivative: no standard error to give.
+            raise CalibrationError(
+                f"the flight does not determine the clock offset within +-{self.max_offset_s:g} s "
+                "(the answer reached that bound): it needs rotation or faster motion, or the "
+                "true offset lies beyond the bound (a larger max_offset_s)"
+            )
         try:
             cov = sigma**2 * np.linalg.inv(J.T @ J)
             std = np.sqrt(np.maximum(np.diag(cov), 0.0))

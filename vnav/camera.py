@@ -226,7 +226,8 @@ class PinholeCamera:
         Returns
         -------
         d_c : ndarray, shape (N, 3), float64
-            Unit direction vectors in the optical frame.
+            Unit direction vectors in the optical frame, for any finite pixel (NaN where a
+            pixel is not finite).
 
         Raises
         ------
@@ -234,6 +235,10 @@ class PinholeCamera:
             If ``uv`` does not have shape (2,) or (N, 2).
         """
         p_c = self.backproject(uv, 1.0)
+        if np.abs(p_c).max(initial=0.0) > 1e150:
+            # The squares of a pixel this far out overflow: an infinite norm would give a
+            # zero "ray". Scaled by its largest component first, every finite pixel has one.
+            p_c = p_c / np.abs(p_c).max(axis=1, keepdims=True)
         return p_c / np.linalg.norm(p_c, axis=1, keepdims=True)
 
     def ray_length_per_depth(self) -> np.ndarray:

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import bisect
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -397,62 +398,76 @@ def _interpolate(a, b, segment, alpha):
     )
 
 
+class _Samples(NamedTuple):
+    """One edge's samples as a reader sees them: ``[lo, hi)`` of the arrays and lists is the
+    live part, indexed alike (sample ``i`` is ``stamps[i]``, ``times[i]``, ``rows[i]``; the
+    pair ``(i, i + 1)`` is ``segments[:, i]``, ``steps[i]``).
+
+    Published whole by the writer (``_Track.view``): a reader that takes one never sees
+    another's ``lo`` or ``hi``, and the writer never changes what lies in ``[lo, hi)`` of a
+    published one (it appends beyond ``hi``, or copies into new containers).
+    """
+
+    lo: int
+    hi: int
+    times: list[float]
+    rows: list[tuple[float, ...]]
+    steps: list[tuple[float, ...]]
+    stamps: FloatArray
+    components: FloatArray
+    segments: FloatArray
+
+
 class _Track:
-    """One time-stamped edge's samples: ``[lo, hi)`` of growable arrays is the live part.
+    """One time-stamped edge's samples, kept by its writer and read through ``view``.
 
     Components are stored column-wise, (7, capacity), with each pair's slerp constants
     (``_segments``, (3, capacity), column i for samples i and i + 1), so a vectorised lookup
     gathers contiguous rows; a Python mirror (stamps, component and constant tuples) serves
-    single lookups without numpy's per-call cost. Appending is amortised O(1): the arrays
-    double, or the live part moves to the front once trimming has freed half of them.
+    single lookups without numpy's per-call cost. Appending is amortised O(1): samples go
+    after the live part, and once the arrays are full the live part is copied into new ones
+    (twice as large if it fills half of them) and the lists likewise; trimming only moves
+    ``lo``. Every change ends by publishing a new ``_Samples`` (one reference assignment, atomic
+    in CPython): readers on other threads see the edge before or after it, never between.
     """
 
-    __slots__ = ("components", "hi", "lo", "rows", "segments", "stamps", "steps", "times")
+    __slots__ = ("view",)
 
     def __init__(self) -> None:
-        self.stamps = np.empty(16)
-        self.components = np.empty((7, 16))
-        self.segments = np.empty((3, 16))
-        self.lo = self.hi = 0
-        self.times: list[float] = []
-        self.rows: list[tuple[float, ...]] = []
-        self.steps: list[tuple[float, ...]] = []
+        self.view = _Samples(0, 0, [], [], [], np.empty(16), np.empty((7, 16)), np.empty((3, 16)))
 
     def __len__(self) -> int:
-        return self.hi - self.lo
+        view = self.view
+        return view.hi - view.lo
 
-    @property
-    def t(self) -> FloatArray:
-        return self.stamps[self.lo : self.hi]
-
-    def append(self, t: FloatArray, components: FloatArray) -> None:
-        n = len(t)
-        if self.hi + n > len(self.stamps):
-            live = len(self)
-            capacity = len(self.stamps)
+    def append(self, t: FloatArray, components: FloatArray, oldest_s: float) -> None:
+        """Add samples after the newest, then drop those before ``oldest_s`` (the newest
+        always stays); publish the result once."""
+        lo, hi, times, rows, steps, stamps, comps, segments = self.view
+        n, live = len(t), hi - lo
+        if hi + n > len(stamps):
+            capacity = len(stamps)
             while live + n > capacity // 2:
                 capacity *= 2
-            for name, rows in (("stamps", None), ("components", 7), ("segments", 3)):
-                old = getattr(self, name)
-                new = np.empty(capacity if rows is None else (rows, capacity))
-                new[..., :live] = old[..., self.lo : self.hi]
-                setattr(self, name, new)
-            self.lo, self.hi = 0, live
-        first = self.hi - 1 if len(self) else self.hi  # the pair across the old last sample
-        self.stamps[self.hi : self.hi + n] = t
-        self.components[:, self.hi : self.hi + n] = components
-        self.hi += n
-        new_segments = _segments(self.components[:4, first : self.hi])
-        self.segments[:, first : self.hi - 1] = new_segments
-        self.times.extend(t.tolist())
-        self.rows.extend(map(tuple, components.T.tolist()))
-        self.steps.extend(map(tuple, new_segments.T.tolist()))
-
-    def drop_before(self, oldest_s: float) -> None:
-        k = bisect.bisect_left(self.times, oldest_s)
-        if k:
-            self.lo += k
-            del self.times[:k], self.rows[:k], self.steps[:k]
+            new_stamps, new_comps = np.empty(capacity), np.empty((7, capacity))
+            new_segments = np.empty((3, capacity))
+            new_stamps[:live] = stamps[lo:hi]
+            new_comps[:, :live] = comps[:, lo:hi]
+            new_segments[:, :live] = segments[:, lo:hi]
+            stamps, comps, segments = new_stamps, new_comps, new_segments
+            times, rows, steps = times[lo:hi], rows[lo:hi], steps[lo : max(hi - 1, lo)]
+            lo, hi = 0, live
+        first = hi - 1 if live else hi  # the pair across the old last sample
+        stamps[hi : hi + n] = t
+        comps[:, hi : hi + n] = components
+        hi += n
+        pairs = _segments(comps[:4, first:hi])
+        segments[:, first : hi - 1] = pairs
+        times.extend(t.tolist())
+        rows.extend(map(tuple, components.T.tolist()))
+        steps.extend(map(tuple, pairs.T.tolist()))
+        lo = min(bisect.bisect_left(times, oldest_s, lo, hi), hi - 1)
+        self.view = _Samples(lo, hi, times, rows, steps, stamps, comps, segments)
 
 
 class FrameBuffer(_Graph):
@@ -467,6 +482,15 @@ class FrameBuffer(_Graph):
     (counted back from its newest stamp), as tf2's cache does.
 
     With only static edges it behaves like ``FrameTree`` (``t_s`` may then be omitted).
+
+    Threads: one writer (``set_transform``, ``set_static``) and any number of readers
+    (``lookup``, ``can_lookup``, ``interval``) may run at once on different threads, without
+    a lock. Each write publishes the edge's samples whole (``_Track``), and a lookup reads one
+    snapshot per edge: it sees the edge before or after a write, never between, and a pose
+    inside an edge's interval never changes (new samples come after the newest). A time
+    trimmed from the cache meanwhile raises ``ExtrapolationError``. Two writers at once are
+    not supported: serialise them with a lock (docs/CONVENTIONS.md, "Performance and
+    threads").
 
     Parameters
     ----------
@@ -516,8 +540,9 @@ class FrameBuffer(_Graph):
         if self._parents.get(child) != parent or child not in self._static:
             self._check_new_edge(parent, child, "build a new FrameBuffer to re-parent it")
         T = _frozen(T_parent_child, parent, child)
-        self._link(parent, child)
+        # Stored before it is linked: a reader that finds the edge finds its transform.
         self._static[child] = tuple(_components(T[None])[:, 0].tolist())
+        self._link(parent, child)
 
     def set_transform(
         self, parent: str, child: str, t_s: ArrayLike, T_parent_child: ArrayLike
@@ -567,18 +592,22 @@ class FrameBuffer(_Graph):
                 f"{float(t[k])!r} then {float(t[k + 1])!r} s"
             )
         track = self._tracks.get(child)
-        if track is not None and len(track) and len(t) and t[0] <= track.times[-1]:
+        newest = None if track is None or not len(track) else track.view.times[track.view.hi - 1]
+        if newest is not None and len(t) and t[0] <= newest:
             raise ValueError(
                 f"stamps of edge {parent!r} -> {child!r} must increase; got {float(t[0])!r} s "
-                f"after the newest stored stamp {track.times[-1]!r} s"
+                f"after the newest stored stamp {newest!r} s"
             )
         if not len(t):
             return
-        if track is None:
+        components = _components(T.reshape(-1, 4, 4))
+        if track is None:  # filled before it is linked: a reader never finds it empty
+            track = _Track()
+            track.append(t, components, float(t[-1]) - self.cache_s)
+            self._tracks[child] = track
             self._link(parent, child)
-            track = self._tracks[child] = _Track()
-        track.append(t, _components(T.reshape(-1, 4, 4)))
-        track.drop_before(float(t[-1]) - self.cache_s)
+        else:
+            track.append(t, components, float(t[-1]) - self.cache_s)
 
     # ------------------------------------------------------------------ reading
     def interval(self, parent: str, child: str) -> tuple[float, float]:
@@ -594,8 +623,8 @@ class FrameBuffer(_Graph):
             raise ValueError(f"no edge {parent!r} -> {child!r}")
         if child in self._static:
             return (-math.inf, math.inf)
-        times = self._tracks[child].times
-        return (times[0], times[-1])
+        view = self._tracks[child].view
+        return (view.times[view.lo], view.times[view.hi - 1])
 
     def lookup(
         self,
@@ -719,24 +748,24 @@ class FrameBuffer(_Graph):
 
     def _at(self, child: str, t: float | FloatArray):
         """``T_parent_child`` of a time-stamped edge at ``t`` as components."""
-        track = self._tracks[child]
-        times = track.times
-        first, last = times[0], times[-1]
+        # One snapshot of the edge for the whole lookup: the writer may publish another.
+        lo, hi, times, rows, steps, stamps, components, segments = self._tracks[child].view
+        first, last = times[lo], times[hi - 1]
         if isinstance(t, float):
             if not first <= t <= last:
-                self._refuse(child, np.array([t]), 1)
-            i = bisect.bisect_right(times, t) - 1
+                self._refuse(child, np.array([t]), 1, first, last, hi - lo)
+            i = bisect.bisect_right(times, t, lo, hi) - 1
             if times[i] == t:  # at a stamp (the last one included): the sample itself
-                return track.rows[i]
+                return rows[i]
             t0, t1 = times[i], times[i + 1]
             alpha = (t - t0) / (t1 - t0)
-            return _interpolate(track.rows[i], track.rows[i + 1], track.steps[i], alpha)
+            return _interpolate(rows[i], rows[i + 1], steps[i], alpha)
         outside = (t < first) | (t > last)
         if np.any(outside):
-            self._refuse(child, t[outside], t.size)
-        stamps = track.t
+            self._refuse(child, t[outside], t.size, first, last, hi - lo)
+        stamps = stamps[lo:hi]
         if len(stamps) == 1:  # every t equals the one stamp
-            return tuple(np.full(t.shape, c) for c in track.rows[0])
+            return tuple(np.full(t.shape, c) for c in rows[lo])
         # t arrives sorted (see lookup): numpy's binary search then starts from the last
         # result, several times faster than for scattered times.
         i0 = np.searchsorted(stamps, t, side="right") - 1
@@ -744,17 +773,18 @@ class FrameBuffer(_Graph):
         i1 = i0 + 1
         t0 = stamps[i0]
         alpha = (t - t0) / (stamps[i1] - t0)
-        live = track.components[:, track.lo : track.hi]
+        live = components[:, lo:hi]
         a = tuple(np.take(live, i0, axis=1))
         b = tuple(np.take(live, i1, axis=1))
-        segment = tuple(np.take(track.segments[:, track.lo : track.hi], i0, axis=1))
+        segment = tuple(np.take(segments[:, lo:hi], i0, axis=1))
         return _interpolate(a, b, segment, alpha)
 
-    def _refuse(self, child: str, bad: FloatArray, asked: int) -> None:
-        times = self._tracks[child].times
+    def _refuse(
+        self, child: str, bad: FloatArray, asked: int, first: float, last: float, n: int
+    ) -> None:
         many = f" ({len(bad)} of {asked} times asked)" if asked > 1 else ""
         raise ExtrapolationError(
             f"edge {self._parents[child]!r} -> {child!r} has no pose at t = {float(bad[0])!r} s"
-            f"{many}: it holds [{times[0]!r}, {times[-1]!r}] s ({len(times)} samples); "
+            f"{many}: it holds [{first!r}, {last!r}] s ({n} samples); "
             "a pose outside that interval would be extrapolated, which is refused"
         )

@@ -67,9 +67,28 @@ def _check_views(camera: PinholeCamera, T_w_c: object, uv: object) -> tuple[np.n
     return T, px
 
 
+MIN_RAY_COS = 1e-9
+"""``triangulate`` refuses a pixel whose ray is within 1e-9 rad of the image plane (90 deg
+off the optical axis, to rounding: 4e11 px out for the default camera): it sees nothing in
+front of the camera, and a point on it has no depth."""
+
+
 def _rays_w(camera: PinholeCamera, T: np.ndarray, px: np.ndarray) -> np.ndarray:
-    """Unit world rays through the pixels, (N, 3)."""
+    """Unit world rays through the pixels, (N, 3).
+
+    Raises
+    ------
+    ValueError
+        If a pixel's ray lies in the image plane (``MIN_RAY_COS``), naming it.
+    """
     rays_c = camera.rays(px)
+    beside = np.flatnonzero(~(rays_c[:, 2] > MIN_RAY_COS))
+    if beside.size:
+        i = int(beside[0])
+        raise ValueError(
+            f"uv[{i}] = ({px[i, 0]:.3g}, {px[i, 1]:.3g}) px is 90 deg off the optical axis (to "
+            f"rounding): its ray sees nothing in front of the camera"
+        )
     return np.einsum("nij,nj->ni", T[:, :3, :3], rays_c)
 
 
@@ -107,8 +126,9 @@ def triangulate(
     Raises
     ------
     ValueError
-        On malformed input, an unknown method, views with too little parallax (the message
-        gives the angle), or a point that comes out behind a camera.
+        On malformed input (``uv`` not finite, or a pixel so far out that its ray lies in the
+        image plane), an unknown method, views with too little parallax (the message gives
+        the angle), or a point that comes out behind a camera.
     """
     if method not in ("midpoint", "dlt"):
         raise ValueError(f"method must be 'midpoint' or 'dlt', got {method!r}")
@@ -128,7 +148,7 @@ def triangulate(
         i = int(np.argmin(depths))
         raise ValueError(
             f"the triangulated point lies behind camera {i} (depth {depths[i]:.3g} m): the rays "
-            "do not meet in front of the cameras"
+            "through uv do not meet in front of the cameras"
         )
     return p_w
 
@@ -232,11 +252,14 @@ def _pnp(
 ) -> PnPResult | None:
     """``cv2.solvePnP`` (then ``solvePnPRefineLM`` if ``refine``) on validated input; None if
     it fails or puts a point behind the camera."""
-    ok, rvec, tvec = cv2.solvePnP(P, px, camera.K, None, flags=flag)
+    try:
+        ok, rvec, tvec = cv2.solvePnP(P, px, camera.K, None, flags=flag)
+        if ok and refine:
+            rvec, tvec = cv2.solvePnPRefineLM(P, px, camera.K, None, rvec, tvec, _LM_CRITERIA)
+    except cv2.error:  # SQPnP asserts on degenerate sets (repeated points or pixels)
+        return None
     if not ok:
         return None
-    if refine:
-        rvec, tvec = cv2.solvePnPRefineLM(P, px, camera.K, None, rvec, tvec, _LM_CRITERIA)
     R_c_w, _ = cv2.Rodrigues(rvec)
     T_c_w = se3.make(R_c_w, tvec.reshape(3))
     p_c = P @ R_c_w.T + T_c_w[:3, 3]
@@ -310,8 +333,13 @@ def camera_pose_from_cones(
     C = np.asarray(cones_w, dtype=np.float64)
     if C.ndim != 2 or C.shape[1] != 3:
         raise ValueError(f"cones_w must have shape (M, 3), got {C.shape}")
+    if not np.isfinite(C).all():
+        raise ValueError("cones_w must be finite; it holds NaN or inf")
     apex_w = C + np.array([0.0, 0.0, cone.height_m])
     usable = [i for i, d in enumerate(detections) if not d.touches_border]
+    for i in usable:
+        if not np.isfinite([*detections[i].apex_uv, *detections[i].base_uv]).all():
+            raise ValueError(f"detections[{i}]: apex_uv and base_uv must be finite")
     if len(usable) == 3 and len(C) >= 3:
         return _pose_from_three_cones(camera, C, detections, usable, cone)
     if len(usable) < 4 or len(C) < 4:
@@ -408,7 +436,13 @@ def camera_pose_from_apexes(
     px = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
     if len(px) < 4 or len(P) < 4:
         raise ValueError(f"a pose needs at least 4 points and 4 pixels, got {len(P)} and {len(px)}")
+    for name, values in (("apex_w", P), ("uv", px)):
+        if not np.isfinite(values).all():
+            raise ValueError(f"{name} must be finite; it holds NaN or inf")
     seeds = list(range(4)) if seeds is None else list(seeds)
+    valid = all(isinstance(k, int | np.integer) and 0 <= k < len(px) for k in seeds)
+    if not valid or len(set(seeds)) != 4:
+        raise ValueError(f"seeds must be 4 distinct pixel indices in [0, {len(px)}), got {seeds}")
     everything = itertools.permutations(range(len(P)), 4)
     if T_w_c_prior is None:
         return _best_choice(camera, P, px, seeds, everything)

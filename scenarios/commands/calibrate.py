@@ -59,6 +59,9 @@ def command(args: argparse.Namespace) -> int:
     except (RecordingError, CalibrationError) as exc:
         error(f"cannot calibrate: {exc}")
         return 2
+    except ValueError as exc:  # what vnav refuses in the recording's numbers
+        error(f"cannot calibrate: {recording}: {exc}")
+        return 2
     say(_table(solved, inputs.truth))
     if out_path is not None:
         try:

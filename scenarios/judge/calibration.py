@@ -20,6 +20,7 @@ from vnav import so3
 from vnav.calibration import CalibrationError, CalibrationResult, calibrate_camera
 from vnav.camera import PinholeCamera
 from vnav.cone import TRAFFIC_CONE
+from vnav.frames import ExtrapolationError
 from vnav.localize import Localizer
 from vnav.sensor_noise import mount_covariance
 from vnav.silhouette import SilhouetteView
@@ -56,16 +57,38 @@ class CalibrationInputs:
     truth: Truth | None = None
 
     def solve(self) -> CalibrationResult:
-        """``calibrate_camera`` on these inputs (raises ``vnav.calibration.CalibrationError``)."""
-        return calibrate_camera(
-            self.camera,
-            self.pose_stamps_s,
-            self.T_w_b,
-            self.image_stamps_cam_s,
-            self.apex_uv,
-            self.apex_w,
-            self.T_b_c_declared,
-        )
+        """``calibrate_camera`` on these inputs.
+
+        Raises
+        ------
+        vnav.calibration.CalibrationError
+            The flight does not determine the mount or the offset, with the reason; a flight
+            too short to calibrate says so: fewer than two pose samples, or a clock offset
+            the solver's search took outside the flight's pose stream (the offset, unknown
+            to the images of a short flight, wandered further than the flight lasts).
+        """
+        n_poses, n_images = len(self.pose_stamps_s), len(self.image_stamps_cam_s)
+        if n_poses < 2:
+            raise CalibrationError(
+                f"the flight is too short to calibrate: {n_poses} pose sample(s) and "
+                f"{n_images} image(s)"
+            )
+        try:
+            return calibrate_camera(
+                self.camera,
+                self.pose_stamps_s,
+                self.T_w_b,
+                self.image_stamps_cam_s,
+                self.apex_uv,
+                self.apex_w,
+                self.T_b_c_declared,
+            )
+        except ExtrapolationError:
+            span_s = float(self.pose_stamps_s[-1] - self.pose_stamps_s[0])
+            raise CalibrationError(
+                f"the flight ({span_s:.3g} s, {n_images} images) does not determine the clock "
+                "offset: the solver's estimate left the pose stream"
+            ) from None
 
 
 def inputs_from_run(

@@ -9,6 +9,7 @@ offset (``truth``).
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -47,10 +48,16 @@ def read_rows(path: Path, entities: tuple[str, ...]) -> dict[str, list[dict]]:
     """
     import pyarrow as pa
     from rerun.chunk import RrdReader
+    from rerun.error_utils import RerunWarning
 
     wanted: dict[str, list[dict]] = {"/" + p: [] for p in entities}
     try:
-        chunks = list(RrdReader(str(path)).stream().to_chunks())
+        # A file without Rerun's footer (cut short, or of an older version) is read by a scan
+        # of the whole file, after a two-line warning on stderr: the scan finds what it holds,
+        # and what it lacks is said below, in one line.
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RerunWarning)
+            chunks = list(RrdReader(str(path)).stream().to_chunks())
     except Exception as exc:  # Rerun reports an unreadable file as RuntimeError
         raise RecordingError(f"{path}: not a readable Rerun recording ({exc})") from None
     for chunk in chunks:

@@ -19,7 +19,7 @@ from typing import Any
 
 from scenarios.scenario.check_kinds import KINDS
 from sim.config import CameraConfig
-from vnav.methods import PREFERENCE
+from vnav.methods import METHOD_NAMES, PREFERENCE
 from vnav.noise_model import FIGURES, NOISELESS
 
 __all__ = [
@@ -37,6 +37,7 @@ __all__ = [
     "SchemaError",
     "comment",
     "read",
+    "short",
 ]
 
 VIEW_NAMES: tuple[str, ...] = ("errors", "coordinates", "attitude", "nees")
@@ -78,9 +79,11 @@ class Key:
     Attributes
     ----------
     name : str
-    kind : {"number", "integer", "vector3", "string", "choice", "any"}
-        ``any`` keys are validated by whoever consumes them (``[camera.mount_error]``, checks'
-        limits).
+    kind : {"number", "integer", "vector3", "string", "choice", "table", "tables", "any"}
+        ``table`` is a TOML table, ``tables`` an array of tables (their keys are read by the
+        caller, table by table); ``any`` keys are validated by whoever consumes them
+        (``lesson``, checks' limits). Every other kind is checked for its type here, before any
+        consumer compares or hashes the value.
     doc : str
         Meaning and unit, one line (shown by ``vnav-demo show`` and in the README).
     default : object
@@ -106,19 +109,34 @@ class Key:
             return number(value, path, self.lo, self.hi, self.lo_open)
         if self.kind == "integer":
             if isinstance(value, bool) or not isinstance(value, int):
-                raise SchemaError(f"{path}: must be an integer, got {_short(value)}")
+                raise SchemaError(f"{path}: must be an integer, got {short(value)}")
             number(value, path, self.lo, self.hi, self.lo_open)  # bounds and size
             return value
         if self.kind == "vector3":
             if not isinstance(value, list) or len(value) != 3:
-                raise SchemaError(f"{path}: must be a list of 3 numbers, got {_short(value)}")
+                raise SchemaError(f"{path}: must be a list of 3 numbers, got {short(value)}")
             return tuple(number(v, f"{path}[{i}]", self.lo, self.hi) for i, v in enumerate(value))
         if self.kind == "string":
             if not isinstance(value, str) or not value.strip():
                 raise SchemaError(f"{path}: must be a non-empty string, got {value!r}")
             return value
-        if self.kind == "choice" and value not in self.choices:
-            raise SchemaError(f"{path}: must be one of {list(self.choices)}, got {value!r}")
+        if self.kind == "choice":
+            # A list or table is not a choice (and cannot be looked up in a dict of choices).
+            if not isinstance(value, str) or value not in self.choices:
+                raise SchemaError(
+                    f"{path}: must be one of {list(self.choices)}, got {short(value)}"
+                )
+            return value
+        if self.kind == "table" and not isinstance(value, dict):
+            raise SchemaError(f"{path}: must be a table, got {_type_and_value(value)}")
+        if self.kind == "tables":
+            if not isinstance(value, list):
+                raise SchemaError(
+                    f"{path}: must be an array of tables, got {_type_and_value(value)}"
+                )
+            for i, entry in enumerate(value):
+                if not isinstance(entry, dict):
+                    raise SchemaError(f"{path}[{i}]: must be a table, got {_type_and_value(entry)}")
         return value
 
 
@@ -126,7 +144,7 @@ def number(
     value: Any, path: str, lo: float | None = None, hi: float | None = None, lo_open: bool = False
 ) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float):
-        raise SchemaError(f"{path}: must be a number, got {_short(value)}")
+        raise SchemaError(f"{path}: must be a number, got {short(value)}")
     try:
         x = float(value)
     except OverflowError:
@@ -136,15 +154,20 @@ def number(
     if not math.isfinite(x):
         raise SchemaError(f"{path}: must be finite, got {value!r}")
     if lo is not None and (x <= lo if lo_open else x < lo):
-        raise SchemaError(f"{path}: must be {'>' if lo_open else '>='} {lo:g}, got {_short(value)}")
+        raise SchemaError(f"{path}: must be {'>' if lo_open else '>='} {lo:g}, got {short(value)}")
     if hi is not None and x > hi:
-        raise SchemaError(f"{path}: must be <= {hi:g}, got {_short(value)}")
+        raise SchemaError(f"{path}: must be <= {hi:g}, got {short(value)}")
     return x
 
 
-def _short(value: Any) -> str:
+def short(value: Any) -> str:
+    """``repr(value)``, cut to 60 characters: how a message shows a value it refuses."""
     text = repr(value)
     return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _type_and_value(value: Any) -> str:
+    return f"{type(value).__name__} {short(value)}"
 
 
 def read(table: Any, keys: tuple[Key, ...], path: str) -> dict[str, Any]:
@@ -210,12 +233,12 @@ TOP: tuple[Key, ...] = (
         0.0,
         MAX_S,
     ),
-    Key("camera", "any", "table: the onboard camera", None),
-    Key("cones", "any", "array of tables: the cones", REQUIRED),
-    Key("flight", "any", "table: how the drone flies", REQUIRED),
-    Key("noise", "any", "table: sensor noise (pose, image, depth, camera mount)", None),
-    Key("timing", "any", "table: sensor clocks, rates and latencies", None),
-    Key("checks", "any", "array of tables: pass/fail criteria", None),
+    Key("camera", "table", "table: the onboard camera", None),
+    Key("cones", "tables", "array of tables: the cones", REQUIRED),
+    Key("flight", "table", "table: how the drone flies", REQUIRED),
+    Key("noise", "table", "table: sensor noise (pose, image, depth, camera mount)", None),
+    Key("timing", "table", "table: sensor clocks, rates and latencies", None),
+    Key("checks", "tables", "array of tables: pass/fail criteria", None),
 )
 
 _CAMERA_DOCS = {
@@ -227,7 +250,7 @@ _CAMERA_DOCS = {
 }
 _MOUNT_ERROR_KEY = Key(
     "mount_error",
-    "any",
+    "table",
     "table: the true mount = the declared one above, then this error (camera frame)",
     None,
 )
@@ -287,9 +310,9 @@ WAYPOINT: tuple[Key, ...] = (
 )
 _PERIOD_DOC = "one turn, s; < 0: clockwise; |period| >= 1"
 FLIGHT_MODES: dict[str, tuple[Key, ...]] = {
-    "kinematic": (Key("keyframes", "any", "timed poses: position linear, attitude slerp"),),
+    "kinematic": (Key("keyframes", "tables", "timed poses: position linear, attitude slerp"),),
     "controlled": (
-        Key("waypoints", "any", "timed positions and headings flown by the controller"),
+        Key("waypoints", "tables", "timed positions and headings flown by the controller"),
     ),
     "orbit": (
         Key("center_w", "vector3", "centre of the circle, m", REQUIRED, -MAX_M, MAX_M),
@@ -348,8 +371,19 @@ TIMING: tuple[Key, ...] = (
     Key("jitter_s", "number", "standard deviation of each arrival's extra delay, s", 0.0, 0.0, 1.0),
 )
 CHECK: tuple[Key, ...] = (
-    Key("kind", "any", "a check kind (scenarios.scenario.check_kinds.KINDS)"),
-    Key("method", "any", "a localisation method (vnav.methods)", PREFERENCE[0]),
+    Key(
+        "kind",
+        "choice",
+        "a check kind (scenarios.scenario.check_kinds.KINDS)",
+        choices=tuple(KINDS),
+    ),
+    Key(
+        "method",
+        "choice",
+        "a localisation method (vnav.methods)",
+        PREFERENCE[0],
+        choices=METHOD_NAMES,
+    ),
     Key("limit", "any", "the limit (give limit or limit_m)", None),
     Key("limit_m", "any", "the limit in metres", None),
     Key("name", "string", "what the report calls it", None),

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import stat
 import tomllib
 from dataclasses import dataclass, field
@@ -26,14 +27,18 @@ from scenarios.scenario import schema
 from scenarios.scenario.check_kinds import KINDS, Check, Unit
 from sim.config import CameraConfig, SceneConfig
 from vnav import quat, so3
-from vnav.methods import METHOD_NAMES, METHODS, method
+from vnav.methods import METHODS, method
 from vnav.noise_model import NOISELESS, NoiseModel
 
 MAX_FILE_BYTES = 1_000_000
+"""Largest scenario file read, bytes."""
 MAX_SEED = 2**63 - 1
 """The largest seed a run takes (``--seed``, a sweep's seeds): numpy's generators take any
 non-negative int, the reports write it as a 64-bit integer."""
-"""Largest scenario file read, bytes."""
+MAX_NESTING = 16
+"""Deepest nesting of tables and arrays a file may hold: a scenario needs 4
+(``flight.keyframes[0].position_w[2]``); every reader after the parser (copies, the writer
+of grid points, JSON) recurses once per level, and must never meet Python's recursion limit."""
 
 
 class ScenarioError(ValueError):
@@ -221,6 +226,11 @@ def _err(where: str, key: str, message: str) -> ScenarioError:
     return ScenarioError(f"{where}: {key}: {message}")
 
 
+def _or_empty(table: dict[str, Any] | None) -> dict[str, Any]:
+    """An optional table: absent reads as empty (``or {}`` would also take ``[]`` or ``0``)."""
+    return {} if table is None else table
+
+
 def _entries(value: Any, where: str, path: str) -> list[Any]:
     if not isinstance(value, list) or not value:
         raise _err(where, path, "must be a non-empty list of tables")
@@ -247,12 +257,13 @@ def keyframe_from_rpy_deg(
     return Keyframe(float(t_s), tuple(map(float, position_w)), tuple(map(float, quat_xyzw)), camera)
 
 
-def _flight(table: Any, where: str) -> KinematicFlight | ControlledFlight | OrbitFlight:
-    mode = table.get("mode") if isinstance(table, dict) else None
-    if mode not in schema.FLIGHT_MODES:
+def _flight(table: dict[str, Any], where: str) -> KinematicFlight | ControlledFlight | OrbitFlight:
+    mode = table.get("mode")  # a table: the schema's TOP says so
+    # A list or table is no mode (and cannot be looked up among the modes).
+    if not isinstance(mode, str) or mode not in schema.FLIGHT_MODES:
         modes = list(schema.FLIGHT_MODES)
         quoted = ", ".join(f'"{m}"' for m in modes[:-1]) + f' or "{modes[-1]}"'
-        raise _err(where, "flight.mode", f"must be {quoted}, got {mode!r}")
+        raise _err(where, "flight.mode", f"must be {quoted}, got {schema.short(mode)}")
     body = {k: v for k, v in table.items() if k != "mode"}
     values = _read(body, schema.FLIGHT_MODES[mode], where, "flight")
     if mode == "kinematic":
@@ -289,15 +300,7 @@ def _checks(raw: Any, where: str) -> tuple[Check, ...]:
     out = []
     for i, entry in enumerate(raw):
         key = f"checks[{i}]"
-        c = _read(entry, schema.CHECK, where, key)
-        if c["kind"] not in KINDS:
-            raise _err(where, f"{key}.kind", f"unknown check {c['kind']!r}; valid: {sorted(KINDS)}")
-        if c["method"] not in METHOD_NAMES:
-            raise _err(
-                where,
-                f"{key}.method",
-                f"unknown method {c['method']!r}; valid: {list(METHOD_NAMES)}",
-            )
+        c = _read(entry, schema.CHECK, where, key)  # kind and method: names of KINDS, METHODS
         if c["kind"] == "error_bound" and method(c["method"]).bound is None:
             bounded = [m.name for m in METHODS if m.bound is not None]
             raise _err(
@@ -345,7 +348,7 @@ def _start_pose(flight) -> tuple[tuple[float, ...], tuple[float, ...]]:
 
 def _camera(table: Any, where: str) -> CameraConfig:
     """``[camera]`` and its optional ``[camera.mount_error]``."""
-    camera_table = _read(table or {}, schema.CAMERA, where, "camera")
+    camera_table = _read(_or_empty(table), schema.CAMERA, where, "camera")
     if camera_table["mount_error"] is None:
         del camera_table["mount_error"]
     else:
@@ -415,8 +418,8 @@ def from_dict(data: dict[str, Any], where: str = "<scenario>") -> ScenarioSpec:
         )
     except ValueError as exc:
         raise _err(where, "cones", str(exc)) from None
-    noise = NoiseModel(**_read(top["noise"] or {}, schema.NOISE, where, "noise"))
-    timing = Timing(**_read(top["timing"] or {}, schema.TIMING, where, "timing"))
+    noise = NoiseModel(**_read(_or_empty(top["noise"]), schema.NOISE, where, "noise"))
+    timing = Timing(**_read(_or_empty(top["timing"]), schema.TIMING, where, "timing"))
     _at_most_physics_rate(1.0 / scene.timestep_s, top["camera_rate_hz"], timing, where)
     if not isinstance(top["lesson"], str):
         raise _err(where, "lesson", f"must be a string, got {type(top['lesson']).__name__}")
@@ -482,10 +485,72 @@ def read_toml(path: str | Path, what: str = "scenario file") -> dict[str, Any]:
     if len(raw) > MAX_FILE_BYTES:
         raise ScenarioError(f"{path}: larger than {MAX_FILE_BYTES} bytes; not a {what}")
     try:
-        return tomllib.loads(raw.decode("utf-8"))
+        text = raw.decode("utf-8")
+        data = tomllib.loads(text)
     except UnicodeDecodeError as exc:
         raise ScenarioError(f"{path}: cannot read: not UTF-8 text ({exc.reason})") from None
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(f"{path}: invalid TOML: {exc}") from None
     except ValueError as exc:  # e.g. an integer beyond Python's digit limit
         raise ScenarioError(f"{path}: invalid TOML: {exc}") from None
+    except RecursionError:  # tomllib recurses once per level of nested arrays or tables
+        raise ScenarioError(f"{path}: {_too_deep_in_text(text)}") from None
+    too_deep = _too_deep(data)
+    if too_deep is not None:
+        raise ScenarioError(f"{path}: {too_deep}: {_NESTING_MESSAGE}")
+    return data
+
+
+_NESTING_MESSAGE = f"tables and arrays nested more than {MAX_NESTING} deep"
+
+# What the nesting scan of a file steps over: strings (which may hold brackets) and comments.
+_TOKEN = re.compile(
+    r'"""(?:\\.|[^\\])*?"""|\'\'\'[\s\S]*?\'\'\'|"(?:\\.|[^"\\\n])*"|\'[^\'\n]*\''
+    r"|#[^\n]*|[\[\]{}\n]"
+)
+
+
+def _too_deep(data: dict[str, Any]) -> str | None:
+    """The path of the first value nested deeper than ``MAX_NESTING`` (``a.b[0][0]``), or
+    None. Walked with a stack, not recursion: this is the guard against it."""
+    stack: list[tuple[Any, str, int]] = [(data, "", 0)]
+    while stack:
+        value, path, depth = stack.pop()
+        if depth > MAX_NESTING:
+            return path
+        if isinstance(value, dict):
+            stack.extend(
+                (v, f"{path}.{k}" if path else str(k), depth + 1) for k, v in value.items()
+            )
+        elif isinstance(value, list):
+            stack.extend((v, f"{path}[{i}]", depth + 1) for i, v in enumerate(value))
+    return None
+
+
+def _too_deep_in_text(text: str) -> str:
+    """Where a file too deep for the parser first nests deeper than ``MAX_NESTING``: ``line N:
+    KEY: ...``, KEY being what the line that opened the outermost bracket assigns, in the
+    table of the header above it."""
+    depth, line, opened, table = 0, 1, (1, ""), ""
+    for match in _TOKEN.finditer(text):
+        token = match.group()
+        if token in "[{":
+            if depth == 0:
+                start = text.rfind("\n", 0, match.start()) + 1
+                end = text.find("\n", match.start())
+                before = text[start : match.start()]
+                if not before.strip():  # a [table] or [[array]] header: its brackets close here
+                    header = text[match.start() : len(text) if end < 0 else end]
+                    table = header.partition("#")[0].strip().strip("[]").strip()
+                    key = ""
+                else:
+                    key = before.partition("=")[0].strip()
+                opened = (line, f"{table}.{key}" if table and key else key)
+            depth += 1
+            if depth > MAX_NESTING:
+                key = f"{opened[1]}: " if opened[1] else ""
+                return f"line {opened[0]}: {key}{_NESTING_MESSAGE}"
+        elif token in "]}":
+            depth = max(depth - 1, 0)
+        line += token.count("\n")
+    return f"invalid TOML: {_NESTING_MESSAGE}"

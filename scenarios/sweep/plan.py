@@ -31,13 +31,21 @@ import hashlib
 import itertools
 import json
 import math
+import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from scenarios.scenario import builtin, schema, toml_out
-from scenarios.scenario.spec import MAX_SEED, ScenarioError, ScenarioSpec, from_dict, read_toml
+from scenarios.scenario.spec import (
+    MAX_NESTING,
+    MAX_SEED,
+    ScenarioError,
+    ScenarioSpec,
+    from_dict,
+    read_toml,
+)
 from vnav.methods import METHOD_NAMES, PREFERENCE
 from vnav.noise_model import SENSORS
 
@@ -60,6 +68,8 @@ MAX_POINTS = 1_000
 anything runs, 2-5 ms a point: a thousand take seconds, a million would take an hour (and
 write a million scenario files) before the first episode."""
 _TOP_KEYS = ("scenario", "seeds", "grid", "rank_by")
+_INDEX = re.compile(r"[0-9]+")
+"""A part of a grid key that indexes a list."""
 
 
 class SweepError(ValueError):
@@ -190,9 +200,7 @@ def plan(data: dict[str, Any], where: str, base_dir: Path = Path()) -> SweepPlan
     grid = data.get("grid", {})
     if not isinstance(grid, dict):
         raise SweepError(f"{where}: grid: must be a table of key = [values]")
-    for key, values in grid.items():
-        if not isinstance(values, list) or not values:
-            raise SweepError(f"{where}: grid.{key}: must be a non-empty list of values")
+    _check_grid(grid, where)
     n_points = math.prod(len(v) for v in grid.values())
     if n_points > MAX_POINTS:
         raise SweepError(
@@ -211,6 +219,38 @@ def plan(data: dict[str, Any], where: str, base_dir: Path = Path()) -> SweepPlan
         for i, combo in enumerate(itertools.product(*grid.values()))
     )
     return SweepPlan(where, data["scenario"], tuple(grid), seeds, points, rank_by)
+
+
+def _check_grid(grid: dict[str, Any], where: str) -> None:
+    """Each grid key a dotted path (at most ``MAX_NESTING`` parts, none empty, list indices in
+    ASCII digits), each value list non-empty and of values a scenario file can hold (no TOML
+    date or time: no scenario key takes one, and the tables could not write it)."""
+    for key, values in grid.items():
+        parts = key.split(".")
+        if len(parts) > MAX_NESTING:
+            raise SweepError(
+                f"{where}: grid.{key[:60]}...: a path of {len(parts)} parts; a scenario nests "
+                f"at most {MAX_NESTING} deep"
+            )
+        if not all(parts):
+            raise SweepError(
+                f"{where}: grid.{key}: an empty part; write a dotted path such as "
+                f'"camera.pitch_down_deg"'
+            )
+        if not isinstance(values, list) or not values:
+            raise SweepError(f"{where}: grid.{key}: must be a non-empty list of values")
+        stack = [(v, f"grid.{key}[{i}]") for i, v in enumerate(values)]
+        while stack:  # the values nest at most MAX_NESTING deep (read_toml)
+            value, path = stack.pop()
+            if isinstance(value, dict):
+                stack.extend((v, f"{path}.{k}") for k, v in value.items())
+            elif isinstance(value, list):
+                stack.extend((v, f"{path}[{i}]") for i, v in enumerate(value))
+            elif not isinstance(value, str | int | float):  # a date, time or date-time
+                raise SweepError(
+                    f"{where}: {path}: a TOML {type(value).__name__} is not a scenario value, "
+                    f"got {value}"
+                )
 
 
 def _base_scenario(source: str, where: str, base_dir: Path) -> dict[str, Any]:
@@ -282,7 +322,8 @@ def _set(scenario: dict[str, Any], key: str, value: Any, here: str) -> None:
         last = depth == len(parts) - 1
         where = ".".join(parts[: depth + 1])
         if isinstance(node, list):
-            if not part.isdigit() or int(part) >= len(node):
+            # ASCII digits only: str.isdigit also takes "²", which int() refuses.
+            if not _INDEX.fullmatch(part) or int(part) >= len(node):
                 raise SweepError(
                     f"{here}: {key}: {'.'.join(parts[:depth])} is a list of {len(node)}; "
                     f"index it with a number below {len(node)}"
