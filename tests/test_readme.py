@@ -215,10 +215,14 @@ def test_serve_web_command_serves_the_recording_without_a_display(first_run: Pat
 
 def test_screenshot_script_renders_without_a_display() -> None:
     """Named by the README as the way to take pictures headless; not run here (it needs
-    apt-get, Xvfb and minutes): it exists and runs the viewer on a virtual display."""
+    apt-get, Xvfb and minutes): it exists, starts a virtual display and has
+    ``scripts/screenshot.py`` drive the real viewer on it (the viewer's own screenshot)."""
     assert "bash scripts/screenshots.sh" in README
     script = (ROOT / "scripts" / "screenshots.sh").read_text()
-    assert "Xvfb" in script and "--screenshot-to" in script
+    assert "Xvfb" in script and 'DISPLAY="$display"' in script
+    assert "scripts/screenshot.py" in script
+    shot = (ROOT / "scripts" / "screenshot.py").read_text()
+    assert "rerun_cli" in shot and "copy_screenshot_to_clipboard" in shot
 
 
 # ------------------------------------------------------------------ the TOML example
