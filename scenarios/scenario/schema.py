@@ -18,7 +18,7 @@ from dataclasses import dataclass, fields
 from typing import Any
 
 from scenarios.scenario.check_kinds import KINDS
-from sim.config import CameraConfig
+from sim.config import MAX_FOVY_DEG, MIN_FOVY_DEG, CameraConfig
 from vnav.methods import METHOD_NAMES, PREFERENCE
 from vnav.noise_model import FIGURES, NOISELESS
 
@@ -244,7 +244,7 @@ TOP: tuple[Key, ...] = (
 _CAMERA_DOCS = {
     "position_b": "optical centre on the body (x forward, y left, z up), m",
     "pitch_down_deg": "optical axis below the body's x axis, deg",
-    "fovy_deg": "vertical field of view, deg",
+    "fovy_deg": f"vertical field of view, {MIN_FOVY_DEG:g} to {MAX_FOVY_DEG:g} deg",
     "width": "image width, px",
     "height": "image height, px",
 }
