@@ -1049,3 +1049,18 @@ def test_a_journal_without_its_manifest_is_resumed_not_overwritten(tiny, tmp_pat
     assert store.pending() == [] and not store.bad_entries
     store.begin()
     assert json.loads((out / "sweep.json").read_text())["fingerprint"] == plan.fingerprint
+
+
+def test_a_restarted_sweep_removes_only_the_plots_it_makes(tmp_path):
+    """The derived files are made again at each (re)start; a file of the user's in ``plots/``
+    is not the sweep's to delete."""
+    (tmp_path / "tiny.toml").write_text(TINY)
+    first = sweep_cli("tiny.toml", "--out", "out", "--workers", "0", cwd=tmp_path)
+    assert first.returncode == 1, first.stderr
+    notes = tmp_path / "out" / "plots" / "my-notes.txt"
+    notes.write_text("mine")
+    made = sorted(p.name for p in (tmp_path / "out" / "plots").iterdir() if p != notes)
+    again = sweep_cli("tiny.toml", "--out", "out", "--workers", "0", "--resume", cwd=tmp_path)
+    assert again.returncode == 1, again.stderr
+    assert notes.read_text() == "mine"
+    assert sorted(p.name for p in notes.parent.iterdir()) == sorted([*made, notes.name])

@@ -42,6 +42,7 @@ from typing import Any
 from scenarios.record import outputs
 from scenarios.record.outputs import OutputError, write_atomic
 from scenarios.sweep.plan import SweepError, SweepPlan, label
+from scenarios.sweep.plots import plot_names
 from scenarios.sweep.rows import (
     ESTIMATE_COLUMNS,
     STATUSES,
@@ -373,11 +374,14 @@ class SweepStore:
         self._flush_cost_s = self._flushed_at - start
 
     def _remove(self, path: Path) -> None:
+        """Remove a derived file, or the plots a directory holds of this sweep's (only the
+        names it writes: a file of the user's there stays), then the directory if empty."""
         try:
             if path.is_dir():
-                for child in path.iterdir():
-                    child.unlink()
-                path.rmdir()
+                for name in plot_names(self.plan):
+                    (path / name).unlink(missing_ok=True)
+                if not any(path.iterdir()):
+                    path.rmdir()
             else:
                 path.unlink(missing_ok=True)
         except OSError as exc:
