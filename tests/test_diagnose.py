@@ -342,3 +342,60 @@ def test_a_30_s_flight_takes_well_under_a_second(rng):
     elapsed_s = time.perf_counter() - start
     assert d.mistake == "composition order swapped"
     assert elapsed_s < 1.0, f"{elapsed_s:.3f} s"
+
+
+# ------------------------------------------------------------------ the simulator's runs
+
+
+def _run_scene(run) -> tuple[dict, dict[str, np.ndarray]]:
+    """A built-in run's observations, as a plug-in would see them: ``p_c`` is the
+    ``depth_image`` estimate in the camera frame with the estimator's own pose and mount, the
+    newest pose received when the image arrived (the exposure pose where none is recorded).
+    Also the run's own estimates (``depth_image``, ``naive``) of the same detections."""
+    rows: list[tuple] = []
+    own: dict[str, list] = {"depth_image": [], "naive": []}
+    for tick in run.result.ticks:
+        newest = tick.timing.T_w_b_latest if tick.timing is not None else None
+        for d in tick.detections:
+            p_w = d.estimates_w.get("depth_image")
+            if p_w is None:
+                continue
+            p_c = se3.apply(se3.invert(tick.T_w_b_est @ tick.T_b_c_est), p_w)
+            T_w_b_newest = tick.T_w_b_est if newest is None else newest
+            rows.append((p_c, tick.T_w_b_est, tick.T_b_c_est, T_w_b_newest))
+            own["depth_image"].append(p_w)
+            own["naive"].append(d.estimates_w["naive"])
+    assert len(rows) >= 5, "the run should have depth_image estimates"
+    p_c, T_w_b, T_b_c, T_w_b_newest = (np.array(column) for column in zip(*rows, strict=True))
+    scene = {"p_c": p_c, "T_w_b": T_w_b, "T_b_c": T_b_c, "T_w_b_newest": T_w_b_newest}
+    return scene, {k: np.array(v) for k, v in own.items()}
+
+
+@pytest.mark.parametrize("scenario", ["frame-problem", "transform-composer"])
+def test_builtin_runs_estimates_are_diagnosed(builtin_runs, scenario):
+    """The run's own estimates: ``depth_image`` is the correct chain, ``naive`` (built from it,
+    vnav.estimators.naive) the naive chain; three mistakes applied to the run's observations are
+    named."""
+    scene, own = _run_scene(builtin_runs[scenario])
+    d = _diagnose(scene, own["depth_image"])
+    assert d.verdict == "correct" and d.residual_m < 1e-9, d.explain()
+    d = _diagnose(scene, own["naive"])
+    assert (d.verdict, d.mistake) == ("mistake", "naive chain"), d.explain()
+    assert d.residual_m < 1e-9
+    for name in ("rotation transposed", "mount inverted", "composition order swapped"):
+        d = _diagnose(scene, _estimates(name, scene))
+        assert (d.verdict, d.mistake) == ("mistake", name), d.explain()
+        assert d.residual_m < 1e-9
+
+
+def test_builtin_latency_run_names_the_stale_pose(builtin_runs):
+    """The latency built-in's newest poses (50 ms late, through a fast yaw): a user chain fed
+    them is named "pose at the wrong time"; without them the doctor cannot say."""
+    scene, _ = _run_scene(builtin_runs["latency"])
+    stale = ~np.all(scene["T_w_b_newest"] == scene["T_w_b"], axis=(1, 2))
+    assert stale.sum() >= 5
+    p_w = _estimates("pose at the wrong time", scene)
+    d = _diagnose(scene, p_w, T_w_b_newest=scene["T_w_b_newest"])
+    assert (d.verdict, d.mistake) == ("mistake", "pose at the wrong time"), d.explain()
+    assert d.residual_m < 1e-9 < d.correct_residual_m
+    assert _diagnose(scene, p_w).verdict == "unexplained"
