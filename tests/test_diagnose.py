@@ -19,7 +19,14 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from vnav import se3
-from vnav.diagnose import DEFAULT_TOLERANCE_M, HYPOTHESES, Diagnosis, diagnose, hypothesis_names
+from vnav.diagnose import (
+    DEFAULT_TOLERANCE_M,
+    HYPOTHESES,
+    Diagnosis,
+    Verdict,
+    diagnose,
+    hypothesis_names,
+)
 
 
 @dataclass(frozen=True)
@@ -151,7 +158,7 @@ def test_every_hypothesis_has_a_user_function():
 def test_the_correct_chain_is_named_correct(rng):
     scene = _scene(rng)
     d = _diagnose(scene, _estimates("correct", scene), T_w_b_newest=scene["T_w_b_newest"])
-    assert d.verdict == "correct" and d.explained and d.mistake is None
+    assert d.verdict is Verdict.CORRECT and d.explained and d.mistake is None
     assert d.candidates == ("correct",)
     assert d.residual_m == d.correct_residual_m < 1e-9
     assert d.chapter == "chapter 7"
@@ -260,6 +267,20 @@ def test_yaw_only_flight(rng):
     # One elementary rotation: the Euler order does not matter, the estimates are right.
     d = _diagnose(scene, _estimates("Euler order reversed", scene))
     assert d.verdict == "correct" and "Euler order reversed" in d.candidates
+
+
+@pytest.mark.filterwarnings("ignore:Gimbal lock detected")
+@pytest.mark.parametrize("name", ["Euler order reversed", "roll and yaw swapped"])
+def test_gimbal_lock_uses_the_angles_with_roll_zero(rng, name):
+    """At pitch = 90 deg only yaw - roll is defined: SciPy, like vnav.so3.to_rpy, hands out
+    roll = 0, and the doctor rebuilds the Euler mistakes from those angles."""
+    scene = _scene(rng)
+    for i in range(len(scene["p_c"])):
+        R = Rotation.from_euler("ZYX", [rng.uniform(-3, 3), np.pi / 2, rng.uniform(-3, 3)])
+        scene["T_w_b"][i, :3, :3] = R.as_matrix()
+    d = _diagnose(scene, _estimates(name, scene))
+    assert (d.verdict, d.mistake) == ("mistake", name), d.explain()
+    assert d.residual_m < 1e-9
 
 
 def test_the_stale_pose_is_tried_only_with_newest_poses(rng):

@@ -46,6 +46,7 @@ Conventions: docs/CONVENTIONS.md ("The frame-bug doctor").
 
 from __future__ import annotations
 
+import enum
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -62,6 +63,7 @@ __all__ = [
     "Chain",
     "Diagnosis",
     "Hypothesis",
+    "Verdict",
     "diagnose",
     "hypothesis_names",
 ]
@@ -71,6 +73,21 @@ DEFAULT_TOLERANCE_M = 1e-6
 
 LECTURE = "MIT 16.485 VNAV, lecture 1"
 CORRECT = "correct"
+
+
+class Verdict(enum.StrEnum):
+    """What the doctor concluded (a string: ``Verdict.MISTAKE == "mistake"``)."""
+
+    CORRECT = "correct"
+    """The correct chain explains every estimate (other hypotheses may too)."""
+    MISTAKE = "mistake"
+    """Exactly one mistake, and not the correct chain, explains every estimate."""
+    AMBIGUOUS = "ambiguous"
+    """Several mistakes, not the correct chain, explain every estimate."""
+    UNEXPLAINED = "unexplained"
+    """No hypothesis explains every estimate."""
+    NO_ESTIMATES = "no estimates"
+    """Every row of ``p_w_user`` is NaN."""
 
 
 @dataclass(frozen=True)
@@ -384,7 +401,7 @@ class Diagnosis:
 
     Attributes
     ----------
-    verdict : str
+    verdict : Verdict
         ``"correct"``, ``"mistake"``, ``"ambiguous"``, ``"unexplained"`` or
         ``"no estimates"`` (see the module's docstring).
     mistake : str or None
@@ -409,7 +426,7 @@ class Diagnosis:
         One sentence for a student: what was found, the lecture chapter, the fix.
     """
 
-    verdict: str
+    verdict: Verdict
     mistake: str | None
     explained: bool
     residual_m: float | None
@@ -423,8 +440,8 @@ class Diagnosis:
     @property
     def chapter(self) -> str | None:
         """The lecture chapter of the named mistake (or of the correct chain), or None."""
-        name = self.mistake if self.verdict == "mistake" else None
-        name = CORRECT if self.verdict == "correct" else name
+        name = self.mistake if self.verdict is Verdict.MISTAKE else None
+        name = CORRECT if self.verdict is Verdict.CORRECT else name
         return None if name is None else _BY_NAME[name].chapter
 
     def explain(self) -> str:
@@ -576,7 +593,7 @@ def diagnose(
 
 def _no_estimates(tol: float) -> Diagnosis:
     return Diagnosis(
-        verdict="no estimates",
+        verdict=Verdict.NO_ESTIMATES,
         mistake=None,
         explained=False,
         residual_m=None,
@@ -597,7 +614,7 @@ def _verdict(residuals: dict[str, float], tol: float, n_est: int) -> Diagnosis:
     mistake = None
     residual: float | None = None
     if CORRECT in candidates:
-        verdict, residual = "correct", r_correct
+        verdict, residual = Verdict.CORRECT, r_correct
         message = (
             f"Correct: the lecture's chain {_FIX_CHAIN} ({LECTURE}, chapter 7) reproduces all "
             f"{n_est} estimates within {r_correct:.3g} m."
@@ -610,7 +627,7 @@ def _verdict(residuals: dict[str, float], tol: float, n_est: int) -> Diagnosis:
             )
     elif len(others) == 1:
         mistake = others[0]
-        verdict, residual = "mistake", residuals[mistake]
+        verdict, residual = Verdict.MISTAKE, residuals[mistake]
         h = _BY_NAME[mistake]
         message = (
             f"Mistake: {mistake} ({LECTURE}, {h.chapter}): {h.what}. It reproduces all "
@@ -618,7 +635,7 @@ def _verdict(residuals: dict[str, float], tol: float, n_est: int) -> Diagnosis:
             f"to {r_correct:.3g} m. Fix: {h.fix}."
         )
     elif others:
-        verdict = "ambiguous"
+        verdict = Verdict.AMBIGUOUS
         parts = "; ".join(f"{c} ({LECTURE}, {_BY_NAME[c].chapter})" for c in others)
         message = (
             f"Ambiguous: {len(others)} mistakes reproduce all {n_est} estimates within "
@@ -626,7 +643,7 @@ def _verdict(residuals: dict[str, float], tol: float, n_est: int) -> Diagnosis:
             f"misses by up to {r_correct:.3g} m."
         )
     else:
-        verdict = "unexplained"
+        verdict = Verdict.UNEXPLAINED
         nearest = next(name for name, _ in ranked if name != CORRECT)
         message = (
             f"Unexplained: no mistake of the lecture's list ({LECTURE}) reproduces the "
