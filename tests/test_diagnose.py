@@ -10,6 +10,7 @@ module's docstring; the last tests use the simulator's own runs.
 
 from __future__ import annotations
 
+import json
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -298,6 +299,19 @@ def test_the_stale_pose_is_tried_only_with_newest_poses(rng):
     p_w[0] = np.nan  # ... unless it gave none there either
     d = _diagnose(scene, p_w, T_w_b_newest=newest)
     assert d.mistake == "pose at the wrong time"
+
+
+def test_the_diagnosis_as_strict_json(rng):
+    scene = _scene(rng)
+    newest = scene["T_w_b_newest"].copy()
+    newest[0] = np.nan  # an infinite residual
+    d = _diagnose(scene, _estimates("naive chain", scene), T_w_b_newest=newest)
+    loaded = json.loads(json.dumps(d.to_dict(), allow_nan=False))
+    assert loaded["verdict"] == "mistake" and loaded["mistake"] == "naive chain"
+    assert loaded["chapter"] == "chapter 0" and loaded["message"] == d.message
+    assert list(loaded["residuals_m"]) == [name for name, _ in d.residuals_m]
+    assert loaded["residuals_m"]["pose at the wrong time"] is None
+    assert loaded["residual_m"] == d.residual_m
 
 
 # ------------------------------------------------------------------ bad input

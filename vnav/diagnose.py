@@ -456,6 +456,27 @@ class Diagnosis:
     def __str__(self) -> str:
         return self.explain()
 
+    def to_dict(self) -> dict:
+        """The diagnosis as plain JSON values (strict JSON: inf and NaN become None), with the
+        chapter; ``residuals_m`` as a mapping in the same order, smallest first."""
+
+        def number(x: float | None) -> float | None:
+            return x if x is not None and np.isfinite(x) else None
+
+        return {
+            "verdict": str(self.verdict),
+            "mistake": self.mistake,
+            "chapter": self.chapter,
+            "explained": self.explained,
+            "residual_m": number(self.residual_m),
+            "correct_residual_m": number(self.correct_residual_m),
+            "candidates": list(self.candidates),
+            "residuals_m": {name: number(r) for name, r in self.residuals_m},
+            "tolerance_m": self.tolerance_m,
+            "n_estimates": self.n_estimates,
+            "message": self.message,
+        }
+
 
 # ------------------------------------------------------------------ validation
 
