@@ -4,7 +4,8 @@ Rotations (``so3``), quaternions (``quat``, scalar last), rigid transforms (``se
 conventions and a frame tree (``frames``), the pinhole camera and depth images (``camera``),
 the traffic cone and its visibility (``cone``), cone detection (``detect``), the silhouette's
 geometry (``silhouette``), the estimators (``estimators``) and their orchestration
-(``localize``), the localisation methods and their accuracy contract (``methods``), and error
-statistics (``metrics``). numpy and OpenCV only; it never imports MuJoCo or Rerun.
+(``localize``), the localisation methods and their accuracy contract (``methods``), error
+statistics (``metrics``), and the frame-bug doctor (``diagnose``). numpy and OpenCV only; it
+never imports MuJoCo or Rerun.
 Conventions: docs/CONVENTIONS.md.
 """
