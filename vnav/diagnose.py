@@ -376,7 +376,7 @@ HYPOTHESES: tuple[Hypothesis, ...] = (
     ),
     Hypothesis(
         "pose at the wrong time",
-        "chapter 8",
+        "chapter 7 (its chain composes poses of one instant; stamps are beyond the lecture)",
         "the newest pose received used instead of the pose at the image's exposure",
         "look the pose up at the image's exposure stamp (every transform of a chain at one "
         "instant; docs/CONVENTIONS.md, 'Time and stamps')",
