@@ -187,10 +187,12 @@ def summary(rep: dict, rrd: Path, json_path: Path) -> str:
         2,
         "",
     )
+    width = max(13, *map(len, rep["methods"]))  # a user's function may have a long name
     lines.append(
-        f"  {'method':<13} {'count':>5} {'mean':>8} {'median':>8} {'rmse':>8} {'max':>8}  error, m"
+        f"  {'method':<{width}} {'count':>5} {'mean':>8} {'median':>8} {'rmse':>8} {'max':>8}"
+        "  error, m"
     )
-    lines += _method_rows(rep["methods"])
+    lines += _method_rows(rep["methods"], width)
     lines += _estimator_lines(rep.get("estimators", {}))
     lines += _latest_pose_lines(rep)
     lines += _recovered_mount_lines(rep)
@@ -201,12 +203,13 @@ def summary(rep: dict, rrd: Path, json_path: Path) -> str:
     return "\n".join(lines)
 
 
-def _method_rows(methods: dict) -> list[str]:
-    """One row per method: its error statistics, or why it gave no estimate."""
+def _method_rows(methods: dict, width: int = 13) -> list[str]:
+    """One row per method, its name ``width`` wide: its error statistics, or why it gave no
+    estimate."""
     lines = []
     for method, entry in methods.items():
         s = entry["position_error_m"]
-        row = f"  {method:<13} {s['count']:>5}"
+        row = f"  {method:<{width}} {s['count']:>5}"
         if s["count"]:
             lines.append(
                 f"{row} {_fmt(s['mean']):>8} {_fmt(s['median']):>8} {_fmt(s['rmse']):>8} "
@@ -248,7 +251,8 @@ def _recovered_mount_lines(rep: dict) -> list[str]:
         "(above: with the declared mount, which the scenario's mount error puts off):",
         2,
     )
-    return lines + _method_rows({m: {"position_error_m": s} for m, s in recovered.items()})
+    width = max(13, *map(len, recovered))
+    return lines + _method_rows({m: {"position_error_m": s} for m, s in recovered.items()}, width)
 
 
 def _latest_pose_lines(rep: dict) -> list[str]:
