@@ -240,3 +240,36 @@ def test_observation_arrays_are_read_only_and_consistent(tmp_path):
         so3.from_rpy(*np.radians(obs.rpy_w_b_deg)), obs.T_w_b[:3, :3], atol=1e-12
     )
     assert obs.depth_m == obs.p_c[2] > 0.0
+
+
+def test_the_conventions_worked_example_and_its_code_agree():
+    """docs/CONVENTIONS.md's worked example, through its own code block and the reference."""
+    from pathlib import Path
+
+    from vnav import se3
+    from vnav.frames import R_FLU_RDF
+    from vnav.plugin import PluginObservation
+
+    text = (Path(__file__).resolve().parents[1] / "docs/CONVENTIONS.md").read_text()
+    section = text.split("## Your own estimator", 1)[1].split("\n## ", 1)[0]
+    (code,) = re.findall(r"```python\n(.*?)```", section, re.S)
+    namespace: dict = {}
+    exec(code, namespace)
+    R_w_b = so3.rot_z(np.pi / 2)
+    obs = PluginObservation(
+        p_c=np.array([1.0, 0.5, 6.0]),
+        uv=np.zeros(2),
+        depth_m=6.0,
+        K=np.eye(3),
+        T_w_b=se3.make(R_w_b, [5.0, 0.0, 4.0]),
+        quat_w_b_xyzw=quat.from_matrix(R_w_b),
+        rpy_w_b_deg=np.degrees(so3.to_rpy(R_w_b)),
+        T_b_c=se3.make(R_FLU_RDF, [0.1, 0.0, 0.0]),
+        t_s=0.0,
+    )
+    np.testing.assert_allclose(R_FLU_RDF, [[0, 0, 1], [-1, 0, 0], [0, -1, 0]])
+    np.testing.assert_allclose(obs.quat_w_b_xyzw, [0, 0, 0.5**0.5, 0.5**0.5], atol=1e-12)
+    np.testing.assert_allclose(obs.rpy_w_b_deg, [0, 0, 90], atol=1e-12)
+    expected = [6.0, 6.1, 3.5]
+    np.testing.assert_allclose(namespace["my_estimate"](obs), expected, atol=1e-12)
+    np.testing.assert_allclose(reference_estimate(obs), expected, atol=1e-12)

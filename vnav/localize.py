@@ -314,7 +314,9 @@ def _localize(
         # called and gives no estimate for depth_image's reason.
         p_w_depth = p_w_by_method.get(USER_INPUT)
         result = (
-            no_estimate[USER_INPUT] if p_w_depth is None else estimator.estimate(obs, p_w_depth, t_s)
+            no_estimate[USER_INPUT]
+            if p_w_depth is None
+            else estimator.estimate(obs, p_w_depth, t_s)
         )
         if isinstance(result, NoEstimate):
             no_estimate[name] = result

@@ -154,9 +154,7 @@ def estimator_summary(run: RunResult, m: Method) -> dict[str, Any]:
     """A user's function over the run (``vnav.plugin``): its spec, calls, how many returned
     None, and each kind of failure with its count, first message and the camera ticks."""
     f = m.estimator.failures
-    tick_of = {
-        (t.t_s if t.timing is None else t.timing.exposure_pose_s): t.tick for t in run.ticks
-    }
+    tick_of = {(t.t_s if t.timing is None else t.timing.exposure_pose_s): t.tick for t in run.ticks}
     return {
         "spec": m.implementation,
         "calls": f.calls,
