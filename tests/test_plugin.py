@@ -273,3 +273,40 @@ def test_the_conventions_worked_example_and_its_code_agree():
     expected = [6.0, 6.1, 3.5]
     np.testing.assert_allclose(namespace["my_estimate"](obs), expected, atol=1e-12)
     np.testing.assert_allclose(reference_estimate(obs), expected, atol=1e-12)
+
+
+def test_recording_draws_the_users_estimates_and_errors(tmp_path, user_file):
+    """The recording has the user's estimates, error segments and error plot, as a built-in's:
+    the reference's estimates on depth_image's (float32 in the file), the transposed one's
+    error per tick as its mean over the tick's detections in the report's run."""
+    from helpers import read_rows
+
+    out = tmp_path / "out"
+    specs = ["vnav.plugin:reference_estimate", f"{user_file}:transposed"]
+    args = ["run", "frame-problem", "--out", str(out), "--quiet", *DURATION]
+    assert main([*args, *(a for s in specs for a in ("--estimator", s))]) == 1
+    rrd = out / "frame-problem.rrd"
+
+    def points(entity: str) -> dict[int, np.ndarray]:
+        return {
+            r["tick"]: np.array(r["Points3D:positions"]).reshape(-1, 3)
+            for r in read_rows(rrd, entity)
+            if "tick" in r
+        }
+
+    depth = points("world/cones/estimate/depth_image")
+    reference = points("world/cones/estimate/user_reference_estimate")
+    assert reference.keys() == depth.keys() and any(p.size for p in depth.values())
+    for tick, p_w in depth.items():
+        np.testing.assert_allclose(reference[tick], p_w, atol=1e-5)
+    assert read_rows(rrd, "world/cones/error/user_transposed")
+    report = json.loads((out / "frame-problem.json").read_text())
+    worst = max(
+        r["Scalars:scalars"][0]
+        for r in read_rows(rrd, "metrics/error/user_transposed")
+        if "tick" in r and np.isfinite(r["Scalars:scalars"][0])
+    )
+    # One detection per tick here: the per-tick mean is the detection's error.
+    assert report["detections"] == report["camera_ticks"]
+    assert worst == pytest.approx(report["methods"]["user:transposed"]["position_error_m"]["max"])
+    assert not read_rows(rrd, "metrics/nees/user_transposed")  # no covariance claimed
