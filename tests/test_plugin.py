@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import re
+import sys
 import textwrap
 
 import numpy as np
@@ -310,3 +311,38 @@ def test_recording_draws_the_users_estimates_and_errors(tmp_path, user_file):
     assert report["detections"] == report["camera_ticks"]
     assert worst == pytest.approx(report["methods"]["user:transposed"]["position_error_m"]["max"])
     assert not read_rows(rrd, "metrics/nees/user_transposed")  # no covariance claimed
+
+
+def test_extended_adds_for_the_block_only_and_refuses_a_name_twice():
+    user = plugin_method("vnav.plugin:reference_estimate")
+    with pytest.raises(RuntimeError), extended([user]) as methods:
+        assert methods == (*METHODS, user) and active_methods() is methods
+        raise RuntimeError("a run that fails")
+    assert active_methods() is METHODS
+    with pytest.raises(ValueError, match="two methods are named 'user:reference_estimate'"):
+        with extended([user, user]):
+            pass
+    assert active_methods() is METHODS
+
+
+def test_two_functions_of_one_name_exit_2(tmp_path, user_file, capsys):
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "mine.py").write_text(USER_FUNCTIONS, encoding="utf-8")
+    out = tmp_path / "out"
+    specs = [f"{user_file}:raises", f"{other / 'mine.py'}:raises"]
+    args = ["run", "frame-problem", "--out", str(out)]
+    assert main([*args, *(a for s in specs for a in ("--estimator", s))]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "are both user:raises" in err
+    assert not out.exists() or not any(out.iterdir())
+
+
+def test_a_module_in_the_current_directory_is_found(tmp_path, monkeypatch):
+    """``module:function`` from the directory the user runs in, as ``python -m`` finds it."""
+    (tmp_path / "chain_in_cwd_for_vnav_test.py").write_text(USER_FUNCTIONS, encoding="utf-8")
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(sys, "path", [p for p in sys.path if p not in ("", ".")])
+    monkeypatch.delitem(sys.modules, "chain_in_cwd_for_vnav_test", raising=False)
+    fn = load_estimator("chain_in_cwd_for_vnav_test:transposed")
+    assert fn.__name__ == "transposed" and fn.__module__ == "chain_in_cwd_for_vnav_test"

@@ -9,7 +9,7 @@ colours and plots, the README's table) derives from ``METHODS``, in this order.
 A method carries its behaviour: its estimator (named here as ``module:attribute`` and imported
 when first used, so that this module stays data), the degrees of freedom of its estimates, how
 many images it needs, and its accuracy contract. ``vnav.localize`` loops over the methods and
-nothing else branches on a method's name. An estimator is one of three kinds:
+nothing else branches on a method's name. An estimator is one of four kinds:
 
 - ``"one"`` image: ``estimate(obs) -> p_w | NoEstimate`` and ``covariance(obs, p_w)``, on one
   ``vnav.observation.Observation`` (``SingleImageEstimator``);
@@ -333,6 +333,9 @@ def extended(extra: Sequence[Method]) -> Iterator[tuple[Method, ...]]:
         If a name in ``extra`` is already a method's or appears twice.
     """
     global _ACTIVE
+    if not extra:  # nothing to add: the active tuple itself, as without the block
+        yield _ACTIVE
+        return
     names = [m.name for m in _ACTIVE] + [m.name for m in extra]
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:

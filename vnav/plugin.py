@@ -23,6 +23,7 @@ import enum
 import importlib
 import importlib.util
 import math
+import os
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -136,7 +137,8 @@ def reference_estimate(obs: PluginObservation) -> np.ndarray:
 
 
 def load_estimator(spec: str) -> Callable[[PluginObservation], Any]:
-    """The function a spec names: ``package.module:function`` or ``path/to/file.py:function``.
+    """The function a spec names: ``package.module:function`` (looked up on ``sys.path`` and
+    in the current directory) or ``path/to/file.py:function``.
 
     Raises
     ------
@@ -149,6 +151,10 @@ def load_estimator(spec: str) -> Callable[[PluginObservation], Any]:
         raise ValueError(
             f"estimator {spec!r}: expected package.module:function or path/to/file.py:function"
         )
+    if not where.endswith(".py") and os.getcwd() not in sys.path and "" not in sys.path:
+        # As ``python -m`` would: a module beside the user is found (an installed console
+        # script's sys.path holds only its own environment's).
+        sys.path.insert(0, os.getcwd())
     try:
         module = _import_file(where) if where.endswith(".py") else importlib.import_module(where)
     except Exception as exc:  # the user's module may raise anything while importing
