@@ -42,6 +42,10 @@ USER_FUNCTIONS = textwrap.dedent("""\
         return None
 
 
+    def quits(obs):
+        raise SystemExit(3)
+
+
     def flat(obs):
         return np.zeros((3, 1))
 
@@ -156,10 +160,10 @@ def test_transposed_rotation_fails_its_check(tmp_path, user_file, monkeypatch, c
 
 
 def test_failing_functions_are_reported_and_the_run_goes_on(tmp_path, user_file, capsys):
-    """Raising, wrong shape, NaN, not an array: failures of that function, counted with the
-    first message and the ticks; its check fails; None always: no estimate, no data; exit 1;
-    the built-ins' results as without them."""
-    names = ["raises", "flat", "not_finite", "words", "nothing"]
+    """Raising (an exit() too), wrong shape, NaN, not an array: failures of that function,
+    counted with the first message and the ticks; its check fails; None always: no estimate,
+    no data; exit 1; the built-ins' results as without them."""
+    names = ["raises", "quits", "flat", "not_finite", "words", "nothing"]
     status, report = _run(tmp_path, *(f"{user_file}:{n}" for n in names))
     assert status == 1
     assert "Traceback" not in capsys.readouterr().err
@@ -169,7 +173,8 @@ def test_failing_functions_are_reported_and_the_run_goes_on(tmp_path, user_file,
     called = report["estimators"]["user:raises"]["calls"]
     assert called == report["methods"]["depth_image"]["position_error_m"]["count"] > 0
     expected = {
-        "raises": ("raised", r"RuntimeError: no idea at t = "),
+        "raises": ("raised", "RuntimeError: no idea at t = "),
+        "quits": ("raised", "SystemExit: 3"),
         "flat": ("wrong_shape", "returned shape (3, 1), not (3,)"),
         "not_finite": ("not_finite", "returned [nan, 0.0, 0.0]"),
         "words": ("not_array", "returned a str, not an array"),

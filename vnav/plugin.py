@@ -255,7 +255,7 @@ class PluginEstimator:
         self.failures.calls += 1
         try:
             returned = self.fn(observation_for(obs, p_w_depth, t_s))
-        except Exception as exc:  # the user's code: any exception is its failure
+        except (Exception, SystemExit) as exc:  # the user's code: its failure, even an exit()
             self.failures.add(Failure.RAISED, f"{type(exc).__name__}: {exc}", t_s)
             return NoEstimate.FUNCTION_ERROR
         if returned is None:
