@@ -3,7 +3,8 @@
 - ``vnav-demo list``: the built-in scenarios, one line each.
 - ``vnav-demo show NAME``: a built-in scenario as a TOML file named ``my-NAME``, to start your
   own from.
-- ``vnav-demo run NAME|FILE.toml [...] [--all] [--out DIR] [--seed N] [--duration S] [--quiet]``:
+- ``vnav-demo run NAME|FILE.toml [...] [--all] [--out DIR] [--seed N] [--duration S] [--quiet]
+  [--estimator SPEC]``:
   runs scenarios headless, writes ``DIR/<name>.rrd`` and ``DIR/<name>.json``, prints a summary.
 - ``vnav-demo lecture``: the lecture's worked examples next to vnav's results.
 - ``vnav-demo sweep FILE.toml [--out DIR] [--workers N] [--address ADDR] [--resume]``: a
@@ -138,6 +139,15 @@ def _add_run_parser(sub) -> None:
         help=f"refuse runs of more than N camera ticks (default: {MAX_TICKS_DEFAULT})",
     )
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
+    p.add_argument(
+        "--estimator",
+        action="append",
+        default=None,
+        metavar="SPEC",
+        help="also run your function fn(obs) -> p_w at every detection, as method "
+        "user:<function>, judged with depth_image's bound; SPEC is package.module:function or "
+        "path/to/file.py:function (repeatable; docs/CONVENTIONS.md, 'Your own estimator')",
+    )
     p.add_argument(
         "--export",
         choices=["tum"],

@@ -6,7 +6,8 @@ scenario is run, judged and written the same way everywhere::
     run        scenarios.run.runner.run_scenario        (MuJoCo; the recording observes every tick)
     calibrate  scenarios.judge.calibration.calibrate_run  (only if a check asks for it; then
                the run's images estimated again with the recovered mount)
-    judge      scenarios.judge.checks.judge             (the spec's checks, else the default ones)
+    judge      scenarios.judge.checks.judge             (the spec's checks, else the default ones;
+               and each user function's bound, ``vnav.plugin``)
     finish     scenarios.record.recording.Recording.finish  (with the verdicts and calibration)
     report     scenarios.judge.report.build              (JSON)
     commit     scenarios.record.outputs.OutputPair.commit  (both files in place, or neither)
@@ -34,6 +35,7 @@ from scenarios.run.runner import run_scenario
 from scenarios.scenario import check_kinds
 from scenarios.scenario.spec import ScenarioSpec
 from sim.scene_cache import SceneCache
+from vnav.methods import active_methods
 
 __all__ = ["Outcome", "output_paths", "run"]
 
@@ -103,6 +105,9 @@ def run(
         If the files cannot be written whole (a full disk...); the previous pair stays.
     """
     started = _Clock()
+    for m in active_methods():
+        if m.images == "user":  # a user's function: this run's failures only
+            m.estimator.reset()
     recording_id = f"{spec.name}-seed{seed}-{uuid.uuid4().hex[:12]}"
     if out_dir is None:
         result = run_scenario(spec, seed=seed, progress=progress, scenes=scenes)
@@ -146,7 +151,8 @@ def _calibrate_and_judge(spec: ScenarioSpec, result: RunResult) -> list[checks.C
 
         result.calibration = calibrate_run(result)
     judge_start = time.perf_counter()
-    judged = [checks.judge(c, result) for c in (spec.checks or check_kinds.default_checks())]
+    own = spec.checks or check_kinds.default_checks()
+    judged = [checks.judge(c, result) for c in (*own, *check_kinds.user_checks())]
     result.timing_s["calibrate"] = judge_start - start
     result.timing_s["judge"] = time.perf_counter() - judge_start
     return judged

@@ -91,6 +91,8 @@ class NoEstimate(enum.Enum):
     NO_OTHER_ESTIMATE = "no_other_estimate"
     ONE_IMAGE = "one_image"
     PARALLAX = "parallax"
+    FUNCTION_NONE = "function_none"
+    FUNCTION_ERROR = "function_error"
 
     @property
     def text(self) -> str:
@@ -120,6 +122,8 @@ _NO_ESTIMATE_TEXT = {
     NoEstimate.NO_OTHER_ESTIMATE: "with no other estimate to start from",
     NoEstimate.ONE_IMAGE: "from one image (triangulation needs a track over several)",
     NoEstimate.PARALLAX: "whose views do not cross widely enough (too little motion for the noise)",
+    NoEstimate.FUNCTION_NONE: "for which the user's function returned None",
+    NoEstimate.FUNCTION_ERROR: "where the user's function failed (the report's estimators say how)",
 }
 _GEOMETRIC = frozenset(
     {

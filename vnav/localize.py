@@ -21,7 +21,7 @@ from vnav.camera import PinholeCamera, check_depth_image
 from vnav.cone import TRAFFIC_CONE, ConeModel
 from vnav.detect import ConeDetection, check_detection
 from vnav.estimators import NoEstimate, depth_under_mask
-from vnav.methods import METHOD_NAMES, METHODS, PREFERENCE, Method, method
+from vnav.methods import METHOD_NAMES, METHODS, PREFERENCE, Method, active_methods, method
 from vnav.noise_model import NOISELESS, NoiseModel
 from vnav.observation import Exposure, Observation
 from vnav.silhouette import SilhouetteView
@@ -66,14 +66,14 @@ class ConeEstimates(Mapping[str, "np.ndarray | None"]):
     no_estimate: Mapping[str, NoEstimate] = field(default_factory=dict)
     cov_w_by_method: Mapping[str, np.ndarray] = field(default_factory=dict)
     apex_uv: np.ndarray | None = None
+    method_names: tuple[str, ...] = METHOD_NAMES
 
     def __post_init__(self) -> None:
-        unknown = sorted((set(self.p_w_by_method) | set(self.no_estimate)) - set(METHOD_NAMES))
+        names = self.method_names
+        unknown = sorted((set(self.p_w_by_method) | set(self.no_estimate)) - set(names))
         if unknown:
-            raise ValueError(f"unknown methods {unknown}; valid: {list(METHOD_NAMES)}")
-        object.__setattr__(
-            self, "p_w_by_method", {m: self.p_w_by_method.get(m) for m in METHOD_NAMES}
-        )
+            raise ValueError(f"unknown methods {unknown}; valid: {list(names)}")
+        object.__setattr__(self, "p_w_by_method", {m: self.p_w_by_method.get(m) for m in names})
         both = [m for m in self.no_estimate if self.p_w_by_method[m] is not None]
         if both:
             raise ValueError(f"no_estimate gives a reason for methods with an estimate: {both}")
@@ -98,13 +98,13 @@ class ConeEstimates(Mapping[str, "np.ndarray | None"]):
         raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
 
     def as_dict(self) -> dict[str, np.ndarray | None]:
-        """``{method name: p_w or None}`` in the order of ``METHOD_NAMES``."""
+        """``{method name: p_w or None}`` in the order of ``method_names``."""
         return dict(self.p_w_by_method)
 
     def covariance(self, name: str) -> np.ndarray | None:
         """The 3x3 world covariance of method ``name``'s estimate, m^2, or None without one."""
-        if name not in METHOD_NAMES:
-            raise ValueError(f"unknown method {name!r}; valid: {list(METHOD_NAMES)}")
+        if name not in self.method_names:
+            raise ValueError(f"unknown method {name!r}; valid: {list(self.method_names)}")
         return self.cov_w_by_method.get(name)
 
     def with_result(
@@ -121,7 +121,7 @@ class ConeEstimates(Mapping[str, "np.ndarray | None"]):
             reasons[name] = result
         else:
             points[name], covs[name] = result
-        return ConeEstimates(points, reasons, covs, self.apex_uv)
+        return ConeEstimates(points, reasons, covs, self.apex_uv, self.method_names)
 
     @property
     def best(self) -> np.ndarray | None:
@@ -243,32 +243,58 @@ def _observation(
     return Observation(exposure, SilhouetteView(detection, exposure.camera, exposure.T_w_c), z_c)
 
 
-_GROUPED: dict[int, tuple[tuple[Method, ...], tuple[tuple, tuple, tuple]]] = {}
+USER_INPUT = "depth_image"
+"""The method whose estimate a user's function is given, in the camera frame (``vnav.plugin``)."""
+
+_GROUPED: dict[int, tuple[tuple[Method, ...], tuple[tuple, tuple, tuple, tuple]]] = {}
 """``_by_kind``'s answers by the identity of the tuple of methods (hashing the methods
 themselves on every detection cost 7 us of localize's 0.55 ms)."""
 
 
-def _by_kind(methods: tuple[Method, ...]) -> tuple[tuple, tuple, tuple]:
+def _by_kind(methods: tuple[Method, ...]) -> tuple[tuple, tuple, tuple, tuple]:
     """``methods``' ``(name, estimator)`` pairs by what they estimate from: one image, from
-    the best single-image estimate, several images (resolved once, not per detection)."""
+    the best single-image estimate, several images, a user's function given the
+    ``depth_image`` estimate (resolved once, not per detection)."""
     known = _GROUPED.get(id(methods))
     if known is not None and known[0] is methods:
         return known[1]
     grouped = tuple(
         tuple((m.name, m.estimator) for m in methods if m.images == kind)
-        for kind in ("one", "from_best", "several")
+        for kind in ("one", "from_best", "several", "user")
     )
     _GROUPED[id(methods)] = (methods, grouped)  # type: ignore[assignment]
     return grouped  # type: ignore[return-value]
 
 
+_NAMES: dict[int, tuple[tuple[Method, ...], tuple[str, ...]]] = {}
+"""``_names``' answers by the identity of the tuple of methods, as ``_GROUPED``."""
+
+
+def _names(methods: tuple[Method, ...]) -> tuple[str, ...]:
+    """``methods``' names, in order (``METHOD_NAMES`` itself for ``METHODS``)."""
+    if methods is METHODS:
+        return METHOD_NAMES
+    known = _NAMES.get(id(methods))
+    if known is not None and known[0] is methods:
+        return known[1]
+    names = tuple(m.name for m in methods)
+    _NAMES[id(methods)] = (methods, names)
+    return names
+
+
 def _localize(
-    obs: Observation | None, detection: ConeDetection, with_covariance: bool
+    obs: Observation | None,
+    detection: ConeDetection,
+    with_covariance: bool,
+    methods: tuple[Method, ...] = METHODS,
+    t_s: float = 0.0,
 ) -> ConeEstimates:
-    """Every single-image method on ``obs``, then those built from the best estimate."""
+    """Every single-image method on ``obs``, then those built from the best estimate, then
+    the users' functions (given the ``depth_image`` estimate and the exposure stamp ``t_s``)."""
+    names = _names(methods)
     if obs is None:
-        return ConeEstimates({}, dict.fromkeys(METHOD_NAMES, NoEstimate.BORDER))
-    single, from_best, several = _by_kind(METHODS)
+        return ConeEstimates({}, dict.fromkeys(names, NoEstimate.BORDER), method_names=names)
+    single, from_best, several, user = _by_kind(methods)
     found = {name: estimator.estimate(obs) for name, estimator in single}
     found.update((name, NoEstimate.ONE_IMAGE) for name, _ in several)  # Localizer's work
     no_estimate = {m: r for m, r in found.items() if isinstance(r, NoEstimate)}
@@ -276,12 +302,28 @@ def _localize(
     apex_uv = obs.view.apex_keypoint(obs.exposure.cone)  # memoised: fitted by the estimators
     if not p_w_by_method:
         no_estimate.update((name, NoEstimate.NO_OTHER_ESTIMATE) for name, _ in from_best)
-        return ConeEstimates({}, no_estimate, apex_uv=apex_uv)
+        no_estimate.update(
+            (name, no_estimate.get(USER_INPUT, NoEstimate.NO_OTHER_ESTIMATE)) for name, _ in user
+        )
+        return ConeEstimates({}, no_estimate, apex_uv=apex_uv, method_names=names)
     best = next(m for m in PREFERENCE if m in p_w_by_method)
     for name, estimator in from_best:
         p_w_by_method[name] = estimator.estimate(obs, p_w_by_method[best])
+    for name, estimator in user:
+        # The user's p_c is the depth_image estimate: without it, the user's function is not
+        # called and gives no estimate for depth_image's reason.
+        p_w_depth = p_w_by_method.get(USER_INPUT)
+        result = (
+            no_estimate[USER_INPUT]
+            if p_w_depth is None
+            else estimator.estimate(obs, p_w_depth, t_s)
+        )
+        if isinstance(result, NoEstimate):
+            no_estimate[name] = result
+        else:
+            p_w_by_method[name] = result
     if not with_covariance:
-        return ConeEstimates(p_w_by_method, no_estimate, apex_uv=apex_uv)
+        return ConeEstimates(p_w_by_method, no_estimate, apex_uv=apex_uv, method_names=names)
     cov_w = {
         name: estimator.covariance(obs, p_w_by_method[name])
         for name, estimator in single
@@ -289,7 +331,10 @@ def _localize(
     }
     for name, estimator in from_best:
         cov_w[name] = estimator.covariance(obs, cov_w[best])
-    return ConeEstimates(p_w_by_method, no_estimate, cov_w, apex_uv)
+    for name, estimator in user:
+        if name in p_w_by_method:
+            cov_w[name] = estimator.covariance(obs, p_w_by_method[name])
+    return ConeEstimates(p_w_by_method, no_estimate, cov_w, apex_uv, names)
 
 
 class Localizer:
@@ -307,6 +352,9 @@ class Localizer:
         Depth at or beyond which a pixel has no return.
     noise : NoiseModel
         The image and depth noise the estimators are told (``vnav.noise_model``).
+    methods : tuple of Method, optional
+        The methods to run, ``vnav.methods.active_methods()`` by default (the built-ins, and a
+        run's user functions within ``vnav.methods.extended``).
     """
 
     def __init__(
@@ -316,10 +364,12 @@ class Localizer:
         far_m: float = np.inf,
         *,
         noise: NoiseModel = NOISELESS,
+        methods: tuple[Method, ...] | None = None,
     ) -> None:
         self.camera, self.cone, self.far_m, self.noise = camera, cone, far_m, noise
+        self.methods = active_methods() if methods is None else methods
         self._tracks = {
-            name: estimator.start(camera, cone) for name, estimator in _by_kind(METHODS)[2]
+            name: estimator.start(camera, cone) for name, estimator in _by_kind(self.methods)[2]
         }
 
     def update(
@@ -363,7 +413,7 @@ class Localizer:
         exposure = self._exposure(T_w_b, T_b_c, cov_T_w_b, cov_T_b_c)
         observations = [_observation(exposure, d, depth) for d in detections]
         estimates = [
-            _localize(o, d, with_covariance=True)
+            _localize(o, d, True, self.methods, t_s)
             for o, d in zip(observations, detections, strict=True)
         ]
         for name, track in self._tracks.items():

@@ -9,14 +9,24 @@ colours and plots, the README's table) derives from ``METHODS``, in this order.
 A method carries its behaviour: its estimator (named here as ``module:attribute`` and imported
 when first used, so that this module stays data), the degrees of freedom of its estimates, how
 many images it needs, and its accuracy contract. ``vnav.localize`` loops over the methods and
-nothing else branches on a method's name. An estimator is one of three kinds:
+nothing else branches on a method's name. An estimator is one of four kinds:
 
 - ``"one"`` image: ``estimate(obs) -> p_w | NoEstimate`` and ``covariance(obs, p_w)``, on one
   ``vnav.observation.Observation`` (``SingleImageEstimator``);
 - ``"several"`` images: ``start(camera, cone)`` gives a per-run track whose ``update`` takes
   each image's exposure and observations (``SeveralImageEstimator``);
 - ``"from_best"``: built from the best single-image estimate (``FromBestEstimator``), as the
-  lecture's naive mistake is.
+  lecture's naive mistake is;
+- ``"user"``: a user's function ``fn(obs) -> p_w`` given the ``depth_image`` estimate in the
+  camera frame (``vnav.plugin``), added for one run with ``extended``.
+
+``METHODS`` is the built-ins, fixed; a run that judges a user's function beside them wraps
+itself in ``with extended(methods):``, and whatever lists the methods of a run (the
+``Localizer``, the checks, the report) asks ``active_methods()``. A module-level tuple that
+other modules import by value cannot grow, and the built-ins' order, colours and
+``PREFERENCE`` (which matches detections to cones) must not change when a user's function
+runs beside them: the extension is explicit, scoped to the ``with`` block, and never part of
+``PREFERENCE``.
 
 The accuracy contract (``docs/ACCURACY.md``) is stated here as data: each checked method has
 an ``AccuracyBound``, promised over the ``CONTRACT_DOMAIN`` (a cone fully in view, at
@@ -25,9 +35,10 @@ least 12 px tall, 2 to 25 m away).
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import importlib
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Literal, Protocol
 
@@ -53,6 +64,8 @@ __all__ = [
     "SeveralImageEstimator",
     "SeveralImageTrack",
     "SingleImageEstimator",
+    "active_methods",
+    "extended",
     "method",
 ]
 
@@ -184,7 +197,7 @@ class Method:
         The accuracy promised; None for a method that is reported but never checked.
     implementation : str
         Where its estimator is, ``"module:attribute"`` (``estimator`` imports it).
-    images : {"one", "several", "from_best"}
+    images : {"one", "several", "from_best", "user"}
         What it estimates from (see the module's docstring).
     dof : int
         Degrees of freedom of its estimates: the rank of their covariance, the chi-square
@@ -197,7 +210,7 @@ class Method:
     color_name: str
     bound: AccuracyBound | None
     implementation: str
-    images: Literal["one", "several", "from_best"] = "one"
+    images: Literal["one", "several", "from_best", "user"] = "one"
     dof: int = 3
 
     @property
@@ -214,7 +227,7 @@ class Method:
     def estimator(self) -> Any:
         """The estimator ``implementation`` names, imported on first use: a
         ``SingleImageEstimator``, ``SeveralImageEstimator`` or ``FromBestEstimator`` as
-        ``images`` says."""
+        ``images`` says (a ``"user"`` method's is given when it is made, ``vnav.plugin``)."""
         module, _, attribute = self.implementation.partition(":")
         return getattr(importlib.import_module(module), attribute)
 
@@ -292,7 +305,44 @@ def method(name: str) -> Method:
     ValueError
         If no method has that name (the message lists the valid ones).
     """
+    found = _BY_NAME.get(name) or next((m for m in _ACTIVE if m.name == name), None)
+    if found is None:
+        valid = [m.name for m in _ACTIVE]
+        raise ValueError(f"unknown method {name!r}; valid: {valid}")
+    return found
+
+
+_ACTIVE: tuple[Method, ...] = METHODS
+
+
+def active_methods() -> tuple[Method, ...]:
+    """The methods of the run under way: ``METHODS``, then those ``extended`` added (the same
+    tuple object for the whole ``with`` block)."""
+    return _ACTIVE
+
+
+@contextlib.contextmanager
+def extended(extra: Sequence[Method]) -> Iterator[tuple[Method, ...]]:
+    """``METHODS`` and ``extra`` as the active methods within a ``with`` block (one run's
+    user functions, ``vnav.plugin``); the previous ones again after it. Not thread-safe: one
+    run at a time per process, as ``vnav-demo run`` and a sweep's workers run.
+
+    Raises
+    ------
+    ValueError
+        If a name in ``extra`` is already a method's or appears twice.
+    """
+    global _ACTIVE
+    if not extra:  # nothing to add: the active tuple itself, as without the block
+        yield _ACTIVE
+        return
+    names = [m.name for m in _ACTIVE] + [m.name for m in extra]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise ValueError(f"two methods are named {twice[0]!r}")
+    previous = _ACTIVE
+    _ACTIVE = (*previous, *extra)
     try:
-        return _BY_NAME[name]
-    except KeyError:
-        raise ValueError(f"unknown method {name!r}; valid: {list(METHOD_NAMES)}") from None
+        yield _ACTIVE
+    finally:
+        _ACTIVE = previous

@@ -42,7 +42,7 @@ from scenarios.scenario import builtin
 from scenarios.scenario.spec import MAX_SEED, ScenarioError, ScenarioSpec, load_toml
 from sim.world import SimulationError
 from vnav.estimators import NoEstimate
-from vnav.methods import METHOD_NAMES
+from vnav.methods import Method, extended
 
 logger = logging.getLogger(__name__)
 
@@ -187,10 +187,13 @@ def summary(rep: dict, rrd: Path, json_path: Path) -> str:
         2,
         "",
     )
+    width = max(13, *map(len, rep["methods"]))  # a user's function may have a long name
     lines.append(
-        f"  {'method':<13} {'count':>5} {'mean':>8} {'median':>8} {'rmse':>8} {'max':>8}  error, m"
+        f"  {'method':<{width}} {'count':>5} {'mean':>8} {'median':>8} {'rmse':>8} {'max':>8}"
+        "  error, m"
     )
-    lines += _method_rows(rep["methods"])
+    lines += _method_rows(rep["methods"], width)
+    lines += _estimator_lines(rep.get("estimators", {}))
     lines += _latest_pose_lines(rep)
     lines += _recovered_mount_lines(rep)
     lines.append("  checks:")
@@ -200,13 +203,13 @@ def summary(rep: dict, rrd: Path, json_path: Path) -> str:
     return "\n".join(lines)
 
 
-def _method_rows(methods: dict) -> list[str]:
-    """One row per method: its error statistics, or why it gave no estimate."""
+def _method_rows(methods: dict, width: int = 13) -> list[str]:
+    """One row per method, its name ``width`` wide: its error statistics, or why it gave no
+    estimate."""
     lines = []
-    for method in METHOD_NAMES:
-        entry = methods[method]
+    for method, entry in methods.items():
         s = entry["position_error_m"]
-        row = f"  {method:<13} {s['count']:>5}"
+        row = f"  {method:<{width}} {s['count']:>5}"
         if s["count"]:
             lines.append(
                 f"{row} {_fmt(s['mean']):>8} {_fmt(s['median']):>8} {_fmt(s['rmse']):>8} "
@@ -215,6 +218,23 @@ def _method_rows(methods: dict) -> list[str]:
         else:  # the row says why it is empty
             lines += _wrap(
                 _no_estimate_text(entry.get("no_estimate", {})), len(row) + 2, row + "  "
+            )
+    return lines
+
+
+def _estimator_lines(estimators: dict) -> list[str]:
+    """Under the methods' rows, how each user's function failed (the report's ``estimators``):
+    each kind's count, first camera tick and first message."""
+    lines = []
+    for name, entry in estimators.items():
+        for kind, f in entry["failures"].items():
+            ticks = f["ticks"]
+            where = f"tick {ticks[0]}" + (f" and {len(ticks) - 1} more" if len(ticks) > 1 else "")
+            lines += _wrap(
+                f"{name} failed {f['count']}x ({kind.replace('_', ' ')}), first at {where}: "
+                f"{f['first_message']}",
+                4,
+                "    ",
             )
     return lines
 
@@ -231,7 +251,8 @@ def _recovered_mount_lines(rep: dict) -> list[str]:
         "(above: with the declared mount, which the scenario's mount error puts off):",
         2,
     )
-    return lines + _method_rows({m: {"position_error_m": s} for m, s in recovered.items()})
+    width = max(13, *map(len, recovered))
+    return lines + _method_rows({m: {"position_error_m": s} for m, s in recovered.items()}, width)
 
 
 def _latest_pose_lines(rep: dict) -> list[str]:
@@ -385,9 +406,29 @@ def _validate(args: argparse.Namespace) -> tuple[list[ScenarioSpec], Path]:
             )
         specs = [dataclasses.replace(s, duration_s=min(args.duration, s.end_s)) for s in specs]
     check_lengths(specs, args.max_ticks)
+    args.user_methods = user_methods(getattr(args, "estimator", None) or [])
     out_dir = prepare_out_dir(args.out)
     check_outputs(specs, out_dir, getattr(args, "export", None))
     return specs, out_dir
+
+
+def user_methods(specs: list[str]) -> tuple[Method, ...]:
+    """The methods of ``--estimator SPEC`` (``vnav.plugin``), each function imported now;
+    InputError for a spec that does not import or names no callable, or two of one name."""
+    from vnav.plugin import plugin_method
+
+    found: dict[str, Method] = {}
+    for spec in specs:
+        try:
+            m = plugin_method(spec)
+        except ValueError as exc:
+            raise InputError(f"--estimator: {exc}") from None
+        if m.name in found:
+            raise InputError(
+                f"--estimator: {found[m.name].implementation} and {spec} are both {m.name}"
+            )
+        found[m.name] = m
+    return tuple(found.values())
 
 
 def command(args: argparse.Namespace) -> int:
@@ -398,7 +439,8 @@ def command(args: argparse.Namespace) -> int:
 def _body(args: argparse.Namespace):
     def run_all(specs: list[ScenarioSpec], out_dir: Path) -> int:
         wall_s, cpu_s = time.perf_counter(), time.process_time()
-        results = [(spec, *run_one(spec, args, out_dir)) for spec in specs]
+        with extended(getattr(args, "user_methods", ())):
+            results = [(spec, *run_one(spec, args, out_dir)) for spec in specs]
         duration = (time.perf_counter() - wall_s, time.process_time() - cpu_s)
         if not args.quiet:
             say(final_summary(results, out_dir, duration))

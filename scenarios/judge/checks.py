@@ -30,6 +30,7 @@ import numpy as np
 
 from scenarios.run.records import DetectionRecord, RunResult
 from scenarios.scenario.check_kinds import KINDS, Check, CheckKind, Unit
+from vnav.estimators import NoEstimate
 from vnav.methods import CONTRACT_DOMAIN, NAIVE, method
 from vnav.uncertainty import nees_band, nees_p_value
 
@@ -203,6 +204,13 @@ def _shown(kind: CheckKind, check: Check, value: float, run: RunResult) -> str:
     return f"{_in_unit(value, kind.unit)} (must be {op} {_in_unit(check.limit, kind.unit)})"
 
 
+def _function_failures(run: RunResult, method_name: str) -> int:
+    """How many detections a user's function failed on (``vnav.plugin``; 0 for a built-in)."""
+    return sum(
+        d.no_estimate.get(method_name) is NoEstimate.FUNCTION_ERROR for d in _detections(run)
+    )
+
+
 def _shown_bound(check: Check, value: float, op: str, run: RunResult) -> str:
     """An ``error_bound`` figure (error / bound) in the bound's own unit where it has one.
 
@@ -213,6 +221,12 @@ def _shown_bound(check: Check, value: float, op: str, run: RunResult) -> str:
     """
     bound = method(check.method).bound
     assert bound is not None  # the parser refuses error_bound on a method without one
+    failed = _function_failures(run, check.method)
+    if failed:
+        return (
+            f"the function failed on {failed} of {len(_detections(run))} detections "
+            "(the report's estimators say where and how)"
+        )
     statistic = "worst" if bound.statistic == "max" else "median"
     ranges_m = run.ranges_for(check.method, contract_only=True)
     if bound.fraction_of_range > 0.0 and np.all(
@@ -324,6 +338,8 @@ def _error_bound(run: RunResult, check: Check) -> float | NoData:
     bound = method(check.method).bound
     if bound is None:
         return NoData(f"{check.method} has no accuracy bound")
+    if _function_failures(run, check.method):
+        return math.inf  # a user's function that failed passes no bound
     errors = run.errors(check.method, contract_only=True)
     if not errors.size:
         return _no_estimates(run, check.method, contract_only=True)

@@ -25,7 +25,7 @@ import numpy as np
 from scenarios.judge.checks import CheckResult
 from scenarios.run.records import RunResult
 from vnav import metrics
-from vnav.methods import METHOD_NAMES, NEWEST_POSE_METHOD
+from vnav.methods import NEWEST_POSE_METHOD, Method, active_methods
 from vnav.uncertainty import nees_band
 
 REPORT_VERSION = 8
@@ -51,7 +51,10 @@ made with the declared mount (``declared_mount``, the same as ``methods``) and o
 images estimated again with the recovered mount (``recovered_mount``): what calibrating
 gives. ``timing_s`` adds ``calibrate`` (the calibration and that second estimate), ``judge``
 (the checks), ``total`` (the whole run, from its start to its report, wall seconds) and
-``total_cpu`` (the process's CPU time, user and system, over the same span)."""
+``total_cpu`` (the process's CPU time, user and system, over the same span).
+Also in 8, only in the report of a run with a user's function (``vnav.plugin``): ``estimators``,
+per function its spec, calls, how many returned None and its failures by kind (count, first
+message, camera ticks); its statistics are under ``methods`` as a built-in's."""
 
 
 def _calibration(run: RunResult) -> dict[str, Any] | None:
@@ -68,9 +71,9 @@ def _calibration(run: RunResult) -> dict[str, Any] | None:
         "frames_used": c.frames_used,
         "errors": {k: _finite_or_none(v) for k, v in c.errors.items()},
         "position_error_m": {
-            "declared_mount": {m: _stats(run.errors(m)) for m in METHOD_NAMES},
+            "declared_mount": {m: _stats(run.errors(m)) for m in _names()},
             "recovered_mount": {
-                m: None if recovered is None else _stats(recovered.errors(m)) for m in METHOD_NAMES
+                m: None if recovered is None else _stats(recovered.errors(m)) for m in _names()
             },
         },
     }
@@ -106,11 +109,11 @@ def build(
             "no_estimate": _no_estimate(run, m),
             "nees": nees_summary(run, m),
         }
-        for m in METHOD_NAMES
+        for m in _names()
     }
     n_detections = sum(len(t.detections) for t in run.ticks)
     n_matched = sum(d.cone_index is not None for t in run.ticks for d in t.detections)
-    return {
+    out = {
         "report_version": REPORT_VERSION,
         "scenario": spec.name,
         "description": spec.description,
@@ -135,6 +138,35 @@ def build(
         ],
         "recording": recording,
         "timing_s": {k: round(v, 4) for k, v in run.timing_s.items()},
+    }
+    users = [m for m in active_methods() if m.images == "user"]
+    if users:  # only with a user's function: a built-in run's report is unchanged
+        out["estimators"] = {m.name: estimator_summary(run, m) for m in users}
+    return out
+
+
+def _names() -> list[str]:
+    """The run's methods' names, in report order (the built-ins, then users' functions)."""
+    return [m.name for m in active_methods()]
+
+
+def estimator_summary(run: RunResult, m: Method) -> dict[str, Any]:
+    """A user's function over the run (``vnav.plugin``): its spec, calls, how many returned
+    None, and each kind of failure with its count, first message and the camera ticks."""
+    f = m.estimator.failures
+    tick_of = {(t.t_s if t.timing is None else t.timing.exposure_pose_s): t.tick for t in run.ticks}
+    return {
+        "spec": m.implementation,
+        "calls": f.calls,
+        "returned_none": f.returned_none,
+        "failures": {
+            kind.value: {
+                "count": f.count[kind],
+                "first_message": f.first_message[kind],
+                "ticks": sorted({tick_of.get(t_s, -1) for t_s in f.stamps_s[kind]}),
+            }
+            for kind in f.count
+        },
     }
 
 

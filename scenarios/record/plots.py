@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from scenarios.run.records import RunResult
-from vnav.methods import CONTRACT_DOMAIN, METHODS
+from vnav.methods import CONTRACT_DOMAIN, active_methods
 
 if TYPE_CHECKING:  # the viewer imports Rerun; a plot needs only the entries' fields
     from scenarios.record.viewer import LegendEntry
@@ -63,8 +63,9 @@ def error_against_range_png(result: RunResult, recovered: RunResult | None = Non
     calibration recovered (``RunResult.with_recovered_mount``), adds its errors as cyan
     crosses.
     """
+    methods = active_methods()  # a user's function too (vnav.plugin)
     columns = 2
-    rows = -(-len(METHODS) // columns)
+    rows = -(-len(methods) // columns)
     width_in, height_in = 7.2, 2.8 * rows
     fig = _figure(width_in, height_in)
     # Fixed margins in inches, not tight_layout: measuring every label costs an extra draw,
@@ -78,9 +79,9 @@ def error_against_range_png(result: RunResult, recovered: RunResult | None = Non
         "hspace": 0.5,
     }
     axes = fig.subplots(rows, columns, gridspec_kw=margins).ravel()
-    for ax in axes[len(METHODS) :]:
+    for ax in axes[len(methods) :]:
         ax.set_visible(False)
-    for ax, m in zip(axes, METHODS, strict=False):
+    for ax, m in zip(axes, methods, strict=False):
         _style(ax)
         color = np.array(m.color_rgb) / 255.0
         inside_r = result.ranges_for(m.name, contract_only=True)

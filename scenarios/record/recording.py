@@ -140,7 +140,7 @@ from scenarios.scenario.spec import ScenarioSpec
 from vnav import quat, so3
 from vnav.camera import PinholeCamera, depth_to_world_points
 from vnav.cone import TRAFFIC_CONE
-from vnav.methods import METHOD_NAMES, METHODS, NAIVE, PREFERENCE, method
+from vnav.methods import METHOD_NAMES, METHODS, NAIVE, PREFERENCE, active_methods, method
 from vnav.uncertainty import nees_band
 
 if TYPE_CHECKING:
@@ -564,13 +564,19 @@ def _depth_scale_m(result: RunResult, depth_p95_m: list[float]) -> float:
     return DEPTH_SCALE_STEP_M * float(np.ceil(top_m / DEPTH_SCALE_STEP_M))
 
 
+def _names() -> list[str]:
+    """The run's methods' names: the built-ins', then any user's function's (``vnav.plugin``),
+    whose estimates, error segments and error plots are drawn as a built-in's."""
+    return [m.name for m in active_methods()]
+
+
 def _error_tops_m(result: RunResult, newest_pose: bool = False) -> dict[str, float | None]:
     """Top of each method's error plot: a little above its largest error or bound (so the
     grey bound stays in view), or None if the method gave no estimate; and of the range plot
     (key ``entity.RANGE``). With ``newest_pose`` the ``NEWEST_POSE_METHOD`` plot also holds
     the newest-pose estimate's errors."""
     tops: dict[str, float | None] = {}
-    for m in METHODS:
+    for m in active_methods():  # a user's function too (vnav.plugin)
         errors = result.errors(m.name)
         if newest_pose and m.name == NEWEST_POSE_METHOD:
             errors = np.concatenate([errors, result.latest_pose_errors()[0]])
@@ -825,8 +831,8 @@ def _log_world_contents(rec: rr.RecordingStream, spec: ScenarioSpec, scenery: Sc
         entity.NAIVE_OFFSET,
         entity.DEPTH_CLOUD,
     ]
-    world_paths += [entity.estimate(m) for m in METHOD_NAMES]
-    world_paths += [entity.error_segment(m) for m in METHOD_NAMES]
+    world_paths += [entity.estimate(m) for m in _names()]
+    world_paths += [entity.error_segment(m) for m in _names()]
     world_paths += [entity.ellipsoid(m) for m in PREFERENCE]
     for path in world_paths:
         _in_frame(rec, path, FRAME.WORLD)
@@ -867,7 +873,7 @@ def _log_pins(rec: rr.RecordingStream, cones_w: np.ndarray) -> None:
 
 def _log_styles(rec: rr.RecordingStream) -> None:
     """Colours, names and sizes, logged once: per-tick rows carry only positions and values."""
-    for m in METHODS:
+    for m in active_methods():
         rec.log(
             entity.error(m.name),
             rr.SeriesLines(colors=[m.color_rgb], names=[f"{m.name} error"]),
@@ -888,6 +894,8 @@ def _log_styles(rec: rr.RecordingStream) -> None:
             rr.LineStrips3D.from_fields(colors=[m.color_rgb], radii=LINE_UI_POINTS),
             static=True,
         )
+        if m.images == "user":
+            continue  # a user's function claims no covariance: no NEES, no ellipsoid
         rec.log(
             entity.nees(m.name),
             rr.SeriesLines(colors=[m.color_rgb], names=[f"{m.name} NEES"], widths=[0.7]),
@@ -1189,7 +1197,7 @@ def _strips(segments: list[list[np.ndarray]]) -> rr.ComponentColumnList:
 
 def _send_estimates(send: _Sender, rows: list[_Buffered], cones_w: np.ndarray) -> None:
     """Per method: its estimates, and a segment from the matched true cone to each."""
-    for name in METHOD_NAMES:
+    for name in _names():
         points = [r.record.estimates_w(name) for r in rows]
         send(
             entity.estimate(name),
@@ -1280,7 +1288,7 @@ def nees_off_top(values: Sequence[float]) -> list[float]:
 def _send_errors(send: _Sender, rows: list[_Buffered]) -> None:
     """Per method its mean error and the contract's bound at the matched ranges (NaN, drawn
     as a gap, at a tick where the method matched nothing); the mean range of matched cones."""
-    for m in METHODS:
+    for m in active_methods():
         errors, allowed = [], []
         for r in rows:
             scored = [d for d in r.record.detections if m.name in d.errors_m]

@@ -33,7 +33,7 @@ from scenarios.scenario.schema import VIEW_NAMES
 from scenarios.scenario.spec import ScenarioSpec
 from vnav import se3, so3
 from vnav.cone import TRAFFIC_CONE
-from vnav.methods import METHODS, NAIVE, NEWEST_POSE_METHOD, PREFERENCE, method
+from vnav.methods import METHODS, NAIVE, NEWEST_POSE_METHOD, PREFERENCE, active_methods, method
 
 if TYPE_CHECKING:
     from scenarios.run.records import RunResult
@@ -81,44 +81,50 @@ __all__ = [
 ]
 
 
+def _part(method: str) -> str:
+    """A method's name as an entity path's part: ``user:fn`` (``vnav.plugin``) as ``user_fn``,
+    since Rerun escapes a colon in a path (``user\\:fn``); a built-in's name as it is."""
+    return method.replace(":", "_")
+
+
 def _error(method: str) -> str:
-    return f"metrics/error/{method}"
+    return f"metrics/error/{_part(method)}"
 
 
 def _allowed(method: str) -> str:
-    return f"metrics/allowed/{method}"
+    return f"metrics/allowed/{_part(method)}"
 
 
 def _error_recovered(method: str) -> str:
-    return f"metrics/error_recovered_mount/{method}"
+    return f"metrics/error_recovered_mount/{_part(method)}"
 
 
 def _estimate(method: str) -> str:
-    return f"world/cones/estimate/{method}"
+    return f"world/cones/estimate/{_part(method)}"
 
 
 def _error_segment(method: str) -> str:
-    return f"world/cones/error/{method}"
+    return f"world/cones/error/{_part(method)}"
 
 
 def _ellipsoid(method: str) -> str:
-    return f"world/cones/uncertainty/{method}"
+    return f"world/cones/uncertainty/{_part(method)}"
 
 
 def _nees(method: str) -> str:
-    return f"metrics/nees/{method}"
+    return f"metrics/nees/{_part(method)}"
 
 
 def _nees_mean(method: str) -> str:
-    return f"metrics/nees_mean/{method}"
+    return f"metrics/nees_mean/{_part(method)}"
 
 
 def _nees_band(method: str) -> str:
-    return f"metrics/nees_band/{method}"
+    return f"metrics/nees_band/{_part(method)}"
 
 
 def _nees_clipped(method: str) -> str:
-    return f"metrics/nees_clipped/{method}"
+    return f"metrics/nees_clipped/{_part(method)}"
 
 
 def _cone0(frame_name: str) -> str:
@@ -276,11 +282,11 @@ AXES_NOTE = "axes x y z: red green blue; body thick, camera thin"
 
 def legend_entries(*, latency: bool = False, mounts: bool = False) -> list[list[LegendEntry]]:
     """Every colour of the 3D views, in the legend's two rows (``entity.LEGEND``): the truth
-    and each method's estimate (``vnav.methods.METHODS``), with ``latency`` the newest-pose
+    and each method's estimate (``vnav.methods.active_methods``), with ``latency`` the newest-pose
     estimate and with ``mounts`` the declared and recovered camera mounts; then the rays, the
     cones' pins, the depth cloud and the flown path (and ``AXES_NOTE``)."""
     estimates = [LegendEntry("truth", TRUTH_COLOR, "dot")]
-    estimates += [LegendEntry(m.name, m.color_rgb, "dot") for m in METHODS]
+    estimates += [LegendEntry(m.name, m.color_rgb, "dot") for m in active_methods()]
     if latency:
         estimates.append(LegendEntry("newest pose", NEWEST_POSE_COLOR, "dot"))
     if mounts:
@@ -770,7 +776,10 @@ def _lower_tabs(
     newest pose's, and the pose stream around the time cursor with each image's exposure and
     arrival; the other methods' errors move to a tab of their own after ``VIEWS``.
     """
-    others = [name for name in PREFERENCE if name != NEWEST_POSE_METHOD]
+    # A user's function (vnav.plugin) is plotted after the built-ins it is judged beside.
+    users = [m.name for m in active_methods() if m.images == "user"]
+    checked = [*PREFERENCE, *users]
+    others = [name for name in checked if name != NEWEST_POSE_METHOD]
     extra = []
     if latency:
         errors = rrb.Vertical(
@@ -791,13 +800,10 @@ def _lower_tabs(
         )
     else:
         errors = rrb.Vertical(
-            *[
-                _error_plot(name, error_top_m, recovered_mount=recovered_mount)
-                for name in PREFERENCE
-            ],
+            *[_error_plot(name, error_top_m, recovered_mount=recovered_mount) for name in checked],
             # A method without an estimate keeps only its title ("no estimate in this run"):
             # the others get the height their axes need to be read.
-            row_shares=[1 if _gave_none(error_top_m, name) else 4 for name in PREFERENCE],
+            row_shares=[1 if _gave_none(error_top_m, name) else 4 for name in checked],
             name="position error",
         )
     tabs = {
@@ -908,7 +914,7 @@ def describe(spec: ScenarioSpec, seed: int, judged: Sequence[CheckResult] | None
         lines += [checks_text(judged), ""]
     estimates = ", ".join(
         f"**{m.name}** ({m.color_name}{': ' + m.depth_from if m.bound is None else ''})"
-        for m in METHODS
+        for m in active_methods()
     )
     lines += [
         f"- flight: {spec.flight.mode}, {spec.end_s:g} s simulated, camera at "

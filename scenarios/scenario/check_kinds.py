@@ -14,7 +14,7 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass
 
-from vnav.methods import METHODS, PREFERENCE, method
+from vnav.methods import METHODS, PREFERENCE, active_methods, method
 
 __all__ = ["KINDS", "Check", "CheckKind", "Unit", "default_checks"]
 
@@ -247,4 +247,14 @@ def default_checks() -> tuple[Check, ...]:
             if m.bound
         ),
         Check("detection_rate", 0.95, name="cones in view detected", default=True),
+    )
+
+
+def user_checks() -> tuple[Check, ...]:
+    """The bound of each user function the run judges (``vnav.plugin``, within
+    ``vnav.methods.extended``): ``depth_image``'s, a ``default`` check like the built-ins'."""
+    return tuple(
+        Check("error_bound", 1.0, m.name, f"{m.name} {m.promise}", default=True)
+        for m in active_methods()
+        if m.images == "user"
     )
