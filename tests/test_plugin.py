@@ -112,6 +112,7 @@ def test_reference_solution_passes_with_depth_images_errors(tmp_path):
     assert user["by_range"] == depth["by_range"]
     assert _check(report, "user:reference_estimate")["outcome"] == "passed"
     assert report["estimators"]["user:reference_estimate"]["failures"] == {}
+    assert report["estimators"]["user:reference_estimate"]["diagnosis"]["verdict"] == "correct"
     assert active_methods() is METHODS  # the extension ends with the run
 
 
@@ -157,6 +158,11 @@ def test_transposed_rotation_fails_its_check(tmp_path, user_file, monkeypatch, c
     # Independent of the check: the worst error is far beyond 1% of range.
     assert report["methods"]["user:transposed"]["position_error_m"]["max"] > 0.5
     assert _check(report, "depth_image")["outcome"] == "passed"  # the built-ins unaffected
+    # The doctor (vnav.diagnose) names the mistake, in the report and under the table.
+    diagnosis = report["estimators"]["user:transposed"]["diagnosis"]
+    assert (diagnosis["verdict"], diagnosis["mistake"]) == ("mistake", "rotation transposed")
+    assert diagnosis["residual_m"] < 1e-9 < 0.5 < diagnosis["correct_residual_m"]
+    assert "user:transposed: " in printed and "rotation transposed" in printed
 
 
 def test_failing_functions_are_reported_and_the_run_goes_on(tmp_path, user_file, capsys):

@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from vnav import quat, so3
+from vnav.diagnose import Diagnosis, diagnose
 from vnav.estimators import NoEstimate
 from vnav.methods import Method, method
 from vnav.observation import Observation
@@ -245,16 +246,29 @@ class PluginEstimator:
     def __init__(self, fn: Callable[[PluginObservation], Any]) -> None:
         self.fn = fn
         self.failures = Failures()
+        self._seen: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
 
     def reset(self) -> None:
-        """Forget the previous run's failures."""
+        """Forget the previous run's failures and estimates."""
         self.failures = Failures()
+        self._seen = []
+
+    def diagnosis(self) -> Diagnosis | None:
+        """The frame-bug doctor (``vnav.diagnose``) on every estimate the function gave this
+        run, from the observations it was given; None before any. The observation's ``p_c``
+        and poses reproduce the correct chain exactly, sensor noise or not, so the default
+        tolerance holds."""
+        if not self._seen:
+            return None
+        p_c, T_w_b, T_b_c, p_w = (np.array(column) for column in zip(*self._seen, strict=True))
+        return diagnose(p_c, T_w_b, T_b_c, p_w)
 
     def estimate(self, obs: Observation, p_w_depth: np.ndarray, t_s: float) -> Any:
         """``fn``'s estimate, (3,) float64, or ``NoEstimate.FUNCTION_NONE`` / ``FUNCTION_ERROR``."""
         self.failures.calls += 1
+        given = observation_for(obs, p_w_depth, t_s)
         try:
-            returned = self.fn(observation_for(obs, p_w_depth, t_s))
+            returned = self.fn(given)
         except (Exception, SystemExit) as exc:  # the user's code: its failure, even an exit()
             self.failures.add(Failure.RAISED, f"{type(exc).__name__}: {exc}", t_s)
             return NoEstimate.FUNCTION_ERROR
@@ -274,6 +288,7 @@ class PluginEstimator:
         if not all(math.isfinite(v) for v in p_w):
             self.failures.add(Failure.NOT_FINITE, f"returned {p_w.tolist()}", t_s)
             return NoEstimate.FUNCTION_ERROR
+        self._seen.append((given.p_c, given.T_w_b, given.T_b_c, p_w.copy()))
         return p_w.copy()
 
     def covariance(self, obs: Observation, p_w: np.ndarray) -> np.ndarray:

@@ -227,6 +227,9 @@ def _estimator_lines(estimators: dict) -> list[str]:
     each kind's count, first camera tick and first message."""
     lines = []
     for name, entry in estimators.items():
+        diagnosis = entry.get("diagnosis")
+        if diagnosis is not None and diagnosis["verdict"] != "correct":
+            lines += _wrap(f"{name}: {diagnosis['message']}", 4, "    ")
         for kind, f in entry["failures"].items():
             ticks = f["ticks"]
             where = f"tick {ticks[0]}" + (f" and {len(ticks) - 1} more" if len(ticks) > 1 else "")

@@ -53,8 +53,10 @@ gives. ``timing_s`` adds ``calibrate`` (the calibration and that second estimate
 (the checks), ``total`` (the whole run, from its start to its report, wall seconds) and
 ``total_cpu`` (the process's CPU time, user and system, over the same span).
 Also in 8, only in the report of a run with a user's function (``vnav.plugin``): ``estimators``,
-per function its spec, calls, how many returned None and its failures by kind (count, first
-message, camera ticks); its statistics are under ``methods`` as a built-in's."""
+per function its spec, calls, how many returned None, its failures by kind (count, first
+message, camera ticks) and the frame-bug doctor's ``diagnosis`` of its estimates
+(``vnav.diagnose.Diagnosis.to_dict``, None without any); its statistics are under ``methods``
+as a built-in's."""
 
 
 def _calibration(run: RunResult) -> dict[str, Any] | None:
@@ -155,10 +157,12 @@ def estimator_summary(run: RunResult, m: Method) -> dict[str, Any]:
     None, and each kind of failure with its count, first message and the camera ticks."""
     f = m.estimator.failures
     tick_of = {(t.t_s if t.timing is None else t.timing.exposure_pose_s): t.tick for t in run.ticks}
+    diagnosis = m.estimator.diagnosis()
     return {
         "spec": m.implementation,
         "calls": f.calls,
         "returned_none": f.returned_none,
+        "diagnosis": None if diagnosis is None else diagnosis.to_dict(),
         "failures": {
             kind.value: {
                 "count": f.count[kind],
