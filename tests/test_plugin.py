@@ -357,3 +357,32 @@ def test_a_module_in_the_current_directory_is_found(tmp_path, monkeypatch):
     monkeypatch.delitem(sys.modules, "chain_in_cwd_for_vnav_test", raising=False)
     fn = load_estimator("chain_in_cwd_for_vnav_test:transposed")
     assert fn.__name__ == "transposed" and fn.__module__ == "chain_in_cwd_for_vnav_test"
+
+
+def test_extending_the_methods_holds_for_its_own_thread_only():
+    """Inside one thread's ``extended`` block another thread still sees the built-ins, and a
+    block of its own there adds only its method."""
+    import threading
+
+    mine = plugin_method("vnav.plugin:reference_estimate")
+    inside, outside = threading.Event(), threading.Event()
+    seen = {}
+
+    def other() -> None:
+        inside.wait(timeout=30)
+        seen["plain"] = active_methods()
+        other_method = dataclasses.replace(mine, name="user:other")
+        with extended([other_method]) as methods:
+            seen["own"] = [m.name for m in methods]
+        outside.set()
+
+    thread = threading.Thread(target=other)
+    thread.start()
+    with extended([mine]):
+        inside.set()
+        assert outside.wait(timeout=30)
+        assert [m.name for m in active_methods()][-1] == mine.name
+    thread.join(timeout=30)
+    assert seen["plain"] is METHODS
+    assert seen["own"] == [*(m.name for m in METHODS), "user:other"]
+    assert active_methods() is METHODS

@@ -36,6 +36,7 @@ least 12 px tall, 2 to 25 m away).
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import functools
 import importlib
 from collections.abc import Iterator, Sequence
@@ -305,44 +306,47 @@ def method(name: str) -> Method:
     ValueError
         If no method has that name (the message lists the valid ones).
     """
-    found = _BY_NAME.get(name) or next((m for m in _ACTIVE if m.name == name), None)
+    found = _BY_NAME.get(name) or next((m for m in active_methods() if m.name == name), None)
     if found is None:
-        valid = [m.name for m in _ACTIVE]
+        valid = [m.name for m in active_methods()]
         raise ValueError(f"unknown method {name!r}; valid: {valid}")
     return found
 
 
-_ACTIVE: tuple[Method, ...] = METHODS
+_ACTIVE: contextvars.ContextVar[tuple[Method, ...]] = contextvars.ContextVar(
+    "vnav_active_methods", default=METHODS
+)
+"""The active methods, per thread (a context variable): a run extending them in one thread
+leaves another thread's ``active_methods()`` as it was."""
 
 
 def active_methods() -> tuple[Method, ...]:
-    """The methods of the run under way: ``METHODS``, then those ``extended`` added (the same
-    tuple object for the whole ``with`` block)."""
-    return _ACTIVE
+    """The methods of the run under way in this thread: ``METHODS``, then those ``extended``
+    added (the same tuple object for the whole ``with`` block)."""
+    return _ACTIVE.get()
 
 
 @contextlib.contextmanager
 def extended(extra: Sequence[Method]) -> Iterator[tuple[Method, ...]]:
     """``METHODS`` and ``extra`` as the active methods within a ``with`` block (one run's
-    user functions, ``vnav.plugin``); the previous ones again after it. Not thread-safe: one
-    run at a time per process, as ``vnav-demo run`` and a sweep's workers run.
+    user functions, ``vnav.plugin``); the previous ones again after it. The change holds for
+    this thread only (``_ACTIVE``): runs in two threads each see their own methods.
 
     Raises
     ------
     ValueError
         If a name in ``extra`` is already a method's or appears twice.
     """
-    global _ACTIVE
+    active = _ACTIVE.get()
     if not extra:  # nothing to add: the active tuple itself, as without the block
-        yield _ACTIVE
+        yield active
         return
-    names = [m.name for m in _ACTIVE] + [m.name for m in extra]
+    names = [m.name for m in active] + [m.name for m in extra]
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
         raise ValueError(f"two methods are named {twice[0]!r}")
-    previous = _ACTIVE
-    _ACTIVE = (*previous, *extra)
+    token = _ACTIVE.set((*active, *extra))
     try:
-        yield _ACTIVE
+        yield _ACTIVE.get()
     finally:
-        _ACTIVE = previous
+        _ACTIVE.reset(token)
