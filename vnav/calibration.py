@@ -150,29 +150,9 @@ def calibrate_camera(
         Too few matched apexes or images, or a mount or offset the flight does not determine
         (its standard error above ``MAX_STD_*``): the message names what is missing.
     """
-    stamps = np.asarray(pose_stamps_s, dtype=np.float64)
-    T_w_b = se3.check_transform(T_w_b, "T_w_b")
-    if stamps.ndim != 1 or T_w_b.shape != (stamps.size, 4, 4) or stamps.size < 2:
-        raise ValueError("pose_stamps_s (M,) and T_w_b (M, 4, 4) must match, M >= 2")
-    t_cam = np.asarray(image_stamps_cam_s, dtype=np.float64)
-    if t_cam.ndim != 1 or len(apex_uv) != t_cam.size:
-        raise ValueError("image_stamps_cam_s (N,) and apex_uv (N arrays) must match")
-    P = np.asarray(apex_w, dtype=np.float64).reshape(-1, 3)
-    # Checked here, by name: past this point NaN reaches OpenCV's PnP (a cv2.error) or the
-    # pose buffer's interval tests (which NaN passes silently).
-    for name, values in (("pose_stamps_s", stamps), ("image_stamps_cam_s", t_cam), ("apex_w", P)):
-        if not np.isfinite(values).all():
-            raise ValueError(f"{name} must be finite; it holds NaN or inf")
-    for i, uv in enumerate(apex_uv):
-        uv = np.asarray(uv, dtype=np.float64)
-        if uv.size and (uv.ndim != 2 or uv.shape[1] != 2):
-            raise ValueError(f"apex_uv[{i}] must have shape (K, 2), got {uv.shape}")
-        if not np.isfinite(uv).all():
-            raise ValueError(f"apex_uv[{i}] must be finite; it holds NaN or inf")
-    if isinstance(max_offset_s, bool) or not (
-        isinstance(max_offset_s, int | float) and 0.0 <= max_offset_s < math.inf
-    ):
-        raise ValueError(f"max_offset_s must be a finite number >= 0, got {max_offset_s!r}")
+    stamps, T_w_b, t_cam, P = _checked(
+        pose_stamps_s, T_w_b, image_stamps_cam_s, apex_uv, apex_w, max_offset_s
+    )
     T_b_c_guess = se3.check_pose(T_b_c_guess, "T_b_c_guess")
     buffer = FrameBuffer(cache_s=max(float(stamps[-1] - stamps[0]) + 1.0, 1.0))
     buffer.set_transform("world", "body", stamps, T_w_b)
@@ -205,6 +185,37 @@ def calibrate_camera(
         problem.keep(keep)
         x = _levenberg_marquardt(problem.residuals, x)
     return problem.result(x)
+
+
+def _checked(
+    pose_stamps_s, T_w_b, image_stamps_cam_s, apex_uv, apex_w, max_offset_s
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``calibrate_camera``'s inputs validated (its Raises): the stamps (M,), the poses
+    (M, 4, 4), the image stamps (N,) and the map (C, 3) as float64 arrays."""
+    stamps = np.asarray(pose_stamps_s, dtype=np.float64)
+    T_w_b = se3.check_transform(T_w_b, "T_w_b")
+    if stamps.ndim != 1 or T_w_b.shape != (stamps.size, 4, 4) or stamps.size < 2:
+        raise ValueError("pose_stamps_s (M,) and T_w_b (M, 4, 4) must match, M >= 2")
+    t_cam = np.asarray(image_stamps_cam_s, dtype=np.float64)
+    if t_cam.ndim != 1 or len(apex_uv) != t_cam.size:
+        raise ValueError("image_stamps_cam_s (N,) and apex_uv (N arrays) must match")
+    P = np.asarray(apex_w, dtype=np.float64).reshape(-1, 3)
+    # Checked here, by name: past this point NaN reaches OpenCV's PnP (a cv2.error) or the
+    # pose buffer's interval tests (which NaN passes silently).
+    for name, values in (("pose_stamps_s", stamps), ("image_stamps_cam_s", t_cam), ("apex_w", P)):
+        if not np.isfinite(values).all():
+            raise ValueError(f"{name} must be finite; it holds NaN or inf")
+    for i, uv in enumerate(apex_uv):
+        uv = np.asarray(uv, dtype=np.float64)
+        if uv.size and (uv.ndim != 2 or uv.shape[1] != 2):
+            raise ValueError(f"apex_uv[{i}] must have shape (K, 2), got {uv.shape}")
+        if not np.isfinite(uv).all():
+            raise ValueError(f"apex_uv[{i}] must be finite; it holds NaN or inf")
+    if isinstance(max_offset_s, bool) or not (
+        isinstance(max_offset_s, int | float) and 0.0 <= max_offset_s < math.inf
+    ):
+        raise ValueError(f"max_offset_s must be a finite number >= 0, got {max_offset_s!r}")
+    return stamps, T_w_b, t_cam, P
 
 
 class _Problem:

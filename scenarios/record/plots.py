@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from scenarios.run.records import RunResult
-from vnav.methods import CONTRACT_DOMAIN, active_methods
+from vnav.methods import CONTRACT_DOMAIN, Method, active_methods
 
 if TYPE_CHECKING:  # the viewer imports Rerun; a plot needs only the entries' fields
     from scenarios.record.viewer import LegendEntry
@@ -82,44 +82,7 @@ def error_against_range_png(result: RunResult, recovered: RunResult | None = Non
     for ax in axes[len(methods) :]:
         ax.set_visible(False)
     for ax, m in zip(axes, methods, strict=False):
-        _style(ax)
-        color = np.array(m.color_rgb) / 255.0
-        inside_r = result.ranges_for(m.name, contract_only=True)
-        inside_e = result.errors(m.name, contract_only=True)
-        all_r, all_e = result.ranges_for(m.name), result.errors(m.name)
-        ax.scatter(all_r, all_e, s=10, facecolors="none", edgecolors=[color], linewidths=0.7)
-        ax.scatter(inside_r, inside_e, s=10, color=[color])
-        if recovered is not None:
-            ax.scatter(
-                recovered.ranges_for(m.name),
-                recovered.errors(m.name),
-                s=9,
-                marker="x",
-                color=[RECOVERED_MOUNT_COLOR],
-                linewidths=0.6,
-            )
-        domain = (CONTRACT_DOMAIN.min_range_m, CONTRACT_DOMAIN.max_range_m)
-        ax.axvspan(*domain, color="#ffffff", alpha=0.04, linewidth=0)
-        top_r = max(float(all_r.max()) if all_r.size else 0.0, 1.0) * 1.1
-        if m.bound is not None:
-            r = np.linspace(0.0, top_r, 200)
-            ax.plot(r, m.bound.allowed_m(r), color="#9a9a9a", linewidth=1.0)
-        ax.set_xlim(0.0, top_r)
-        ax.set_ylim(bottom=0.0)
-        promise = m.bound.text if m.bound is not None else "never checked"
-        ax.set_title(f"{m.name}: {promise}", fontsize=8.5)
-        ax.set_xlabel("range (m)", fontsize=8)
-        ax.set_ylabel("error (m)", fontsize=8)
-        if not all_e.size:
-            ax.text(
-                0.5,
-                0.5,
-                "no matched estimate",
-                transform=ax.transAxes,
-                ha="center",
-                color=_FOREGROUND,
-                fontsize=9,
-            )
+        _range_panel(ax, m, result, recovered)
     title = "error against range (filled: inside the contract's domain; grey: the bound)"
     if recovered is not None:
         title = title[:-1] + "; cyan crosses: with the recovered mount)"
@@ -131,6 +94,48 @@ def error_against_range_png(result: RunResult, recovered: RunResult | None = Non
         va="top",
     )
     return _png(fig)
+
+
+def _range_panel(ax, m: Method, result: RunResult, recovered: RunResult | None) -> None:
+    """``error_against_range_png``'s panel of method ``m``."""
+    _style(ax)
+    color = np.array(m.color_rgb) / 255.0
+    inside_r = result.ranges_for(m.name, contract_only=True)
+    inside_e = result.errors(m.name, contract_only=True)
+    all_r, all_e = result.ranges_for(m.name), result.errors(m.name)
+    ax.scatter(all_r, all_e, s=10, facecolors="none", edgecolors=[color], linewidths=0.7)
+    ax.scatter(inside_r, inside_e, s=10, color=[color])
+    if recovered is not None:
+        ax.scatter(
+            recovered.ranges_for(m.name),
+            recovered.errors(m.name),
+            s=9,
+            marker="x",
+            color=[RECOVERED_MOUNT_COLOR],
+            linewidths=0.6,
+        )
+    domain = (CONTRACT_DOMAIN.min_range_m, CONTRACT_DOMAIN.max_range_m)
+    ax.axvspan(*domain, color="#ffffff", alpha=0.04, linewidth=0)
+    top_r = max(float(all_r.max()) if all_r.size else 0.0, 1.0) * 1.1
+    if m.bound is not None:
+        r = np.linspace(0.0, top_r, 200)
+        ax.plot(r, m.bound.allowed_m(r), color="#9a9a9a", linewidth=1.0)
+    ax.set_xlim(0.0, top_r)
+    ax.set_ylim(bottom=0.0)
+    promise = m.bound.text if m.bound is not None else "never checked"
+    ax.set_title(f"{m.name}: {promise}", fontsize=8.5)
+    ax.set_xlabel("range (m)", fontsize=8)
+    ax.set_ylabel("error (m)", fontsize=8)
+    if not all_e.size:
+        ax.text(
+            0.5,
+            0.5,
+            "no matched estimate",
+            transform=ax.transAxes,
+            ha="center",
+            color=_FOREGROUND,
+            fontsize=9,
+        )
 
 
 def depth_scale_png(depth_max_m: float, colormap: str = "viridis") -> bytes:
