@@ -422,15 +422,21 @@ class Recording:
             _log_mounts(rec, result.calibration)
             _send_recovered_mount_errors(rec, result)
         self._send_waiting_state(result)
+        self._log_depth_scale_and_legend(result)
+        self._send_layout(result, judged)
+        self._close()
+
+    def _log_depth_scale_and_legend(self, result: RunResult) -> None:
+        """The depth image's colour range and its scale bar, and the 3D views' legend."""
         depth_max_m = _depth_scale_m(result, self._depth_p95_m)
-        rec.log(
+        self.rec.log(
             entity.DEPTH,
             rr.EncodedDepthImage.from_fields(
                 colormap=DEPTH_COLORMAP, depth_range=[0.0, DEPTH_METER * float(depth_max_m)]
             ),
             static=True,
         )
-        rec.log(
+        self.rec.log(
             entity.DEPTH_SCALE,
             rr.EncodedImage(
                 contents=depth_scale_png(float(depth_max_m), DEPTH_COLORMAP),
@@ -439,7 +445,7 @@ class Recording:
             static=True,
         )
         mounts = result.calibration is not None
-        rec.log(
+        self.rec.log(
             entity.LEGEND,
             rr.EncodedImage(
                 contents=legend_png(
@@ -449,18 +455,22 @@ class Recording:
             ),
             static=True,
         )
+
+    def _send_layout(self, result: RunResult, judged: Sequence[CheckResult]) -> None:
+        """The instant the 3D views are framed for (``entity.MOMENT``) and the blueprint."""
+        mounts = result.calibration is not None
         shown = result.ticks[shown_tick(self._spec, result)] if result.ticks else None
         if shown is not None:
             # Where the 3D views are framed: a screenshot (scripts/screenshots.sh) moves the
             # viewer's time cursor here.
-            rec.log(
+            self.rec.log(
                 entity.MOMENT,
                 rr.AnyValues(camera_tick=shown.tick, sim_time_s=shown.t_s),
                 static=True,
             )
         eye_w, look_target_w = eye_for(self._spec, result)
         close_up_cone_w = self._spec.scene.cones_w[0] if self._spec.close_up == "cone" else None
-        rec.send_blueprint(
+        self.rec.send_blueprint(
             blueprint(
                 eye_w,
                 look_target_w,
@@ -474,7 +484,6 @@ class Recording:
                 mounts_T_w_c=shown.T_w_b @ shown.T_b_c if mounts and shown is not None else None,
             )
         )
-        self._close()
 
     def _send_waiting_state(self, result: RunResult) -> None:
         """The state panel of the ticks that waited for the run's end, with the mounts block
