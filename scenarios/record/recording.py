@@ -140,7 +140,15 @@ from scenarios.scenario.spec import ScenarioSpec
 from vnav import quat, so3
 from vnav.camera import PinholeCamera, depth_to_world_points
 from vnav.cone import TRAFFIC_CONE
-from vnav.methods import METHOD_NAMES, METHODS, NAIVE, PREFERENCE, active_methods, method
+from vnav.methods import (
+    METHOD_NAMES,
+    METHODS,
+    NAIVE,
+    PREFERENCE,
+    Method,
+    active_methods,
+    method,
+)
 from vnav.uncertainty import nees_band
 
 if TYPE_CHECKING:
@@ -903,45 +911,8 @@ def _log_styles(rec: rr.RecordingStream) -> None:
             rr.LineStrips3D.from_fields(colors=[m.color_rgb], radii=LINE_UI_POINTS),
             static=True,
         )
-        if m.images == "user":
-            continue  # a user's function claims no covariance: no NEES, no ellipsoid
-        rec.log(
-            entity.nees(m.name),
-            rr.SeriesLines(colors=[m.color_rgb], names=[f"{m.name} NEES"], widths=[0.7]),
-            static=True,
-        )
-        rec.log(
-            entity.nees_mean(m.name),
-            rr.SeriesLines(colors=[m.color_rgb], names=[f"{m.name} mean NEES"], widths=[2.5]),
-            static=True,
-        )
-        rec.log(
-            entity.nees_clipped(m.name),
-            rr.SeriesPoints(
-                colors=[m.color_rgb],
-                markers=["up"],
-                marker_sizes=[6.0],
-                names=[f"{m.name} NEES above {NEES_TOP:g}"],
-            ),
-            static=True,
-        )
-        rec.log(
-            entity.nees_band(m.name),
-            rr.SeriesLines(
-                colors=[(160, 160, 160)] * 2,
-                names=["95% band, low", "95% band, high"],
-                widths=[1.0, 1.0],
-            ),
-            static=True,
-        )
-        if m.bound is not None:
-            rec.log(
-                entity.ellipsoid(m.name),
-                rr.Ellipsoids3D.from_fields(
-                    colors=[m.color_rgb], line_radii=ELLIPSOID_LINE, fill_mode="MajorWireframe"
-                ),
-                static=True,
-            )
+        if m.images != "user":  # a user's function claims no covariance: no NEES, no ellipsoid
+            _log_uncertainty_styles(rec, m)
     series = {
         entity.RANGE: ([(200, 200, 200)], ["range"]),
         entity.RPY: (AXIS_COLORS, ["roll", "pitch", "yaw"]),
@@ -953,6 +924,48 @@ def _log_styles(rec: rr.RecordingStream) -> None:
         rec.log(path, rr.SeriesLines(colors=colors, names=names), static=True)
     _log_state_lanes(rec)
     _log_3d_styles(rec)
+
+
+def _log_uncertainty_styles(rec: rr.RecordingStream, m: Method) -> None:
+    """Method ``m``'s NEES series (each, mean, the marks above the plot, the band) and its
+    ellipsoids, styled once."""
+    rec.log(
+        entity.nees(m.name),
+        rr.SeriesLines(colors=[m.color_rgb], names=[f"{m.name} NEES"], widths=[0.7]),
+        static=True,
+    )
+    rec.log(
+        entity.nees_mean(m.name),
+        rr.SeriesLines(colors=[m.color_rgb], names=[f"{m.name} mean NEES"], widths=[2.5]),
+        static=True,
+    )
+    rec.log(
+        entity.nees_clipped(m.name),
+        rr.SeriesPoints(
+            colors=[m.color_rgb],
+            markers=["up"],
+            marker_sizes=[6.0],
+            names=[f"{m.name} NEES above {NEES_TOP:g}"],
+        ),
+        static=True,
+    )
+    rec.log(
+        entity.nees_band(m.name),
+        rr.SeriesLines(
+            colors=[(160, 160, 160)] * 2,
+            names=["95% band, low", "95% band, high"],
+            widths=[1.0, 1.0],
+        ),
+        static=True,
+    )
+    if m.bound is not None:
+        rec.log(
+            entity.ellipsoid(m.name),
+            rr.Ellipsoids3D.from_fields(
+                colors=[m.color_rgb], line_radii=ELLIPSOID_LINE, fill_mode="MajorWireframe"
+            ),
+            static=True,
+        )
 
 
 def _log_state_lanes(rec: rr.RecordingStream) -> None:
