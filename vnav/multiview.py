@@ -458,12 +458,7 @@ def _near_projections(
     camera: PinholeCamera, T_w_c: np.ndarray, P: np.ndarray, px: np.ndarray
 ) -> list[list[int]]:
     """For each pixel, the map points that ``T_w_c`` projects within ``GUESS_GATE_PX`` of it."""
-    T_c_w = se3.invert(T_w_c)
-    p_c = P @ T_c_w[:3, :3].T + T_c_w[:3, 3]
-    proj = np.full((len(P), 2), np.inf)
-    front = p_c[:, 2] > 0.0
-    proj[front] = camera.project(p_c[front])
-    dist = np.linalg.norm(px[:, None, :] - proj[None, :, :], axis=2)
+    dist = _pixel_distances(camera, T_w_c, P, px)
     return [np.flatnonzero(row <= GUESS_GATE_PX).tolist() for row in dist]
 
 
@@ -499,6 +494,19 @@ def _best_choice(
     return result, best[2]
 
 
+def _pixel_distances(
+    camera: PinholeCamera, T_w_c: np.ndarray, p_w: np.ndarray, uv: np.ndarray
+) -> np.ndarray:
+    """``(len(uv), len(p_w))`` distances, px, from each pixel to each map point as the camera
+    at ``T_w_c`` sees it; inf for a point behind the camera."""
+    T_c_w = se3.invert(T_w_c)
+    p_c = p_w @ T_c_w[:3, :3].T + T_c_w[:3, 3]
+    front = p_c[:, 2] > 0.0
+    proj = np.full((len(p_w), 2), np.inf)
+    proj[front] = camera.project(p_c[front])
+    return np.linalg.norm(uv[:, None, :] - proj[None, :, :], axis=2)
+
+
 def _match(
     camera: PinholeCamera,
     T_w_c: np.ndarray,
@@ -507,12 +515,7 @@ def _match(
     gate_px: float = MATCH_GATE_PX,
 ) -> dict[int, tuple[float, int]]:
     """Detection index -> (pixel distance, cone index): mutual nearest within the gate."""
-    T_c_w = se3.invert(T_w_c)
-    p_c = apex_w @ T_c_w[:3, :3].T + T_c_w[:3, 3]
-    front = p_c[:, 2] > 0.0
-    proj = np.full((len(apex_w), 2), np.inf)
-    proj[front] = camera.project(p_c[front])
-    dist = np.linalg.norm(uv[:, None, :] - proj[None, :, :], axis=2)  # (detections, cones)
+    dist = _pixel_distances(camera, T_w_c, apex_w, uv)  # (detections, cones)
     out = {}
     for k in range(len(uv)):
         c = int(np.argmin(dist[k]))
