@@ -520,3 +520,37 @@ def _latency_prediction(run: RunResult, check: Check) -> float | NoData:
             "when it arrived: no stale pose to judge"
         )
     return NoData("no matched detection has a depth_image estimate with the newest pose")
+
+
+def _navigation(run: RunResult):
+    if run.navigation is None:
+        return NoData("the flight does not navigate (flight.mode is not \"navigate\")")
+    return run.navigation
+
+
+@figure("reached_goal")
+def _reached_goal(run: RunResult, check: Check) -> float | NoData:
+    """true distance of the body from the goal when a navigating flight ends <= limit_m"""
+    nav = _navigation(run)
+    return nav if isinstance(nav, NoData) else nav.final_distance_m
+
+
+@figure("no_collision")
+def _no_collision(run: RunResult, check: Check) -> float | NoData:
+    """cones the drone touched (MuJoCo contacts) <= limit (0: none)"""
+    nav = _navigation(run)
+    return nav if isinstance(nav, NoData) else float(nav.collided)
+
+
+@figure("collision")
+def _collision(run: RunResult, check: Check) -> float | NoData:
+    """cones the drone touched (MuJoCo contacts) >= limit (1: the run must collide)"""
+    nav = _navigation(run)
+    return nav if isinstance(nav, NoData) else float(nav.collided)
+
+
+@figure("min_clearance")
+def _min_clearance(run: RunResult, check: Check) -> float | NoData:
+    """smallest true distance between the drone's and a cone's geometry >= limit_m"""
+    nav = _navigation(run)
+    return nav if isinstance(nav, NoData) else nav.min_clearance_m

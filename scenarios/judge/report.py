@@ -56,7 +56,7 @@ Also in 8, only in the report of a run with a user's function (``vnav.plugin``):
 per function its spec, calls, how many returned None, its failures by kind (count, first
 message, camera ticks) and the frame-bug doctor's ``diagnosis`` of its estimates
 (``vnav.diagnose.Diagnosis.to_dict``, None without any); its statistics are under ``methods``
-as a built-in's."""
+as a built-in's. Only in the report of a navigating flight: ``navigation`` (``navigation``)."""
 
 
 def _calibration(run: RunResult) -> dict[str, Any] | None:
@@ -141,6 +141,8 @@ def build(
         "recording": recording,
         "timing_s": {k: round(v, 4) for k, v in run.timing_s.items()},
     }
+    if run.navigation is not None:  # only a navigating flight: other reports are unchanged
+        out["navigation"] = navigation(run)
     users = [m for m in active_methods() if m.images == "user"]
     if users:  # only with a user's function: a built-in run's report is unchanged
         out["estimators"] = {m.name: estimator_summary(run, m) for m in users}
@@ -170,6 +172,37 @@ def estimator_summary(run: RunResult, m: Method) -> dict[str, Any]:
                 "ticks": sorted({tick_of.get(t_s, -1) for t_s in f.stamps_s[kind]}),
             }
             for kind in f.count
+        },
+    }
+
+
+def navigation(run: RunResult) -> dict[str, Any]:
+    """A navigating flight's outcome: whether and when it reached its goal, whether it
+    touched a cone (when, which, where), its smallest true clearance, the length flown and,
+    per camera tick, the planned path's length and the smallest true clearance."""
+    nav = run.navigation
+    assert nav is not None
+    contact = nav.contact
+    return {
+        "estimate": run.spec.flight.estimate,
+        "clearance_m": run.spec.flight.clearance_m,
+        "goal_w": list(run.spec.flight.goal_w),
+        "reached_goal": nav.reached_goal,
+        "time_to_goal_s": nav.reached_goal_s,
+        "collided": nav.collided,
+        "first_contact_s": None if contact is None else round(contact.t_s, 9),
+        "first_contact_cone": None if contact is None else contact.cone_index,
+        "first_contact_point_w": None if contact is None else contact.point_w.tolist(),
+        "min_clearance_m": _finite_or_none(nav.min_clearance_m),
+        "path_length_m": _finite_or_none(nav.path_length_m),
+        "final_distance_to_goal_m": _finite_or_none(nav.final_distance_m),
+        "per_tick": {
+            "t_s": [round(k.t_s, 9) for k in nav.ticks],
+            "plan_length_m": [_finite_or_none(k.plan_length_m) for k in nav.ticks],
+            "min_clearance_true_m": [
+                _finite_or_none(float(np.min(k.clearance_true_m))) for k in nav.ticks
+            ],
+            "mapped_cones": [len(k.obstacles_w) for k in nav.ticks],
         },
     }
 

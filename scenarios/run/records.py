@@ -22,7 +22,16 @@ if TYPE_CHECKING:
     from scenarios.scenario.spec import ScenarioSpec
     from vnav.estimators import NoEstimate
 
-__all__ = ["DetectionRecord", "ImageTiming", "PoseStream", "RunResult", "TickRecord"]
+__all__ = [
+    "Contact",
+    "DetectionRecord",
+    "ImageTiming",
+    "NavigationRecord",
+    "NavigationTick",
+    "PoseStream",
+    "RunResult",
+    "TickRecord",
+]
 
 
 @dataclass(frozen=True)
@@ -280,6 +289,92 @@ class CalibrationRecord:
     ticks_recovered: list[TickRecord] | None = None
 
 
+@dataclass(frozen=True)
+class Contact:
+    """The first contact between the drone and a cone, as MuJoCo found it.
+
+    Attributes
+    ----------
+    t_s : float
+        Simulated time of the physics step that found it, s.
+    cone_index : int
+        Which cone (``spec.scene.cones_w``).
+    point_w : ndarray, shape (3,)
+        The contact point in the world, m.
+    """
+
+    t_s: float
+    cone_index: int
+    point_w: np.ndarray
+
+
+@dataclass(frozen=True)
+class NavigationTick:
+    """What the navigating drone knew and planned at one camera tick.
+
+    Attributes
+    ----------
+    t_s : float
+        The tick's simulated time, s.
+    position_w_est : ndarray, shape (3,)
+        Where the drone thought it was (its estimated pose), m: the plan starts there.
+    plan_w : ndarray, shape (K, 3)
+        The path planned at this tick, from ``position_w_est`` to the goal, m.
+    plan_length_m : float
+        Its length, m.
+    obstacles_w : ndarray, shape (M, 3)
+        The mapped cones' estimated base centres, m (``vnav.navigate``).
+    clearance_true_m : ndarray, shape (N,)
+        MuJoCo's distance between the drone's collision geometry and each true cone's, m.
+    """
+
+    t_s: float
+    position_w_est: np.ndarray
+    plan_w: np.ndarray
+    plan_length_m: float
+    obstacles_w: np.ndarray
+    clearance_true_m: np.ndarray
+
+
+@dataclass
+class NavigationRecord:
+    """A navigating flight's outcome (``scenarios.scenario.spec.NavigateFlight``).
+
+    Attributes
+    ----------
+    ticks : list of NavigationTick
+        One per camera tick, in order.
+    reached_goal_s : float or None
+        When the body origin came within the goal radius of the goal, s (None: never).
+    contact : Contact or None
+        The first contact with a cone (the flight ends there), or None.
+    min_clearance_m : float
+        The smallest true clearance over the flight (every physics step's, not only the
+        camera ticks'), m.
+    path_length_m : float
+        The length of the path flown (the true body origin, every physics step), m.
+    final_distance_m : float
+        The body origin's true distance from the goal when the flight ended, m.
+    """
+
+    ticks: list[NavigationTick] = field(default_factory=list)
+    reached_goal_s: float | None = None
+    contact: Contact | None = None
+    min_clearance_m: float = float("inf")
+    path_length_m: float = 0.0
+    final_distance_m: float = float("nan")
+
+    @property
+    def reached_goal(self) -> bool:
+        """Whether the drone reached its goal (without touching a cone first)."""
+        return self.reached_goal_s is not None
+
+    @property
+    def collided(self) -> bool:
+        """Whether the drone touched a cone."""
+        return self.contact is not None
+
+
 @dataclass
 class RunResult:
     """Everything a finished run produced, before it is judged and written.
@@ -302,6 +397,8 @@ class RunResult:
     calibration : CalibrationRecord or None
         The mount and clock offset recovered from the run, for a scenario that checks them
         (``scenarios.pipeline``).
+    navigation : NavigationRecord or None
+        A navigating flight's plans and outcome (None for any other flight).
     """
 
     spec: ScenarioSpec
@@ -310,6 +407,7 @@ class RunResult:
     timing_s: dict[str, float] = field(default_factory=dict)
     poses: PoseStream | None = None
     calibration: CalibrationRecord | None = None
+    navigation: NavigationRecord | None = None
 
     @property
     def cones_w(self) -> np.ndarray:

@@ -198,6 +198,34 @@ KINDS: dict[str, CheckKind] = _kinds(
         False,
         "median |latest-pose error / predicted - 1| <= limit (depth_image with the newest pose)",
     ),
+    CheckKind(
+        "reached_goal",
+        _AT_MOST,
+        Unit.METRES,
+        False,
+        "true distance of the body from the goal when a navigating flight ends <= limit_m",
+    ),
+    CheckKind(
+        "no_collision",
+        _AT_MOST,
+        Unit.COUNT,
+        False,
+        "cones the drone touched (MuJoCo contacts) <= limit (0: none)",
+    ),
+    CheckKind(
+        "collision",
+        _AT_LEAST,
+        Unit.COUNT,
+        False,
+        "cones the drone touched (MuJoCo contacts) >= limit (1: the run must collide)",
+    ),
+    CheckKind(
+        "min_clearance",
+        _AT_LEAST,
+        Unit.METRES,
+        False,
+        "smallest true distance between the drone's and a cone's geometry >= limit_m",
+    ),
 )
 """Every check kind, by name. Its figure is ``scenarios.judge.checks.FIGURES[name]``."""
 

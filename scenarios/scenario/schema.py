@@ -323,6 +323,27 @@ FLIGHT_MODES: dict[str, tuple[Key, ...]] = {
         Key("start_angle_deg", "number", "start on the circle, deg", 180.0, -MAX_DEG, MAX_DEG),
         Key("ramp_s", "number", "speed-up time, s", 3.0, 0.0, 600.0),
     ),
+    "navigate": (
+        Key("start_w", "vector3", "where the flight starts, m", REQUIRED, -MAX_M, MAX_M),
+        Key("goal_w", "vector3", "where the drone must go, m", REQUIRED, -MAX_M, MAX_M),
+        Key("speed_mps", "number", "cruise speed along the plan, m/s", 2.0, 0.0, 10.0, True),
+        Key(
+            "clearance_m",
+            "number",
+            "distance to keep between the drone's centre and each estimated cone's axis, m",
+            1.0,
+            0.0,
+            100.0,
+            True,
+        ),
+        Key(
+            "estimate",
+            "choice",
+            "whose cone estimates the planner avoids: a method of vnav.methods",
+            PREFERENCE[0],
+            choices=METHOD_NAMES,
+        ),
+    ),
 }
 """The keys of ``[flight]`` per ``mode`` (besides ``mode`` itself)."""
 

@@ -126,6 +126,45 @@ class OrbitFlight:
         )
 
 
+GOAL_RADIUS_M = 0.3
+"""A navigating flight has reached its goal when its body origin is this close to it, m."""
+
+
+@dataclass(frozen=True)
+class NavigateFlight:
+    """Closed loop: the drone flies to a goal around the cones its estimator has mapped.
+
+    At every camera tick the cones estimated by ``estimate`` (a method of ``vnav.methods``)
+    update the map, and the path from the drone's estimated position to the goal is planned
+    again to keep ``clearance_m`` from each mapped cone (``vnav.navigate``); the controller
+    flies it at ``speed_mps``. The flight ends at the goal (within ``GOAL_RADIUS_M``), at the
+    first contact with a cone, or at the run's end.
+    """
+
+    start_w: tuple[float, float, float]
+    goal_w: tuple[float, float, float]
+    speed_mps: float = 2.0
+    clearance_m: float = 1.0
+    estimate: str = "depth_image"
+    mode: str = "navigate"
+    moves_camera = False
+
+    @property
+    def straight_m(self) -> float:
+        """The straight line's length from start to goal, m."""
+        return math.dist(self.start_w, self.goal_w)
+
+    @property
+    def end_s(self) -> float:
+        # Time for a detour of twice the straight line, and 5 s to take off and settle.
+        return 2.0 * self.straight_m / self.speed_mps + 5.0
+
+    @property
+    def start_yaw_rad(self) -> float:
+        """Heading at the start: at the goal."""
+        return math.atan2(self.goal_w[1] - self.start_w[1], self.goal_w[0] - self.start_w[0])
+
+
 @dataclass(frozen=True)
 class Timing:
     """The sensors' clocks and links (``scenarios.run.streams``; docs/CONVENTIONS.md, "Time").
@@ -176,7 +215,7 @@ class ScenarioSpec:
     name: str
     description: str
     scene: SceneConfig
-    flight: KinematicFlight | ControlledFlight | OrbitFlight
+    flight: KinematicFlight | ControlledFlight | OrbitFlight | NavigateFlight
     camera_rate_hz: float = 10.0
     duration_s: float | None = None
     noise: NoiseModel = NOISELESS
@@ -257,7 +296,9 @@ def keyframe_from_rpy_deg(
     return Keyframe(float(t_s), tuple(map(float, position_w)), tuple(map(float, quat_xyzw)), camera)
 
 
-def _flight(table: dict[str, Any], where: str) -> KinematicFlight | ControlledFlight | OrbitFlight:
+def _flight(
+    table: dict[str, Any], where: str
+) -> KinematicFlight | ControlledFlight | OrbitFlight | NavigateFlight:
     mode = table.get("mode")  # a table: the schema's TOP says so
     # A list or table is no mode (and cannot be looked up among the modes).
     if not isinstance(mode, str) or mode not in schema.FLIGHT_MODES:
@@ -284,6 +325,8 @@ def _flight(table: dict[str, Any], where: str) -> KinematicFlight | ControlledFl
             waypoints.append(Waypoint(w["t"], w["position_w"], math.radians(w["yaw_deg"])))
         _times_increasing([w.t_s for w in waypoints], where, "flight.waypoints")
         return ControlledFlight(tuple(waypoints))
+    if mode == "navigate":
+        return _navigate(values, where)
     if abs(values["period_s"]) < 1.0:
         raise _err(
             where,
@@ -292,6 +335,24 @@ def _flight(table: dict[str, Any], where: str) -> KinematicFlight | ControlledFl
         )
     start_angle_rad = math.radians(values.pop("start_angle_deg"))
     return OrbitFlight(**values, start_angle_rad=start_angle_rad)
+
+
+def _navigate(values: dict[str, Any], where: str) -> NavigateFlight:
+    """``[flight]`` of mode ``navigate``: a start and a goal above the ground, apart."""
+    for key in ("start_w", "goal_w"):
+        if values[key][2] <= 0.0:
+            raise _err(
+                where, f"flight.{key}", f"must be above the ground (z > 0), got z = {values[key][2]:g}"
+            )
+    flight = NavigateFlight(**values)
+    if flight.straight_m <= GOAL_RADIUS_M:
+        raise _err(
+            where,
+            "flight.goal_w",
+            f"must be more than {GOAL_RADIUS_M:g} m (the goal's radius) from start_w, "
+            f"got {flight.straight_m:.3g} m",
+        )
+    return flight
 
 
 def _checks(raw: Any, where: str) -> tuple[Check, ...]:
@@ -340,6 +401,8 @@ def _start_pose(flight) -> tuple[tuple[float, ...], tuple[float, ...]]:
         return flight.keyframes[0].position_w, flight.keyframes[0].quat_xyzw
     if isinstance(flight, ControlledFlight):
         position_w, yaw_rad = flight.waypoints[0].position_w, flight.waypoints[0].yaw_rad
+    elif isinstance(flight, NavigateFlight):
+        position_w, yaw_rad = flight.start_w, flight.start_yaw_rad
     else:
         position_w = flight.start_position_w
         yaw_rad = flight.start_angle_rad + math.pi  # heading at the centre
