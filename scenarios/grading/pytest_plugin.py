@@ -30,7 +30,7 @@ import pytest
 if TYPE_CHECKING:
     from scenarios.grading.verdict import Judge, Verdict
 
-__all__ = ["VerdictFailed", "pytest_addoption", "vnav_judge"]
+__all__ = ["VerdictError", "pytest_addoption", "vnav_judge"]
 
 _JUDGE = pytest.StashKey["Judge"]()
 
@@ -97,7 +97,7 @@ def vnav_judge(pytestconfig: pytest.Config) -> Judge:
     return _judge(pytestconfig)
 
 
-class VerdictFailed(Exception):
+class VerdictError(Exception):
     """A function's verdict did not pass; the test's report is its explanation."""
 
     def __init__(self, verdict: Verdict) -> None:
@@ -118,7 +118,9 @@ class _Estimators(pytest.Collector):
 
         scenarios = judged_builtins()
         return [
-            EstimatorItem.from_parent(self, name=f"{spec}[{scenario}]", spec=spec, scenario=scenario)
+            EstimatorItem.from_parent(
+                self, name=f"{spec}[{scenario}]", spec=spec, scenario=scenario
+            )
             for spec in dict.fromkeys(self.specs)
             for scenario in scenarios
         ]
@@ -126,6 +128,8 @@ class _Estimators(pytest.Collector):
 
 class EstimatorItem(pytest.Item):
     """One ``--vnav-estimator`` test: a SPEC judged on one built-in scenario."""
+
+    fixturenames: tuple[str, ...] = ()  # it requests none (read by plugins that sort by them)
 
     def __init__(self, *, spec: str, scenario: str, **kwargs: Any) -> None:
         super().__init__(**kwargs)
@@ -140,10 +144,10 @@ class EstimatorItem(pytest.Item):
             duration_s=config.getoption("vnav_duration"),
         )
         if not verdict.passed:
-            raise VerdictFailed(verdict)
+            raise VerdictError(verdict)
 
     def repr_failure(self, excinfo: pytest.ExceptionInfo[BaseException], style=None) -> str:
-        if isinstance(excinfo.value, VerdictFailed):
+        if isinstance(excinfo.value, VerdictError):
             return excinfo.value.verdict.explain()
         return super().repr_failure(excinfo, style=style)
 
