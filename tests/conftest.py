@@ -116,9 +116,14 @@ SHARED = {
 }
 """Costly fixture: (its unit, the node id prefixes of the tests that request it)."""
 
-SPLIT_MODULES = ("tests/test_cli.py", "tests/test_readme.py", "tests/test_sweep.py")
+SPLIT_MODULES = (
+    "tests/test_cli.py",
+    "tests/test_grading.py",
+    "tests/test_readme.py",
+    "tests/test_sweep.py",
+)
 """Modules spread test by test; their module fixtures are session-scoped (test_sweep's sweep,
-once per process) or ``SHARED``."""
+test_grading's judge, once per process) or ``SHARED``."""
 
 LONGEST_FIRST = (
     "tests/test_readme.py::test_vnav_demo_commands_run_in_order",

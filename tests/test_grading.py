@@ -47,9 +47,9 @@ def user_file(tmp_path):
     return path
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def judge() -> grading.Judge:
-    """One judge for the module: frame-problem flown once for every test here."""
+    """One judge for the tests here: frame-problem flown once for them all (per process)."""
     return grading.Judge()
 
 
@@ -81,6 +81,22 @@ def test_a_verdict_is_what_vnav_demo_run_reports(tmp_path, user_file, judge, fun
     if errors["count"]:
         assert round(verdict.max_error_m, 9) == errors["max"]
     assert verdict.passed == (function == "reference")
+
+
+def test_a_calibrated_runs_verdict_is_what_vnav_demo_run_reports(tmp_path, user_file):
+    """A scenario that checks its calibration estimates every tick again with the recovered
+    mount, calling the function there too: the same calls, failures, diagnosis, statistics
+    after calibration and checks as the run's report (its first 4 s, enough to calibrate)."""
+    spec = f"{user_file}:transposed"
+    verdict = grading.Judge()(spec, "calibration", duration_s=4.0)
+    out = tmp_path / "out"
+    args = ["run", "calibration", "--duration", "4", "--out", str(out), "--quiet"]
+    assert main([*args, "--estimator", spec]) == 1
+    report = json.loads((out / "calibration.json").read_text())
+    assert report["calibration"]["position_error_m"]["recovered_mount"]["user:transposed"]
+    for key in ("passed", "checks", "methods", "estimators", "calibration"):
+        assert verdict.report[key] == report[key], key
+    assert not verdict.passed
 
 
 def test_judging_leaves_the_stored_run_as_it_was(user_file, judge):
