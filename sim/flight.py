@@ -677,6 +677,11 @@ class ReferenceFollower:
                 f"cone {self.contact.cone_index}; build a new follower to fly again"
             )
         w = self.world
+        if int(n) > 0:
+            # A state already touching a cone (placed there) ends the flight before any step.
+            hit = first_cone_contact(w)
+            if hit is not None:
+                return self._end(hit)
         for _ in range(int(n)):
             ref = self.reference_at(w.time_s)
             out = self.controller.compute(
@@ -687,17 +692,21 @@ class ReferenceFollower:
             self.last, self.last_reference = out, ref
             hit = first_cone_contact(w)
             if hit is not None:
-                self.contact = hit
-                logger.info(
-                    "t = %.3f s: the drone's %s touched cone %d (%s) at %s",
-                    hit.time_s,
-                    hit.drone_geom,
-                    hit.cone_index,
-                    hit.cone_geom,
-                    np.round(hit.p_w, 3),
-                )
-                return hit
+                return self._end(hit)
         return None
+
+    def _end(self, hit: ConeContact) -> ConeContact:
+        """End the flight at ``hit``."""
+        self.contact = hit
+        logger.info(
+            "t = %.3f s: the drone's %s touched cone %d (%s) at %s",
+            hit.time_s,
+            hit.drone_geom,
+            hit.cone_index,
+            hit.cone_geom,
+            np.round(hit.p_w, 3),
+        )
+        return hit
 
     def run_until(self, t_s: float) -> ConeContact | None:
         """Step until the simulated time reaches ``t_s`` or a cone is touched (see ``step``)."""

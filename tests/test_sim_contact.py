@@ -275,3 +275,14 @@ def test_follower_carries_the_reference_forward_between_ticks() -> None:
     ref = follower.reference_at(1.5)
     np.testing.assert_allclose(ref.p_w, [1.0 + 0.5 + 0.125, 2.125, 3.125])
     np.testing.assert_allclose(ref.v_w, [1.5, 0.5, 0.5])
+
+
+def test_follower_placed_in_a_cone_ends_before_stepping() -> None:
+    world = World.from_config(SceneConfig(cones_w=CONES_W))
+    world.set_pose(_pose(np.add(CONES_W[0], [0.1, 0.0, 0.3])))
+    follower = ReferenceFollower(world)
+    t0_s, T0_w_b = world.time_s, world.T_w_b
+    hit = follower.step(10)
+    assert hit is not None and hit.cone_index == 0
+    assert world.time_s == t0_s  # no physics step, no contact force
+    np.testing.assert_array_equal(world.T_w_b, T0_w_b)
