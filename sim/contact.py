@@ -188,18 +188,20 @@ def cone_clearance(world: World, distmax_m: float = math.inf, drone_geom_ids=Non
     nearest = [-1] * n_cones  # geom id of the nearest drone geom
     if n_cones == 0:
         return ConeClearance(distance, p_drone, p_cone, ())
-    # A lower bound of each pair's distance: from the drone geom's bounding sphere to the cone
-    # geom's bounding box (MuJoCo's geom_aabb, in the geom's frame). The pairs are measured
-    # nearest bound first, and one whose bound exceeds the best distance so far cannot be the
-    # closest (when they penetrate, the signed distance is still above this bound).
+    # A lower bound of each pair's signed distance: that of the drone geom's bounding sphere
+    # to the cone geom's bounding box (MuJoCo's geom_aabb, in the geom's frame), the box's
+    # signed distance function at the sphere's centre minus its radius. Distance and
+    # penetration depth are monotone in the shapes, so the pair can be no closer (nor deeper).
+    # The pairs are measured lowest bound first; one whose bound exceeds the best distance so
+    # far cannot be the closest.
     flat = cones.ravel()
     R_w_g = d.geom_xmat[flat].reshape(-1, 3, 3)  # (2 N, 3, 3)
     aabb = m.geom_aabb[flat]  # (2 N, 6): centre, half sizes
     rel_w = d.geom_xpos[drone][None, :, :] - d.geom_xpos[flat][:, None, :]  # (2 N, G, 3)
     rel_g = np.einsum("kgi,kij->kgj", rel_w, R_w_g) - aabb[:, None, :3]
-    outside = np.maximum(np.abs(rel_g) - aabb[:, None, 3:], 0.0)
-    bound = np.linalg.norm(outside, axis=-1) - m.geom_rbound[drone][None, :]
-    bound = bound.reshape(n_cones, 2, drone.size)
+    excess = np.abs(rel_g) - aabb[:, None, 3:]
+    sdf = np.linalg.norm(np.maximum(excess, 0.0), axis=-1) + np.minimum(excess.max(axis=-1), 0.0)
+    bound = (sdf - m.geom_rbound[drone][None, :]).reshape(n_cones, 2, drone.size)
     fromto = np.zeros(6)
     for i in range(n_cones):
         b = bound[i].ravel()  # (2 G,): cone geom major

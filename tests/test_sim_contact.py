@@ -10,11 +10,13 @@ import math
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from sim import names
 from sim.config import SceneConfig
 from sim.contact import cone_clearance, cone_contacts, first_cone_contact
 from sim.flight import Reference, ReferenceFollower
+from sim.gl import mujoco
 from sim.world import World
 from vnav.cone import TRAFFIC_CONE
 
@@ -286,3 +288,28 @@ def test_follower_placed_in_a_cone_ends_before_stepping() -> None:
     assert hit is not None and hit.cone_index == 0
     assert world.time_s == t0_s  # no physics step, no contact force
     np.testing.assert_array_equal(world.T_w_b, T0_w_b)
+
+
+def test_clearance_is_the_minimum_over_every_geom_pair() -> None:
+    # The pruning by bounding volumes must never skip the closest pair: compare with every
+    # drone-cone pair measured, over random poses around and inside the cone.
+    cone = np.array([0.0, 0.0, 0.0])
+    world = World.from_config(SceneConfig(cones_w=(tuple(cone), (3.0, 0.0, 0.0))))
+    m, d = world.model, world.data
+    rng = np.random.default_rng(7)
+    fromto = np.zeros(6)
+    for _ in range(300):
+        p_w = cone + rng.uniform([-0.6, -0.6, 0.05], [0.6, 0.6, 1.0])
+        q = rng.normal(size=4)
+        T = np.eye(4)
+        T[:3, :3] = Rotation.from_quat(q / np.linalg.norm(q)).as_matrix()
+        T[:3, 3] = p_w
+        world.set_pose(T)
+        got = cone_clearance(world)
+        for i, ids in enumerate(world.cone_geom_ids):
+            every = [
+                mujoco.mj_geomDistance(m, d, int(g), int(c), math.inf, fromto)
+                for g in world.drone_geom_ids
+                for c in ids
+            ]
+            assert got.distance_m[i] == pytest.approx(min(every), abs=1e-9)
