@@ -29,9 +29,9 @@ from sim.world import World
 __all__ = ["ConeClearance", "ConeContact", "cone_clearance", "cone_contacts", "first_cone_contact"]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class ConeContact:
-    """The drone touching a cone, one MuJoCo contact.
+    """The drone touching a cone, one MuJoCo contact (compared by identity: it holds an array).
 
     Attributes
     ----------
@@ -111,7 +111,7 @@ def first_cone_contact(world: World) -> ConeContact | None:
     return contacts[0] if contacts else None
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class ConeClearance:
     """Per cone, the drone's true clearance: MuJoCo's distance between their geoms.
 
