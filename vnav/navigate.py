@@ -147,15 +147,24 @@ def _escape(start: np.ndarray, centres: np.ndarray, r: float, eps_m: float) -> n
 
 @dataclass
 class _Graph:
-    """The tangent visibility graph: node positions, the circle and angle of each tangent node
-    (-1 and NaN for the start, node 0, and the goal, node 1), and adjacency lists of
-    ``(neighbour, length_m, arc)`` where ``arc`` is ``(circle, start_rad, signed_span_rad)``
-    for an arc edge as travelled from the node, ``None`` for a segment."""
+    """The tangent visibility graph, as flat lists the search reads element by element.
+
+    Node 0 is the start, node 1 the goal, the others tangent points: ``circle`` (-1 for start
+    and goal) and ``angle`` (radians) say where. Segments: node ``u``'s neighbours are
+    ``seg_to[seg_from[u]:seg_from[u + 1]]`` at lengths ``seg_m``. Arcs: ``ccw_to[u]`` is the
+    next tangent node counter-clockwise on u's circle, ``ccw_rad[u]`` the arc's angle, -1 when
+    that arc enters another disc; ``cw_to[u]`` is the one before (its arc is ``cw_to[u]``'s
+    counter-clockwise one)."""
 
     xy: np.ndarray
-    circle: np.ndarray
-    angle: np.ndarray
-    adjacent: list[list[tuple[int, float, tuple[int, float, float] | None]]]
+    circle: list[int]
+    angle: list[float]
+    seg_from: list[int]
+    seg_to: list[int]
+    seg_m: list[float]
+    ccw_to: list[int]
+    ccw_rad: list[float]
+    cw_to: list[int]
 
 
 def _candidate_segments(
@@ -212,68 +221,85 @@ def _build_graph(
     a_xy, b_xy = ends(ca, aa), ends(cb, ab)
     ok = _clear(a_xy, b_xy, centres, r - eps_m)
     ca, aa, cb, ab, a_xy, b_xy = ca[ok], aa[ok], cb[ok], ab[ok], a_xy[ok], b_xy[ok]
-    n_edges = len(ca)
     # Node ids: 0 start, 1 goal, then one per segment end on a circle.
-    n_a = int(np.count_nonzero(ca >= 0))
+    on_a = ca >= 0
+    n_a = int(np.count_nonzero(on_a))
     ida = np.where(ca == -1, 0, 1)
-    ida[ca >= 0] = 2 + np.arange(n_a)
-    idb = 2 + n_a + np.arange(n_edges)
-    xy = np.vstack([start, goal, a_xy[ca >= 0], b_xy])
-    circle = np.concatenate([[-1, -1], ca[ca >= 0], cb])
-    angle = np.concatenate([[np.nan, np.nan], aa[ca >= 0], ab])
-    adjacent: list[list[tuple[int, float, tuple[int, float, float] | None]]] = [
-        [] for _ in range(len(xy))
-    ]
-    lengths = np.hypot(*(b_xy - a_xy).T)
-    for u, v, w in zip(ida.tolist(), idb.tolist(), lengths.tolist(), strict=True):
-        adjacent[u].append((v, w, None))
-        adjacent[v].append((u, w, None))
-    _add_arcs(adjacent, circle, angle, centres, r)
-    return _Graph(xy, circle, angle, adjacent)
+    ida[on_a] = 2 + np.arange(n_a)
+    idb = 2 + n_a + np.arange(len(ca))
+    xy = np.vstack([start, goal, a_xy[on_a], b_xy])
+    circle = np.concatenate([[-1, -1], ca[on_a], cb])
+    angle = np.concatenate([[0.0, 0.0], aa[on_a], ab])
+    # Both directions of each segment, grouped by the node they leave.
+    src, dst = np.concatenate([ida, idb]), np.concatenate([idb, ida])
+    length_m = np.tile(np.hypot(*(b_xy - a_xy).T), 2)
+    order = np.argsort(src, kind="stable")
+    seg_from = np.searchsorted(src[order], np.arange(len(xy) + 1))
+    ccw_to, ccw_rad, cw_to = _arcs(circle, angle, centres, r)
+    return _Graph(
+        xy,
+        circle.tolist(),
+        angle.tolist(),
+        seg_from.tolist(),
+        dst[order].tolist(),
+        length_m[order].tolist(),
+        ccw_to.tolist(),
+        ccw_rad.tolist(),
+        cw_to.tolist(),
+    )
 
 
-def _add_arcs(adjacent, circle: np.ndarray, angle: np.ndarray, centres, r: float) -> None:
-    """Join consecutive tangent nodes on each circle by the arcs no other disc's interior
-    meets (in both directions).
+def _arcs(
+    circle: np.ndarray, angle: np.ndarray, centres: np.ndarray, r: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each node's next and previous tangent node round its circle, and the angle of the arc
+    to the next one (-1 where that arc enters another disc, or the node is alone on it).
 
     The points of circle i inside disc j (centres ``d < 2 r`` apart, direction ``phi``) are
     the open arc ``|angle - phi| < acos(d / 2r)``; an arc between tangent nodes is free when it
     meets none of them (two arcs meet when either one's start lies on the other)."""
     tiny = 1e-9
+    n = len(circle)
+    ccw_to, cw_to, ccw_rad = np.full(n, -1), np.full(n, -1), np.full(n, -1.0)
     nodes = np.flatnonzero(circle >= 0)
+    if not len(nodes):
+        return ccw_to, ccw_rad, cw_to
     nodes = nodes[np.lexsort((angle[nodes], circle[nodes]))]
     ring = circle[nodes]
-    first = np.flatnonzero(np.r_[True, ring[1:] != ring[:-1]])
-    size = np.diff(np.r_[first, len(nodes)])
-    group_first = np.repeat(first, size)
-    position = np.arange(len(nodes)) - group_first
-    following = group_first + (position + 1) % np.repeat(size, size)
+    new_ring = np.ones(len(nodes), dtype=bool)
+    new_ring[1:] = ring[1:] != ring[:-1]
+    first = np.flatnonzero(new_ring)
+    counts = np.diff(first, append=len(nodes))
+    size, group_first = np.repeat(counts, counts), np.repeat(first, counts)
+    following = group_first + (np.arange(len(nodes)) - group_first + 1) % size
     starts = angle[nodes]
     spans = np.mod(starts[following] - starts, _TWO_PI)
-    free = np.repeat(size, size) >= 2
-    gap = centres[None, :, :] - centres[ring][:, None, :]
+    free = size >= 2
+    gap = centres[None, :, :] - centres[:, None, :]  # [i, j]: from centre i to centre j
     dist = np.hypot(gap[..., 0], gap[..., 1])
-    overlap = (dist < 2.0 * r) & (dist > 0.0)
+    half = np.arccos(np.clip(dist / (2.0 * r), 0.0, 1.0)) - tiny
+    overlap = (dist < 2.0 * r) & (dist > 0.0) & (half > 0.0)
     if overlap.any():
-        half = np.arccos(np.clip(dist / (2.0 * r), 0.0, 1.0)) - tiny
         lo = np.arctan2(gap[..., 1], gap[..., 0]) - half
+        lo, half, overlap = lo[ring], half[ring], overlap[ring]
         meets = _in_ccw(lo, starts[:, None], spans[:, None]) | _in_ccw(
             starts[:, None], lo, 2.0 * half
         )
-        free &= ~(meets & overlap & (half > 0.0)).any(axis=1)
-    for k in np.flatnonzero(free).tolist():
-        u, v, span = int(nodes[k]), int(nodes[following[k]]), float(spans[k])
-        i = int(ring[k])
-        adjacent[u].append((v, r * span, (i, float(starts[k]), span)))
-        adjacent[v].append((u, r * span, (i, float(starts[k]) + span, -span)))
+        free &= ~(meets & overlap).any(axis=1)
+    ccw_to[nodes] = nodes[following]
+    cw_to[nodes[following]] = nodes
+    ccw_rad[nodes] = np.where(free, spans, -1.0)
+    return ccw_to, ccw_rad, cw_to
 
 
-def _shortest(graph: _Graph) -> list[tuple[int, tuple[int, float, float] | None]]:
-    """A* from node 0 to node 1: the route as ``(node, arc into it or None)``, start first."""
-    goal = graph.xy[1]
-    heuristic = np.hypot(*(graph.xy - goal).T).tolist()
+def _shortest(graph: _Graph, r: float) -> list[tuple[int, tuple[int, float, float] | None]]:
+    """A* from node 0 to node 1: the route as ``(node, arc into it or None)``, start first,
+    an arc as ``(circle, start_rad, signed_span_rad)``."""
+    heuristic = np.hypot(*(graph.xy - graph.xy[1]).T).tolist()
+    seg_from, seg_to, seg_m = graph.seg_from, graph.seg_to, graph.seg_m
+    ccw_to, ccw_rad, cw_to = graph.ccw_to, graph.ccw_rad, graph.cw_to
     best = {0: 0.0}
-    came: dict[int, tuple[int, tuple[int, float, float] | None]] = {}
+    came: dict[int, tuple[int, int]] = {}  # node: (previous, +1 ccw arc, -1 cw arc, 0 segment)
     heap = [(heuristic[0], 0.0, 0)]
     done: set[int] = set()
     while heap:
@@ -283,21 +309,32 @@ def _shortest(graph: _Graph) -> list[tuple[int, tuple[int, float, float] | None]
         if u == 1:
             break
         done.add(u)
-        for v, w, arc in graph.adjacent[u]:
+        steps = [(seg_to[k], seg_m[k], 0) for k in range(seg_from[u], seg_from[u + 1])]
+        if ccw_rad[u] >= 0.0:
+            steps.append((ccw_to[u], r * ccw_rad[u], 1))
+        back = cw_to[u]
+        if back >= 0 and ccw_rad[back] >= 0.0:
+            steps.append((back, r * ccw_rad[back], -1))
+        for v, w, how in steps:
             c = cost + w
             if c < best.get(v, math.inf):
                 best[v] = c
-                came[v] = (u, arc)
+                came[v] = (u, how)
                 heapq.heappush(heap, (c + heuristic[v], c, v))
     else:
         raise NoPathError("no path from start to goal keeps clearance_m: the goal is enclosed")
     route: list[tuple[int, tuple[int, float, float] | None]] = []
-    node, arc = 1, None
+    node = 1
     while node != 0:
-        prev, arc_in = came[node]
-        route.append((node, arc_in))
+        prev, how = came[node]
+        arc = None
+        if how == 1:
+            arc = (graph.circle[prev], graph.angle[prev], ccw_rad[prev])
+        elif how == -1:
+            arc = (graph.circle[prev], graph.angle[prev], -ccw_rad[node])
+        route.append((node, arc))
         node = prev
-    route.append((0, arc))
+    route.append((0, None))
     return route[::-1]
 
 
@@ -421,7 +458,7 @@ def plan_path(
     if not len(centres) or _clear(start[None], goal[None], centres, r - eps_m)[0]:
         return _drop_repeats(np.vstack([*head, start, goal]))
     graph = _build_graph(start, goal, centres, r, eps_m)
-    route = _shortest(graph)
+    route = _shortest(graph, r)
     path = _polyline(route, graph, centres, r, math.radians(step_deg), eps_m)
     return _drop_repeats(np.vstack([*head, path]))
 
