@@ -114,6 +114,18 @@ def test_the_arc_through_a_neighbours_disc_is_no_way_through():
     assert min(_distances(path, cone).min() for cone in cones) >= 1.0 - 1e-9
 
 
+@pytest.mark.parametrize("goal_x_m", [0.2, 0.35, 0.5, 0.8])
+def test_past_a_touching_disc_the_corners_keep_the_clearance(goal_x_m):
+    # Discs at (0, 0) and (2, 0) touch at (1, 0). From (0.2, -5) to (goal_x_m, 5) the path
+    # wraps the first disc's right side through the touching point; a corner of the
+    # circumscribing polyline there (standing out r (1 / cos(2.5 deg) - 1) = 9.5e-4 m) would
+    # enter the second disc unless a tangent line touches the circle at the point itself.
+    cones = np.array([[0.0, 0.0], [2.0, 0.0]])
+    path = plan_path([0.2, -5.0], [goal_x_m, 5.0], cones, 1.0)
+    assert (path[:, 0] > 0.9).sum() >= 3
+    assert min(_distances(path, c).min() for c in cones) >= 1.0 - 1e-9
+
+
 def test_a_goal_inside_a_keep_out_disc_is_refused_naming_the_obstacle():
     with pytest.raises(ValueError, match=r"goal_xy_w .* inside .* obstacle 1 at \[20.0, 0.5\]"):
         plan_path([0.0, 0.0], [20.0, 0.0], [[10.0, 0.0], [20.0, 0.5]], 1.0)
@@ -124,7 +136,7 @@ def test_an_enclosed_goal_has_no_path():
     # overlap, and the goal is 2 m from each, outside them.
     angles = np.arange(8) * math.pi / 4
     ring = np.array([20.0, 0.0]) + 2.0 * np.stack([np.cos(angles), np.sin(angles)], axis=1)
-    with pytest.raises(NoPathError, match="enclosed"):
+    with pytest.raises(NoPathError, match="enclose the goal"):
         plan_path([0.0, 0.0], [20.0, 0.0], ring, 1.0)
     assert issubclass(NoPathError, ValueError)
 

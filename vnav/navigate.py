@@ -34,8 +34,9 @@ at most ``clearance_m (1 / cos(step / 2) - 1)`` (0.1 % of the clearance at 5 deg
 polyline is longer than the arc by a factor of at most ``tan(step / 2) / (step / 2)`` (1.0006
 at 5 deg). Where a corner would poke into a neighbouring disc (two discs nearly touching), the
 tangent angles also include the direction of that neighbour, and the arc is split finer until
-it clears (down to 1/256 of the step; only a neighbour within ``1e-8 clearance_m`` of the arc
-could then remain closer than the clearance by that much).
+it clears (down to 1/256 of the step, whose corners stand out by ``1.5e-8 clearance_m`` at
+5 deg: only a neighbour closer than that to the arc could be left closer than the clearance,
+by no more).
 
 Start too close
 ---------------
@@ -69,7 +70,8 @@ _TWO_PI = 2.0 * math.pi
 
 
 class NoPathError(ValueError):
-    """No path from the start to the goal keeps the clearance: the goal is enclosed."""
+    """No path from the start to the goal keeps the clearance: overlapping keep-out discs
+    enclose one of them."""
 
 
 def _positive(value: float, name: str) -> float:
@@ -114,7 +116,7 @@ def _in_ccw(x: np.ndarray | float, start: np.ndarray | float, span: np.ndarray |
 def _distinct(centres: np.ndarray, eps_m: float) -> np.ndarray:
     """The centres with exact duplicates (within ``eps_m`` of an earlier one) dropped: one disc
     is enough."""
-    gap = centres[:, None, :] - centres[None, :, :]
+    gap = centres[None, :, :] - centres[:, None, :]  # [i, j]: from centre i to centre j
     close = np.einsum("ijd,ijd->ij", gap, gap) <= eps_m * eps_m
     return centres[~np.tril(close, -1).any(axis=1)]
 
@@ -322,7 +324,10 @@ def _shortest(graph: _Graph, r: float) -> list[tuple[int, tuple[int, float, floa
                 came[v] = (u, how)
                 heapq.heappush(heap, (c + heuristic[v], c, v))
     else:
-        raise NoPathError("no path from start to goal keeps clearance_m: the goal is enclosed")
+        raise NoPathError(
+            "no path from start to goal keeps clearance_m: keep-out discs enclose the goal "
+            "(or the start)"
+        )
     route: list[tuple[int, tuple[int, float, float] | None]] = []
     node = 1
     while node != 0:
@@ -356,7 +361,7 @@ def _arc_corners(
 def _polyline(route, graph: _Graph, centres: np.ndarray, r: float, step_rad: float, eps_m):
     """The route's waypoints, each arc replaced by its circumscribing polyline, split finer
     where a corner would enter a neighbouring disc."""
-    gap = centres[:, None, :] - centres[None, :, :]
+    gap = centres[None, :, :] - centres[:, None, :]  # [i, j]: from centre i to centre j
     dist = np.hypot(gap[..., 0], gap[..., 1])
     # A neighbour whose disc a corner could reach: closer than 2 r plus the corners' bulge.
     near = (dist > 0.0) & (dist < 2.0 * r / math.cos(0.5 * step_rad))
@@ -422,9 +427,10 @@ def plan_path(
     path_xy_w : ndarray, shape (K, 2)
         Waypoints, the start first and the goal last (K >= 2), joined by straight segments;
         no two consecutive ones equal unless start and goal are. Every segment keeps at least
-        ``clearance_m`` from every centre (to rounding, ``1e-9 clearance_m``), except the first
-        when the start is inside a keep-out disc (it leaves by the shortest way; see the
-        module). The straight line when it is clear.
+        ``clearance_m`` from every centre (to rounding, ``1e-9 clearance_m``; see the module
+        for two discs all but touching), except the first when the start is inside a keep-out
+        disc (it leaves by the shortest way; see the module). The straight line when it is
+        clear.
 
     Raises
     ------
