@@ -242,18 +242,19 @@ def _connected_on_a_grid(s, g, centres, r) -> bool:
     goal=POINT,
     centres=st.lists(POINT, min_size=0, max_size=7),
     r=st.floats(0.2, 3.0),
+    step_deg=st.sampled_from([1.0, STEP_DEG, 20.0, 45.0]),
 )
-def test_any_plan_keeps_the_clearance_and_joins_start_to_goal(start, goal, centres, r):
+def test_any_plan_keeps_the_clearance_and_joins_start_to_goal(start, goal, centres, r, step_deg):
     s, g = np.array(start), np.array(goal)
     c = np.array(centres).reshape(-1, 2)
     to_goal = np.hypot(*(g - c).T) if len(c) else np.zeros(0)
     if (to_goal < r * (1.0 - 1e-6)).any():
         with pytest.raises(ValueError, match="goal_xy_w"):
-            plan_path(s, g, c, r)
+            plan_path(s, g, c, r, max_arc_step_deg=step_deg)
         return
     assume((to_goal > r * (1.0 + 1e-6)).all())  # not the ambiguous rounding band
     try:
-        path = plan_path(s, g, c, r)
+        path = plan_path(s, g, c, r, max_arc_step_deg=step_deg)
     except NoPathError:
         assert not _connected_on_a_grid(s, g, c, r)
         return
@@ -346,16 +347,20 @@ def test_near_the_goal_the_reference_slows_to_a_stop_on_it():
     assert still.yaw_rad == 0.7 and not still.v_w.any() and still.remaining_m == 0.0
 
 
-def test_the_follower_flies_a_plan_to_its_goal():
-    # Stepping the drone onto each carrot in turn walks the planned path to the goal, never
-    # inside the clearance.
+@pytest.mark.parametrize("lookahead_m", [0.3, 0.5, 1.0])
+def test_the_follower_flies_a_plan_to_its_goal(lookahead_m):
+    # Stepping the drone onto each carrot in turn walks the planned path to the goal; each
+    # carrot is on the path, outside the clearance, and the straight flight to it cuts inside
+    # by at most lookahead^2 / (8 r) (a chord of that length on a circle of radius r).
     cone, r = np.array([10.0, 0.0]), 1.0
-    path = plan_path([0.0, 0.0], [20.0, 0.0], [cone], r)
+    path = plan_path([0.0, 0.0], [20.0, 0.0], [cone], r, max_arc_step_deg=1.0)
     p = np.array([0.0, 0.0])
-    for _ in range(100):
-        ref = follow_path(path, p, altitude_m=1.0, speed_mps=1.0, lookahead_m=0.5)
+    for _ in range(200):
+        ref = follow_path(path, p, altitude_m=1.0, speed_mps=1.0, lookahead_m=lookahead_m)
+        chord = np.array([p, ref.p_w[:2]])
         p = ref.p_w[:2]
         assert np.hypot(*(p - cone)) >= r * (1.0 - 1e-9)
+        assert _distances(chord, cone).min() >= r - lookahead_m**2 / (8.0 * r) - 1e-9
     np.testing.assert_allclose(p, [20.0, 0.0])
 
 

@@ -16,10 +16,11 @@ those tangent points; it never touches a disc elsewhere, nor a corner where two 
 graph*: the start and the goal, the tangent points of the segments from each of them to each
 disc and of the four common tangents of each pair of discs (two outer; two inner when the discs
 are apart), kept when no disc's interior meets them, joined along each circle by the arcs
-between consecutive tangent points that no other disc's interior meets (shortest paths among
-disjoint discs: Chew, "Planning the shortest path for a disc in O(n^2 log n) time", SoCG 1985;
-with overlapping discs the union's boundary keeps only the arcs outside every other disc, and
-the outer tangents bridge the notches). Dijkstra's algorithm (A* with the straight-line
+between consecutive tangent points that no other disc's interior meets. This is the visibility
+graph of de Berg, Cheong, van Kreveld and Overmars, "Computational Geometry: Algorithms and
+Applications", chapter 15, with discs for polygons (Chen and Wang, "Computing shortest paths
+among curved obstacles in the plane", SoCG 2013); with overlapping discs the union's boundary
+keeps only the arcs outside every other disc, and the outer tangents bridge the notches. Dijkstra's algorithm (A* with the straight-line
 distance to the goal, which never overestimates) finds the shortest route in that graph. When
 the straight line from start to goal is clear it is the answer and no graph is built.
 
@@ -32,11 +33,11 @@ joined at their intersections. Every segment of it touches the circle or runs ou
 the drone never comes closer than ``clearance_m`` to that cone's axis; the corners stand out by
 at most ``clearance_m (1 / cos(step / 2) - 1)`` (0.1 % of the clearance at 5 deg), and the
 polyline is longer than the arc by a factor of at most ``tan(step / 2) / (step / 2)`` (1.0006
-at 5 deg). Where a corner would poke into a neighbouring disc (two discs nearly touching), the
-tangent angles also include the direction of that neighbour, and the arc is split finer until
-it clears (down to 1/256 of the step, whose corners stand out by ``1.5e-8 clearance_m`` at
-5 deg: only a neighbour closer than that to the arc could be left closer than the clearance,
-by no more).
+at 5 deg). A corner could poke into a neighbouring disc that (nearly) touches the arc: the
+tangent angles also include the direction of each neighbour within ``2 clearance_m`` plus the
+bulge, so the tangent line there keeps the neighbour's whole distance. The finished path is
+checked against every disc, and an arc that still failed would be split finer until it
+cleared (down to 1/256 of the step); no layout tried needed it.
 
 Start too close
 ---------------
@@ -527,6 +528,11 @@ def follow_path(
     it is usually the first waypoint); the carrot is ``lookahead_m`` further along, or the goal.
     The velocity is ``speed_mps`` along the path there, scaled down linearly over the last
     ``lookahead_m`` before the goal to stop on it; the heading is the path's direction there.
+
+    A drone chasing the carrot cuts across the path's bends: round an arc of radius
+    ``clearance_m`` the chord to a carrot ``lookahead_m`` ahead comes inside by up to
+    ``lookahead_m^2 / (8 clearance_m)`` (3 cm for 0.5 m round 1 m), which the clearance's margin
+    over the cone's footprint must hold.
 
     Parameters
     ----------
