@@ -20,9 +20,10 @@ between consecutive tangent points that no other disc's interior meets. This is 
 graph of de Berg, Cheong, van Kreveld and Overmars, "Computational Geometry: Algorithms and
 Applications", chapter 15, with discs for polygons (Chen and Wang, "Computing shortest paths
 among curved obstacles in the plane", SoCG 2013); with overlapping discs the union's boundary
-keeps only the arcs outside every other disc, and the outer tangents bridge the notches. Dijkstra's algorithm (A* with the straight-line
-distance to the goal, which never overestimates) finds the shortest route in that graph. When
-the straight line from start to goal is clear it is the answer and no graph is built.
+keeps only the arcs outside every other disc, and the outer tangents bridge the notches.
+Dijkstra's algorithm (A* with the straight-line distance to the goal, which never
+overestimates) finds the shortest route in that graph. When the straight line from start to
+goal is clear it is the answer and no graph is built.
 
 Arcs as polylines
 -----------------
