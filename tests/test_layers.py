@@ -137,6 +137,9 @@ def test_no_import_circle():
     [
         ("vnav.localize", ("mujoco", "rerun")),
         ("vnav.methods", ("mujoco", "rerun", "cv2")),
+        # Replanned at every camera tick: pure geometry, numpy only.
+        ("vnav.obstacle_map", ("mujoco", "rerun", "cv2", "scipy")),
+        ("vnav.navigate", ("mujoco", "rerun", "cv2", "scipy")),
         ("scenarios.scenario.spec", ("mujoco", "rerun")),
         ("scenarios.scenario.builtin", ("mujoco", "rerun")),
         ("scenarios.run.records", ("mujoco", "rerun")),
