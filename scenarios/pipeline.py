@@ -37,7 +37,7 @@ from scenarios.scenario.spec import ScenarioSpec
 from sim.scene_cache import SceneCache
 from vnav.methods import active_methods
 
-__all__ = ["Outcome", "output_paths", "run"]
+__all__ = ["Outcome", "judge", "output_paths", "run"]
 
 
 @dataclass(frozen=True)
@@ -151,11 +151,18 @@ def _calibrate_and_judge(spec: ScenarioSpec, result: RunResult) -> list[checks.C
 
         result.calibration = calibrate_run(result)
     judge_start = time.perf_counter()
-    own = spec.checks or check_kinds.default_checks()
-    judged = [checks.judge(c, result) for c in (*own, *check_kinds.user_checks())]
+    judged = judge(spec, result)
     result.timing_s["calibrate"] = judge_start - start
     result.timing_s["judge"] = time.perf_counter() - judge_start
     return judged
+
+
+def judge(spec: ScenarioSpec, result: RunResult) -> list[checks.CheckResult]:
+    """Every check of ``spec`` (or ``check_kinds.default_checks()``) on ``result``, then each
+    active user function's bound (``check_kinds.user_checks``): what ``run`` judges, for a run
+    already calibrated if its checks ask for it."""
+    own = spec.checks or check_kinds.default_checks()
+    return [checks.judge(c, result) for c in (*own, *check_kinds.user_checks())]
 
 
 class _Clock:

@@ -10,7 +10,9 @@ Controlled flight
     ``Mixer`` maps collective thrust and body moments to the four rotor thrusts, built
     from the model's own rotor sites and gears and kept within their ``ctrlrange``.
     ``MinimumJerkTrajectory`` is a smooth reference through timed waypoints with a yaw at
-    each; ``Autopilot`` ties them to a ``sim.world.World``.
+    each; ``Autopilot`` ties them to a ``sim.world.World``. ``ReferenceFollower`` flies to a
+    reference replaced from outside at every camera tick (the navigate mode) and ends the
+    flight at the first contact with a cone (``sim.contact``).
 
 Kinematic playback
     ``KeyframeTrajectory`` interpolates timed poses (position linearly, attitude by slerp)
@@ -27,6 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from sim import names
+from sim.contact import ConeContact, first_cone_contact
 from sim.world import World
 from vnav import quat, se3
 from vnav.frames import FrameBuffer
@@ -530,6 +533,186 @@ class Autopilot:
         dt = self.world.model.opt.timestep
         n = round((t_s - self.world.time_s) / dt)
         self.step(max(n, 0))
+
+
+# ------------------------------------------------------------------------------- reference follower
+def _checked_reference(ref: Reference) -> Reference:
+    """``ref`` with float64 (3,) vectors, or ValueError naming the bad field."""
+    if not isinstance(ref, Reference):
+        raise ValueError(f"ref must be a sim.flight.Reference, got {type(ref).__name__}")
+    fields = {}
+    for name in ("p_w", "v_w", "a_w"):
+        value = np.asarray(getattr(ref, name), dtype=np.float64)
+        if value.shape != (3,) or not np.all(np.isfinite(value)):
+            raise ValueError(f"Reference.{name} must be 3 finite numbers, got {value!r}")
+        fields[name] = value.copy()
+    yaw = float(ref.yaw_rad)
+    if not math.isfinite(yaw):
+        raise ValueError(f"Reference.yaw_rad must be finite, got {ref.yaw_rad!r}")
+    return Reference(yaw_rad=yaw, **fields)
+
+
+class ReferenceFollower:
+    """Flies a ``World`` to a reference replaced from outside, ending at the first cone contact.
+
+    The navigate mode hands it a new ``Reference`` at every camera tick (``set_reference``);
+    between two of them the controller (the same ``GeometricController`` and ``Mixer`` as
+    ``Autopilot``, gains unchanged) runs at every physics step on that reference carried
+    forward at constant acceleration from the time it was set, ``t0``:
+    ``p(t) = p + v (t - t0) + a (t - t0)^2 / 2``, ``v(t) = v + a (t - t0)``, ``a``, yaw held.
+    So a reference moving at ``v`` keeps moving between ticks instead of pulling the drone
+    back to where it was at ``t0``; ``extrapolate=False`` holds it as given.
+
+    After every physics step the contacts are read (``sim.contact.first_cone_contact``): the
+    first state in which a drone geom touches a cone ends the flight. ``step`` returns that
+    contact (also kept in ``contact``) and stops there, before any contact force has acted, so
+    a collision is reported as one and never reaches the physics as a crash. Contacts with the
+    ground do not end it.
+
+    Parameters
+    ----------
+    world : World
+    reference : Reference, optional
+        The first reference, set at the world's current time. Default: hold the current
+        position and heading.
+    controller : GeometricController, optional
+        Default: ``GeometricController.from_world``.
+    mixer : Mixer, optional
+        Default: ``Mixer.from_world``.
+    extrapolate : bool
+        Carry the reference forward between ``set_reference`` calls (see above).
+
+    Attributes
+    ----------
+    contact : sim.contact.ConeContact or None
+        The contact that ended the flight, ``None`` while it goes on.
+    last : ControlOutput or None
+        The last controller evaluation.
+    last_reference : Reference or None
+        The reference it tracked (carried forward to that step's time).
+    """
+
+    def __init__(
+        self,
+        world: World,
+        reference: Reference | None = None,
+        controller: GeometricController | None = None,
+        mixer: Mixer | None = None,
+        extrapolate: bool = True,
+    ) -> None:
+        self.world = world
+        self.controller = controller or GeometricController.from_world(world)
+        self.mixer = mixer or Mixer.from_world(world)
+        self.extrapolate = bool(extrapolate)
+        self.contact: ConeContact | None = None
+        self.last: ControlOutput | None = None
+        self.last_reference: Reference | None = None
+        if reference is None:
+            R = world.R_w_b
+            reference = Reference(p_w=world.position_w.copy(), yaw_rad=math.atan2(R[1, 0], R[0, 0]))
+        self.set_reference(reference)
+
+    @property
+    def reference(self) -> Reference:
+        """The reference as last set (at ``reference_time_s``)."""
+        return self._ref
+
+    @property
+    def reference_time_s(self) -> float:
+        """Simulated time at which ``reference`` was set, seconds."""
+        return self._ref_t_s
+
+    @property
+    def ended(self) -> bool:
+        """True once a cone contact has ended the flight."""
+        return self.contact is not None
+
+    def set_reference(self, ref: Reference, t_s: float | None = None) -> None:
+        """Track ``ref`` from now on, as the reference at time ``t_s`` (default: now).
+
+        Raises
+        ------
+        ValueError
+            If ``ref`` is not a ``Reference`` of finite (3,) vectors and a finite yaw, or
+            ``t_s`` is not finite.
+        """
+        ref = _checked_reference(ref)
+        t = self.world.time_s if t_s is None else float(t_s)
+        if not math.isfinite(t):
+            raise ValueError(f"t_s must be finite, got {t_s!r}")
+        self._ref, self._ref_t_s = ref, t
+
+    def reference_at(self, t_s: float) -> Reference:
+        """The reference tracked at time ``t_s`` (carried forward from the one set)."""
+        ref = self._ref
+        if not self.extrapolate:
+            return ref
+        dt = float(t_s) - self._ref_t_s
+        return Reference(
+            p_w=ref.p_w + ref.v_w * dt + 0.5 * ref.a_w * dt * dt,
+            v_w=ref.v_w + ref.a_w * dt,
+            a_w=ref.a_w,
+            yaw_rad=ref.yaw_rad,
+        )
+
+    def step(self, n: int = 1) -> ConeContact | None:
+        """Control and simulate up to ``n`` physics steps; stop at the first cone contact.
+
+        Returns
+        -------
+        ConeContact or None
+            The contact that ended the flight during these steps (the world is left in that
+            state, its time the contact's), ``None`` if none did.
+
+        Raises
+        ------
+        RuntimeError
+            If the flight had already ended at a contact.
+        sim.world.SimulationError
+            If the state diverges (not because of a cone: the flight stops at its contact).
+        """
+        if self.contact is not None:
+            raise RuntimeError(
+                f"the flight ended at t = {self.contact.time_s:.4f} s when the drone touched "
+                f"cone {self.contact.cone_index}; build a new follower to fly again"
+            )
+        w = self.world
+        if int(n) > 0:
+            # A state already touching a cone (placed there) ends the flight before any step.
+            hit = first_cone_contact(w)
+            if hit is not None:
+                return self._end(hit)
+        for _ in range(int(n)):
+            ref = self.reference_at(w.time_s)
+            out = self.controller.compute(
+                w.position_w, w.velocity_w, w.R_w_b, w.angular_velocity_b, ref
+            )
+            w.set_rotor_thrusts(self.mixer.thrusts(out.thrust_N, out.moment_b))
+            w.step(1)
+            self.last, self.last_reference = out, ref
+            hit = first_cone_contact(w)
+            if hit is not None:
+                return self._end(hit)
+        return None
+
+    def _end(self, hit: ConeContact) -> ConeContact:
+        """End the flight at ``hit``."""
+        self.contact = hit
+        logger.info(
+            "t = %.3f s: the drone's %s touched cone %d (%s) at %s",
+            hit.time_s,
+            hit.drone_geom,
+            hit.cone_index,
+            hit.cone_geom,
+            np.round(hit.p_w, 3),
+        )
+        return hit
+
+    def run_until(self, t_s: float) -> ConeContact | None:
+        """Step until the simulated time reaches ``t_s`` or a cone is touched (see ``step``)."""
+        dt = self.world.model.opt.timestep
+        n = round((t_s - self.world.time_s) / dt)
+        return self.step(max(n, 0))
 
 
 # ------------------------------------------------------------------------------- keyframes

@@ -259,6 +259,12 @@ class World:
             dtype=np.int64,
         ).reshape(n_cones, 2)
         """(N, 2) geom ids of each cone: [base plate, body]."""
+        self.drone_geom_ids = np.flatnonzero(m.geom_bodyid == self.body_id)
+        """Geom ids of the drone's geoms (every one drawn and colliding), in model order."""
+        self.cone_index_of_geom = np.full(m.ngeom, -1, dtype=np.int64)
+        """(ngeom,) the cone index a geom belongs to, -1 for geoms that are no cone's."""
+        for i, ids in enumerate(self.cone_geom_ids):
+            self.cone_index_of_geom[ids] = i
         cam_cfg = self.config.camera
         self._T_b_c = cam_cfg.T_b_c
         self._cam_pos0 = m.cam_pos[self.camera_id].copy()

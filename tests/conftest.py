@@ -33,6 +33,8 @@ from helpers import (  # noqa: E402
     render_one_view,
 )
 
+pytest_plugins = ["pytester"]  # tests/test_grading.py runs pytest sessions of its own
+
 
 @pytest.fixture
 def rng() -> np.random.Generator:
@@ -100,6 +102,7 @@ SHARED = {
             "tests/test_calibrate_command.py::test_calibrate_refuses_what_it_cannot_use",
             "tests/test_covariance.py::test_uncertainty_builtin_covariance_grows_",
             "tests/test_diagnose.py::test_builtin_",
+            "tests/test_grading.py::test_vnav_estimator_adds_one_test_per_builtin_with_",
         ),
     ),
     "first_run": (
@@ -113,9 +116,14 @@ SHARED = {
 }
 """Costly fixture: (its unit, the node id prefixes of the tests that request it)."""
 
-SPLIT_MODULES = ("tests/test_cli.py", "tests/test_readme.py", "tests/test_sweep.py")
+SPLIT_MODULES = (
+    "tests/test_cli.py",
+    "tests/test_grading.py",
+    "tests/test_readme.py",
+    "tests/test_sweep.py",
+)
 """Modules spread test by test; their module fixtures are session-scoped (test_sweep's sweep,
-once per process) or ``SHARED``."""
+test_grading's judge, once per process) or ``SHARED``."""
 
 LONGEST_FIRST = (
     "tests/test_readme.py::test_vnav_demo_commands_run_in_order",

@@ -11,6 +11,7 @@
 - The cone's extreme points written out by hand.
 - Reading a Rerun 0.41 recording back (``rerun.chunk.RrdReader`` + pyarrow).
 - The built-in scenario runs shared by the session fixture in ``conftest.py``.
+- The pytest plugin's arguments for a pytest run of its own (``plugin_args``).
 
 MuJoCo renders off-screen through EGL: ``conftest.py`` sets ``MUJOCO_GL`` before this module
 (and with it MuJoCo) is imported.
@@ -355,3 +356,20 @@ class BuiltinRun:
     report: dict
     rrd: object
     json_path: object
+
+
+# ------------------------------------------------------------------------ the pytest plugin
+
+PYTEST_PLUGIN = "scenarios.grading.pytest_plugin"
+"""vnav-sim's pytest plugin, registered by the ``pytest11`` entry point ``vnav``."""
+
+
+def plugin_args() -> list[str]:
+    """What a pytest run of its own (a subprocess, pytester) needs to load the plugin: nothing
+    once the installed vnav-sim declares its entry point (pytest loads it; naming it again
+    would register it twice), else ``-p`` and its module (an editable install made before the
+    entry point existed)."""
+    from importlib.metadata import entry_points
+
+    installed = any(ep.value == PYTEST_PLUGIN for ep in entry_points(group="pytest11"))
+    return [] if installed else ["-p", PYTEST_PLUGIN]

@@ -6,7 +6,7 @@ this interpreter (``/tmp/`` paths are moved into that directory), except where a
 ``_KIND`` says why a command is checked another way: ``./setup.sh`` needs root, apt-get and
 the network and would rebuild the environment the tests run in; ``rerun FILE`` opens a window;
 ``rerun --serve-web FILE`` serves until stopped, so it is started, asked for its page, then
-stopped.
+stopped; the walk-through of "Check your own frame chain" runs on a copy of ``examples/``.
 """
 
 from __future__ import annotations
@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import shutil
 import signal
 import socket
 import subprocess
@@ -25,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import plugin_args
 
 from scenarios import pipeline
 from scenarios.cli import main
@@ -60,6 +62,8 @@ def _kind(command: str) -> str:
         return "serve"  # started, asked for its page, stopped
     if re.fullmatch(r"\.venv/bin/rerun \S+\.rrd", command):
         return "viewer"  # opens a window: checked to name a file the README makes
+    if "examples/" in command:
+        return "example"  # the walk-through, run in order on a copy of examples/
     if command.startswith(".venv/bin/vnav-demo sweep "):
         return "sweep"  # run in order by test_sweep_commands_run, with the README's sweep file
     if command.startswith(".venv/bin/vnav-demo "):
@@ -70,7 +74,8 @@ def _kind(command: str) -> str:
 def test_every_block_of_the_readme_is_tested() -> None:
     languages = {lang for lang, _ in re.findall(r"```(\w*)\n(.*?)```", README, re.S)}
     assert languages == {"bash", "toml", "python"}
-    assert {_kind(c) for c in COMMANDS} == {"setup", "serve", "viewer", "run", "sweep"}
+    kinds = {_kind(c) for c in COMMANDS}
+    assert kinds == {"setup", "serve", "viewer", "run", "sweep", "example"}
     assert len(_blocks("toml")) == 2  # a scenario, a sweep: each has its test
 
 
@@ -223,6 +228,42 @@ def test_screenshot_script_renders_without_a_display() -> None:
     assert "scripts/screenshot.py" in script
     shot = (ROOT / "scripts" / "screenshot.py").read_text()
     assert "rerun_cli" in shot and "copy_screenshot_to_clipboard" in shot
+
+
+# ------------------------------------------------------------ your own frame chain
+
+
+def test_the_walk_through_finds_the_mistake_and_the_fix_passes(tmp_path: Path) -> None:
+    """On a copy of ``examples/``: the run exits 1 and the doctor names the mistake the README
+    names; ``pytest examples/`` fails naming it too; with the README's fix made, it passes
+    (the plugin given with ``-p`` where the installed vnav-sim predates its entry point)."""
+    shutil.copytree(ROOT / "examples", tmp_path / "examples", ignore=_no_cache)
+    run, tests = [c for c in COMMANDS if _kind(c) == "example"]
+    section = README.split("## Check your own frame chain", 1)[1].split("\n## ", 1)[0]
+    said = " ".join(section.split())
+    mistake = re.search(r"`(Mistake: [^(`]+ \([^)`]+\))`", said)[1]
+    wrong, right = re.search(
+        r"In `examples/my_chain.py`, `([^`]+)` becomes `([^`]+)`", said
+    ).groups()
+    tests += "".join(f" {a}" for a in plugin_args())
+
+    proc = _shell(run, tmp_path)
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    assert mistake in " ".join(proc.stdout.split())
+    proc = _shell(tests, tmp_path)
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    assert mistake in proc.stdout
+
+    chain = tmp_path / "examples" / "my_chain.py"
+    assert chain.read_text().count(wrong) == 1
+    chain.write_text(chain.read_text().replace(wrong, right))
+    proc = _shell(tests, tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert re.search(r"\b4 passed\b", proc.stdout), proc.stdout
+
+
+def _no_cache(directory: str, names: list[str]) -> list[str]:
+    return [n for n in names if n in ("__pycache__", ".pytest_cache")]
 
 
 # ------------------------------------------------------------------ the TOML example

@@ -43,6 +43,7 @@ __all__ = [
     "Failures",
     "PluginEstimator",
     "PluginObservation",
+    "function_method",
     "load_estimator",
     "observation_for",
     "plugin_method",
@@ -265,8 +266,13 @@ class PluginEstimator:
 
     def estimate(self, obs: Observation, p_w_depth: np.ndarray, t_s: float) -> Any:
         """``fn``'s estimate, (3,) float64, or ``NoEstimate.FUNCTION_NONE`` / ``FUNCTION_ERROR``."""
+        return self.estimate_given(observation_for(obs, p_w_depth, t_s))
+
+    def estimate_given(self, given: PluginObservation) -> Any:
+        """``estimate`` on the ``PluginObservation`` made already (``observation_for``): what
+        judging a function again on a stored run's detections calls."""
+        t_s = given.t_s
         self.failures.calls += 1
-        given = observation_for(obs, p_w_depth, t_s)
         try:
             returned = self.fn(given)
         except (Exception, SystemExit) as exc:  # the user's code: its failure, even an exit()
@@ -306,7 +312,12 @@ def plugin_method(spec: str) -> Method:
         As ``load_estimator``.
     """
     fn = load_estimator(spec)
-    name = getattr(fn, "__name__", None) or spec.rpartition(":")[2]
+    return function_method(fn, spec, getattr(fn, "__name__", None) or spec.rpartition(":")[2])
+
+
+def function_method(fn: Callable[[PluginObservation], Any], spec: str, name: str) -> Method:
+    """A function already in hand as the method ``user:<name>`` (``plugin_method`` without the
+    import): ``spec`` says where it came from (the report's ``estimators.<name>.spec``)."""
     m = Method(
         f"{USER_PREFIX}{name}",
         f"your function {spec}, given the depth_image estimate in the camera frame",

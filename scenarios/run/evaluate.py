@@ -31,11 +31,12 @@ from scenarios.run.records import DetectionRecord, ImageTiming, TickRecord
 from vnav import metrics, se3, so3
 from vnav.cone import cones_fully_in_view
 from vnav.detect import ConeDetection
+from vnav.estimators import NoEstimate
 from vnav.localize import ConeEstimates, Localizer
 from vnav.methods import CONTRACT_DOMAIN, NEWEST_POSE_METHOD
 from vnav.uncertainty import nees
 
-__all__ = ["MATCH_GATE_M", "TickTruth", "evaluate_tick", "reevaluate"]
+__all__ = ["MATCH_GATE_M", "TickTruth", "evaluate_tick", "reevaluate", "with_method"]
 
 MATCH_GATE_M = 3.0
 """An estimate farther than this from every true cone is reported unmatched."""
@@ -287,6 +288,76 @@ def _match(estimates: list[ConeEstimates], cones_w: np.ndarray) -> dict[int, int
     return {usable[j]: i for i, j in pairs}
 
 
+def _error_m(p_true_w: np.ndarray, p_w: np.ndarray) -> float:
+    """The distance of an estimate from the true cone, metres."""
+    return float(metrics.position_error(p_true_w, p_w)[0])
+
+
+def _has_nees(scored: tuple[float, int]) -> bool:
+    """Whether a NEES counts: a covariance of rank 0 claims an exact estimate, it has no NEES
+    (0 degrees of freedom), and counting it would make the band's count differ from its
+    degrees of freedom."""
+    return scored[1] > 0
+
+
+def _without(by_method: dict, drop: str | None) -> dict:
+    """A copy of ``by_method`` without the key ``drop``."""
+    return {m: v for m, v in by_method.items() if m != drop}
+
+
+def with_method(
+    record: DetectionRecord,
+    name: str,
+    estimate: np.ndarray | NoEstimate,
+    cov_w: np.ndarray | None,
+    cones_w: np.ndarray,
+    *,
+    drop: str | None = None,
+) -> DetectionRecord:
+    """``record`` with one more method's estimate (or its reason for none), compared with the
+    truth as ``evaluate_tick`` compares every method's: its error and NEES against the matched
+    cone. What judging another function on a finished run's detections needs
+    (``scenarios.grading``); the record itself is left as it was.
+
+    Parameters
+    ----------
+    record : DetectionRecord
+    name : str
+        The method's name; it must not be in ``record`` already.
+    estimate : ndarray, shape (3,), or NoEstimate
+    cov_w : ndarray, shape (3, 3), or None
+        The estimate's world covariance, m^2 (None with a NoEstimate).
+    cones_w : ndarray, shape (N, 3)
+        True base centres of the cones, metres (those the run matched against).
+    drop : str, optional
+        A method whose entries are left out of the new record.
+    """
+    estimates_w = _without(record.estimates_w, drop)
+    no_estimate = _without(record.no_estimate, drop)
+    covariances_w = _without(record.covariances_w, drop)
+    errors_m = _without(record.errors_m, drop)
+    scored = _without(record.nees, drop)
+    if isinstance(estimate, NoEstimate):
+        no_estimate[name] = estimate
+    else:
+        estimates_w[name] = estimate
+        covariances_w[name] = cov_w
+        if record.cone_index is not None:
+            p_true_w = cones_w[record.cone_index]
+            errors_m[name] = _error_m(p_true_w, estimate)
+            value = nees(estimate - p_true_w, cov_w)
+            if _has_nees(value):
+                scored[name] = value
+    return dataclasses.replace(
+        record,
+        estimates_w=estimates_w,
+        no_estimate=no_estimate,
+        covariances_w=covariances_w,
+        errors_m=errors_m,
+        nees=scored,
+    )
+
+
 def _compare(
     detection: ConeDetection,
     estimates: ConeEstimates,
@@ -306,11 +377,9 @@ def _compare(
     p_true_w = cones_w[cone_index]
     p_c_true = se3.apply(T_c_w, p_true_w)
     range_m = float(np.linalg.norm(p_c_true))
-    errors_m = {m: float(metrics.position_error(p_true_w, p)[0]) for m, p in estimates_w.items()}
-    # A covariance of rank 0 claims an exact estimate: it has no NEES (0 degrees of freedom),
-    # and counting it would make the band's count differ from its degrees of freedom.
+    errors_m = {m: _error_m(p_true_w, p) for m, p in estimates_w.items()}
     scored = {m: nees(p - p_true_w, covariances_w[m]) for m, p in estimates_w.items()}
-    nees_by_method = {m: v for m, v in scored.items() if v[1] > 0}
+    nees_by_method = {m: v for m, v in scored.items() if _has_nees(v)}
     in_contract = cone_index in in_view and CONTRACT_DOMAIN.contains_range(range_m)
     return DetectionRecord(
         detection,
