@@ -196,6 +196,7 @@ def summary(rep: dict, rrd: Path, json_path: Path) -> str:
     lines += _estimator_lines(rep.get("estimators", {}))
     lines += _latest_pose_lines(rep)
     lines += _recovered_mount_lines(rep)
+    lines += _navigation_lines(rep.get("navigation"))
     lines.append("  checks:")
     for c in rep["checks"]:
         lines += _check_lines(c)
@@ -240,6 +241,29 @@ def _estimator_lines(estimators: dict) -> list[str]:
                 "    ",
             )
     return lines
+
+
+def _navigation_lines(nav: dict | None) -> list[str]:
+    """A navigating flight's outcome (the report's ``navigation``): the goal reached or not,
+    the collision, the smallest true clearance and the length flown."""
+    if nav is None:
+        return []
+    if nav["collided"]:
+        outcome = (
+            f"collision with cone {nav['first_contact_cone']} at t = {nav['first_contact_s']:.2f} s"
+        )
+    elif nav["reached_goal"]:
+        outcome = f"reached the goal at t = {nav['time_to_goal_s']:.2f} s, no collision"
+    else:
+        outcome = (
+            f"did not reach the goal ({nav['final_distance_to_goal_m']:.2f} m from it at the "
+            "end), no collision"
+        )
+    return _wrap(
+        f"navigation on {nav['estimate']}'s map: {outcome}; smallest true clearance "
+        f"{nav['min_clearance_m']:.3f} m, flew {nav['path_length_m']:.2f} m",
+        2,
+    )
 
 
 def _recovered_mount_lines(rep: dict) -> list[str]:

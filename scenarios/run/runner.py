@@ -35,13 +35,21 @@ import numpy as np
 from scenarios.run.evaluate import TickTruth, evaluate_tick
 from scenarios.run.records import ImageTiming, PoseStream, RunResult, TickRecord
 from scenarios.run.streams import BODY, WORLD, Delivered, Receiver, Streams
-from scenarios.scenario.spec import ControlledFlight, KinematicFlight, OrbitFlight, ScenarioSpec
+from scenarios.run.navigation import Navigator
+from scenarios.scenario.spec import (
+    ControlledFlight,
+    KinematicFlight,
+    NavigateFlight,
+    OrbitFlight,
+    ScenarioSpec,
+)
 from sim.flight import (
     Autopilot,
     KeyframePlayer,
     KeyframeTrajectory,
     MinimumJerkTrajectory,
     OrbitTrajectory,
+    ReferenceFollower,
 )
 from sim.mesh import Scenery, scenery
 from sim.noise import mount_error, noisy_depth, noisy_pose, noisy_rgb
@@ -180,6 +188,9 @@ def _run_ticks(
             image: _Image = d.payload
             record = flow.evaluate(d)
             result.ticks.append(record)
+            if flow.navigator is not None:  # the closed loop: what was seen steers
+                newest = d.T_w_b_latest if d.T_w_b_latest is not None else d.T_w_b_at_exposure
+                flow.navigator.on_tick(record, newest)
             t1 = time.perf_counter()
             if observer:
                 observer.on_tick(record, image.rgb, image.depth)
@@ -191,6 +202,8 @@ def _run_ticks(
 
     for k in range(n_ticks):
         evaluate(flow.advance_to(flow.step_of(k / spec.camera_rate_hz)))
+        if flow.navigator is not None and flow.navigator.ended:
+            break  # at the goal or a cone: no more images
         t0 = time.perf_counter()
         if camera_track:
             world.set_camera_position_b(_interpolate(camera_track, world.time_s))
@@ -208,6 +221,8 @@ def _run_ticks(
     timing["physics"] += flow.physics_s
     timing["streams"] += flow.streams_s
     result.poses = flow.pose_stream()
+    if flow.navigator is not None:
+        result.navigation = flow.navigator.record
 
 
 @dataclass(frozen=True)
@@ -232,6 +247,11 @@ class _Flow:
         self.spec = spec
         self.world = world
         self.driver = _driver(world, spec)
+        self.navigator = (
+            Navigator(spec.flight, world, self.driver)
+            if isinstance(spec.flight, NavigateFlight)
+            else None
+        )
         self.dt = float(world.model.opt.timestep)
         t = spec.timing
         # Independent streams of randomness: pose noise, arrival jitter, image and depth noise,
@@ -301,7 +321,18 @@ class _Flow:
 
     def _drive(self, n: int) -> None:
         t0 = time.perf_counter()
-        self.driver.step(n)
+        nav = self.navigator
+        if nav is None:
+            self.driver.step(n)
+        else:
+            t_end_s = self.world.time_s + n * self.dt
+            if not nav.ended:
+                self.driver.step(n)  # stops at the first contact with a cone
+                nav.after_physics()
+            if nav.ended:
+                # The flight is over (a cone or the goal): the drone is held where it ended
+                # while time runs on, so that the images in flight still arrive.
+                self.world.data.time = t_end_s
         self.physics_s += time.perf_counter() - t0
 
     def advance_to(self, step: int) -> list[Delivered]:
@@ -494,6 +525,8 @@ def _driver(world: World, spec: ScenarioSpec):
             flight.ramp_s,
         )
         return Autopilot(world, orbit)
+    if isinstance(flight, NavigateFlight):
+        return ReferenceFollower(world)  # steered by the run's Navigator
     assert isinstance(flight, ControlledFlight)
     wps = flight.waypoints  # one waypoint is a hover there
     trajectory = MinimumJerkTrajectory(

@@ -13,7 +13,7 @@ from collections.abc import Callable
 from typing import Any
 
 from scenarios.scenario.check_kinds import KINDS, default_checks
-from scenarios.scenario.spec import ScenarioError, ScenarioSpec, from_dict
+from scenarios.scenario.spec import GOAL_RADIUS_M, ScenarioError, ScenarioSpec, from_dict
 from sim.config import MountError
 from vnav.methods import METHODS, PREFERENCE, method
 
@@ -468,6 +468,59 @@ def calibration() -> Scenario:
     }
 
 
+def _avoid_world(estimate: str) -> Scenario:
+    """A cone on the straight line from start to goal, 10 m ahead; the drone flies on
+    ``estimate``'s map of it (``flight.mode = "navigate"``)."""
+    return {
+        "camera_rate_hz": 10.0,
+        "camera": {"pitch_down_deg": 15.0},
+        "cones": [{"position_w": [10.0, 0.0, 0.0]}],
+        "flight": {
+            "mode": "navigate",
+            "start_w": [0.0, 0.0, 0.5],
+            "goal_w": [20.0, 0.0, 0.5],
+            "speed_mps": 2.0,
+            "clearance_m": 1.0,
+            "estimate": estimate,
+        },
+    }
+
+
+def avoid() -> Scenario:
+    # Lecture chapter 0 made real: the drone must navigate around the cone it sees.
+    return {
+        "name": "avoid",
+        "description": "Chapter 0, closed loop: a cone stands on the straight line to the goal; "
+        "the drone maps it with the depth image and flies around it.",
+        "lesson": "The planner avoids where the estimator says the cone is. With "
+        "p_w = T_w_b T_b_c p_c the mapped cone (blue) sits on the real one, the plan bends "
+        "round it at clearance_m, and MuJoCo's own distance between the drone and the cone "
+        "never drops below 0.3 m.",
+        **_avoid_world("depth_image"),
+        "checks": [
+            *ACCURACY_CHECKS,
+            _check("reached_goal", GOAL_RADIUS_M, name="reached the goal"),
+            _check("no_collision", 0.0, name="never touched the cone"),
+            _check("min_clearance", 0.3, name="true clearance at least 0.3 m"),
+        ],
+    }
+
+
+def avoid_naive() -> Scenario:
+    return {
+        "name": "avoid-naive",
+        "description": "Chapter 0's warning, flown: the same cone mapped by the naive chain; "
+        "the drone flies into it.",
+        "lesson": "'If you naively treat 2 m forward in the camera frame as 2 m forward in the "
+        "world frame, you will command the drone to fly into the cone.' The camera's z axis "
+        "points forward; added to the drone's position it becomes the world's z, up: the "
+        "naive map puts the cone in the sky, metres above the drone, where no cone can be, so "
+        "nothing is avoided and MuJoCo reports the contact.",
+        **_avoid_world("naive"),
+        "checks": [_check("collision", 1.0, name="the naive map flies into the cone")],
+    }
+
+
 REGISTRY: dict[str, Callable[[], Scenario]] = {
     "frame-problem": frame_problem,
     "yaw-sweep": yaw_sweep,
@@ -479,6 +532,8 @@ REGISTRY: dict[str, Callable[[], Scenario]] = {
     "latency": latency,
     "uncertainty": uncertainty,
     "calibration": calibration,
+    "avoid": avoid,
+    "avoid-naive": avoid_naive,
 }
 
 
