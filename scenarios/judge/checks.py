@@ -524,7 +524,7 @@ def _latency_prediction(run: RunResult, check: Check) -> float | NoData:
 
 def _navigation(run: RunResult):
     if run.navigation is None:
-        return NoData("the flight does not navigate (flight.mode is not \"navigate\")")
+        return NoData('the flight does not navigate (flight.mode is not "navigate")')
     return run.navigation
 
 

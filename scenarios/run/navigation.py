@@ -133,9 +133,7 @@ class Navigator:
             self.follower.set_reference(
                 Reference(p_w=here.p_w, v_w=carrot.v_w, yaw_rad=carrot.yaw_rad)
             )
-        plan_w = np.column_stack(
-            [self._plan_xy_w, np.full(len(self._plan_xy_w), self.altitude_m)]
-        )
+        plan_w = np.column_stack([self._plan_xy_w, np.full(len(self._plan_xy_w), self.altitude_m)])
         obstacles = self.map.obstacles
         self.record.ticks.append(
             NavigationTick(

@@ -33,9 +33,9 @@ from typing import Protocol
 import numpy as np
 
 from scenarios.run.evaluate import TickTruth, evaluate_tick
+from scenarios.run.navigation import Navigator
 from scenarios.run.records import ImageTiming, PoseStream, RunResult, TickRecord
 from scenarios.run.streams import BODY, WORLD, Delivered, Receiver, Streams
-from scenarios.run.navigation import Navigator
 from scenarios.scenario.spec import (
     ControlledFlight,
     KinematicFlight,

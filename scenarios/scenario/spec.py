@@ -341,9 +341,8 @@ def _navigate(values: dict[str, Any], where: str) -> NavigateFlight:
     """``[flight]`` of mode ``navigate``: a start and a goal above the ground, apart."""
     for key in ("start_w", "goal_w"):
         if values[key][2] <= 0.0:
-            raise _err(
-                where, f"flight.{key}", f"must be above the ground (z > 0), got z = {values[key][2]:g}"
-            )
+            z_m = values[key][2]
+            raise _err(where, f"flight.{key}", f"must be above the ground (z > 0), got z = {z_m:g}")
     flight = NavigateFlight(**values)
     if flight.straight_m <= GOAL_RADIUS_M:
         raise _err(
