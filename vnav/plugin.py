@@ -119,13 +119,15 @@ def _exposure_fields(e: Exposure, T_w_b_newest: np.ndarray | None) -> dict[str, 
     same for each of its detections): its pose in three forms, the mount, ``K``, the newest
     pose."""
     R_w_b = e.T_w_b[:3, :3]
+    T_w_b = _frozen(e.T_w_b, (4, 4))
     return {
         "K": _frozen(e.camera.K, (3, 3)),
-        "T_w_b": _frozen(e.T_w_b, (4, 4)),
+        "T_w_b": T_w_b,
         "quat_w_b_xyzw": _frozen(quat.from_matrix(R_w_b), (4,)),
         "rpy_w_b_deg": _frozen(np.degrees(so3.to_rpy(R_w_b, warn=False)), (3,)),
         "T_b_c": _frozen(e.T_b_c, (4, 4)),
-        "T_w_b_newest": _frozen(e.T_w_b if T_w_b_newest is None else T_w_b_newest, (4, 4)),
+        # Read-only, so one array may be both.
+        "T_w_b_newest": T_w_b if T_w_b_newest is None else _frozen(T_w_b_newest, (4, 4)),
     }
 
 
@@ -351,6 +353,12 @@ def _call_with_alarm(
             signal.setitimer(signal.ITIMER_REAL, max(left_s, 1e-6), previous_interval_s)
 
 
+_LAST_FIELDS: tuple[Exposure | None, np.ndarray | None, dict[str, Any]] = (None, None, {})
+"""The exposure fields (``_exposure_fields``) of the last image a user's function was given:
+the image's other detections, and the other users' functions, share them (they are
+read-only)."""
+
+
 class PluginEstimator:
     """A user's function as a ``"user"`` method's estimator (``vnav.localize``): called with
     the ``PluginObservation`` of each detection that has a ``depth_image`` estimate, never
@@ -391,11 +399,6 @@ class PluginEstimator:
         self.stopped = False
         self.again = None
         self._seen: list[tuple[np.ndarray, ...]] = []
-        self._fields_of: tuple[Exposure | None, np.ndarray | None, dict[str, Any]] = (
-            None,
-            None,
-            {},
-        )
 
     def second_pass(self) -> PluginEstimator:
         """A new estimator of the same function and limit for this run's detections
@@ -421,11 +424,14 @@ class PluginEstimator:
     def _observation(
         self, obs: Observation, p_w_depth: np.ndarray, t_s: float, T_w_b_newest: Any
     ) -> PluginObservation:
-        """``observation_for``, with the exposure's fields made once per image."""
-        exposure, newest, fields = self._fields_of
+        """``observation_for``, with the exposure's fields made once per image (for every
+        user's function, ``_LAST_FIELDS``)."""
+        global _LAST_FIELDS
+        exposure, newest, fields = _LAST_FIELDS
         if exposure is not obs.exposure or newest is not T_w_b_newest:
             fields = _exposure_fields(obs.exposure, T_w_b_newest)
-            self._fields_of = (obs.exposure, T_w_b_newest, fields)
+            # One tuple, assigned at once: another thread reads the old entry or the new.
+            _LAST_FIELDS = (obs.exposure, T_w_b_newest, fields)
         return observation_for(obs, p_w_depth, t_s, exposure_fields=fields)
 
     def estimate(
