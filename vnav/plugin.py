@@ -541,6 +541,8 @@ def second_pass_methods(methods: tuple[Method, ...]) -> tuple[Method, ...]:
     (``PluginEstimator.second_pass``): for a run's detections estimated again (a calibrated
     run's recovered mount), so that the function is called again with what that pass gives
     it, its tallies kept apart from the run's own."""
+    if not any(m.images == "user" for m in methods):
+        return methods  # the same tuple: nothing to give a second pass
     out = []
     for m in methods:
         if m.images == "user":

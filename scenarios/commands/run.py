@@ -258,7 +258,8 @@ def _estimator_lines(estimators: dict, run_wall_s: float) -> list[str]:
         t = entry["time_s"]
         if t["calls"] and (t["mean"] > SLOW_CALL_S or t["total"] > SLOW_SHARE * run_wall_s):
             lines += _wrap(
-                f"{name} took {_seconds(t['mean'])} per call ({t['calls']} calls, "
+                f"{name} took {_seconds(t['mean'])} per call ({t['calls']} "
+                f"call{'s' if t['calls'] != 1 else ''}, "
                 f"{_seconds(t['total'])}, longest {_seconds(t['max'])})",
                 4,
                 "    ",
