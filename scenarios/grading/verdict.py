@@ -90,9 +90,17 @@ class _Keeper:
     def diagnosis(self) -> None:
         return None
 
-    def estimate(self, obs: Observation, p_w_depth: np.ndarray, t_s: float) -> NoEstimate:
+    def estimate(
+        self,
+        obs: Observation,
+        p_w_depth: np.ndarray,
+        t_s: float,
+        T_w_b_newest: np.ndarray | None = None,
+    ) -> NoEstimate:
         kept = self.given[self.phase]
-        kept.setdefault(id(obs.view.detection), observation_for(obs, p_w_depth, t_s))
+        kept.setdefault(
+            id(obs.view.detection), observation_for(obs, p_w_depth, t_s, T_w_b_newest)
+        )
         return NoEstimate.FUNCTION_NONE
 
     def covariance(self, obs: Observation, p_w: np.ndarray) -> np.ndarray:
