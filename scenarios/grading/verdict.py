@@ -98,9 +98,7 @@ class _Keeper:
         T_w_b_newest: np.ndarray | None = None,
     ) -> NoEstimate:
         kept = self.given[self.phase]
-        kept.setdefault(
-            id(obs.view.detection), observation_for(obs, p_w_depth, t_s, T_w_b_newest)
-        )
+        kept.setdefault(id(obs.view.detection), observation_for(obs, p_w_depth, t_s, T_w_b_newest))
         return NoEstimate.FUNCTION_NONE
 
     def covariance(self, obs: Observation, p_w: np.ndarray) -> np.ndarray:
