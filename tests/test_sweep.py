@@ -490,7 +490,7 @@ def test_on_ray_an_episode_that_raises_or_kills_its_worker_costs_itself_only(
     monkeypatch.setattr(engines, "_Worker", Faulty)
     plan = load(work / "small.toml")
     tasks = {(p, s): engines.Task(p, s, plan.points[p].scenario_toml) for p, s in plan.episodes}
-    engine = engines.RayEngine(workers=1)
+    engine = engines.RayEngine(workers=1, estimators=plan.estimators)  # the sweep's user:ref
     try:
         import ray
 
