@@ -10,6 +10,17 @@ the average bytes of the .rrd per tick (target <= 60 KB). The total wall time of
 built-ins is the figure behind "``vnav-demo run --all`` finishes within 2 minutes" (target
 <= 120 s).
 
+``--plugin`` measures a user's estimator (``vnav.plugin``): one scenario (``--scenario``,
+default frame-problem) run with the reference solution plugged in and without it, alternating
+for ``--rounds`` rounds, in this process, recording to a temporary directory as ``vnav-demo
+run`` does; the best wall and CPU time of each, their ratio, the function's own time (the
+report's ``time_s``) and the target: plugged in <= 1.05 x without + the function's own time.
+Also the cost of what a plug-in adds per detection (``PluginEstimator.estimate`` around a
+function that returns at once: the observation it is given, the checks of what it returns),
+for one detection in an image and for each further one in the same image; and the frame-bug
+doctor on a 30 s flight's worth of observations (900, every hypothesis, the newest poses
+included; target < 1 s).
+
 ``--against REV`` measures a change: the same scenarios (those both versions have) are run by
 this checkout and by git revision REV (checked out in a temporary worktree), each in a fresh
 process, alternating for ``--rounds`` rounds; the best wall time of each counts, and the ratio
@@ -51,7 +62,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="REV",
         help="compare with git revision REV, side by side (see the module docstring)",
     )
-    parser.add_argument("--rounds", type=int, default=2, help="rounds of --against")
+    parser.add_argument("--rounds", type=int, default=2, help="rounds of --against and of --plugin")
+    parser.add_argument(
+        "--plugin",
+        action="store_true",
+        help="a scenario with the reference solution plugged in against without it, "
+        "the plug-in's cost per detection and the doctor's time (see the module docstring)",
+    )
 
 
 def _run_one(name: str, out: Path) -> dict:
@@ -78,6 +95,8 @@ def _run_one(name: str, out: Path) -> dict:
 def run(args: argparse.Namespace) -> dict:
     if getattr(args, "against", None):
         return _against(args)
+    if getattr(args, "plugin", False):
+        return _plugin(args)
     names = getattr(args, "scenario", None) or builtin.names()
     with tempfile.TemporaryDirectory(prefix="vnav-bench-") as tmp:
         start = time.perf_counter()
@@ -205,3 +224,140 @@ def _against(args: argparse.Namespace) -> dict:
             )
         print(f"{'ALL':<19}{total['now']:>8.2f}{total['rev']:>12.2f}{figures['total_ratio']:>8.3f}")
     return figures
+
+
+PLUGIN_TARGETS = {"plugged_over_plain": 1.05, "doctor_900_s": 1.0}
+
+
+def _timed_run(spec, out: Path, methods: tuple) -> tuple[float, float, dict]:
+    """One run of ``spec`` with ``methods`` added: wall and CPU seconds, the report."""
+    from vnav.methods import extended
+
+    wall_s, cpu_s = time.perf_counter(), time.process_time()
+    with extended(methods):
+        outcome = pipeline.run(spec, seed=1, out_dir=out)
+    return time.perf_counter() - wall_s, time.process_time() - cpu_s, outcome.report
+
+
+def _plugin(args: argparse.Namespace) -> dict:
+    """The reference solution plugged in against not, side by side; the plug-in's cost per
+    detection; the doctor on 900 observations."""
+    from vnav.plugin import plugin_method
+
+    name = (getattr(args, "scenario", None) or ["frame-problem"])[0]
+    spec = builtin.load(name)
+    best = {"plain": [float("inf")] * 2, "plugged": [float("inf")] * 2}
+    user_s = float("inf")
+    with tempfile.TemporaryDirectory(prefix="vnav-bench-plugin-") as tmp:
+        _timed_run(spec, Path(tmp), ())  # warm: imports, the scene's first build
+        for i in range(max(1, args.rounds)):
+            # ABBA: neither side always runs first (a warmer cache, a quieter moment).
+            for side in ("plain", "plugged")[:: 1 if i % 2 == 0 else -1]:
+                methods = (plugin_method("vnav.plugin:reference_estimate"),) * (side == "plugged")
+                wall_s, cpu_s, report = _timed_run(spec, Path(tmp), methods)
+                best[side] = [min(best[side][0], wall_s), min(best[side][1], cpu_s)]
+                if methods:
+                    own = report["estimators"][methods[0].name]["time_s"]
+                    user_s = min(user_s, own["total"])
+                    calls = own["calls"]
+    ratio = {k: best["plugged"][i] / best["plain"][i] for i, k in enumerate(("wall", "cpu"))}
+    allowed = {
+        k: PLUGIN_TARGETS["plugged_over_plain"] + user_s / best["plain"][i]
+        for i, k in enumerate(("wall", "cpu"))
+    }
+    figures = {
+        "scenario": name,
+        "rounds": args.rounds,
+        "plain_s": dict(zip(("wall", "cpu"), best["plain"], strict=True)),
+        "plugged_s": dict(zip(("wall", "cpu"), best["plugged"], strict=True)),
+        "ratio": ratio,
+        "allowed_ratio": allowed,
+        "function_calls": calls,
+        "function_total_s": user_s,
+        "per_detection_us": _per_detection_us(),
+        "doctor_900_s": _doctor_s(),
+        "targets": PLUGIN_TARGETS,
+    }
+    if not args.json:
+        print(f"{name}, best of {args.rounds} alternating rounds, recording as vnav-demo run does")
+        for side in ("plain", "plugged"):
+            label = "without" if side == "plain" else "with reference_estimate"
+            print(f"  {label:<26}{best[side][0]:>8.2f} s wall {best[side][1]:>8.2f} s CPU")
+        print(
+            f"  ratio: wall {ratio['wall']:.3f}, CPU {ratio['cpu']:.3f} (target <= "
+            f"{allowed['wall']:.3f} wall, {allowed['cpu']:.3f} CPU: 1.05 + the function's "
+            f"{1e3 * user_s:.1f} ms over {calls} calls)"
+        )
+        per = figures["per_detection_us"]
+        print(
+            f"  a plug-in's cost per detection, the function aside: {per['first']:.0f} us for "
+            f"an image's first detection, {per['further']:.0f} us for each further one"
+        )
+        doctor_ms, target_s = 1e3 * figures["doctor_900_s"], PLUGIN_TARGETS["doctor_900_s"]
+        print(
+            f"  the doctor on 900 observations (30 s at 30 Hz): {doctor_ms:.1f} ms "
+            f"(target < {target_s:g} s)"
+        )
+    return figures
+
+
+def _per_detection_us(repeat: int = 2000) -> dict[str, float]:
+    """``PluginEstimator.estimate`` around a function that returns at once, microseconds:
+    for a new image's detection, and for a further detection of the same image."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from vnav import se3, so3
+    from vnav.camera import PinholeCamera
+    from vnav.frames import R_FLU_RDF
+    from vnav.plugin import PluginEstimator
+
+    camera = PinholeCamera.from_fovy(60.0, 640, 480)
+    p_w = np.array([8.0, 1.0, 0.0])
+    T_w_b = se3.make(so3.from_rpy(0.02, -0.03, 0.4), [0.0, 0.0, 1.5])
+    T_b_c = se3.make(R_FLU_RDF, [0.15, 0.0, 0.05])
+    p_c = se3.apply(se3.invert(T_w_b @ T_b_c), p_w)
+
+    def observation() -> SimpleNamespace:  # what estimate reads of a vnav Observation
+        exposure = SimpleNamespace(T_w_b=T_w_b, T_b_c=T_b_c, camera=camera)
+        return SimpleNamespace(
+            exposure=exposure, view=SimpleNamespace(camera_coordinates=lambda p: p_c)
+        )
+
+    estimator = PluginEstimator(lambda obs: p_w)
+    fresh = [observation() for _ in range(repeat)]
+    start = time.perf_counter()
+    for obs in fresh:
+        estimator.estimate(obs, p_w, 0.0)
+    first = (time.perf_counter() - start) / repeat
+    same = observation()
+    start = time.perf_counter()
+    for _ in range(repeat):
+        estimator.estimate(same, p_w, 0.0)
+    further = (time.perf_counter() - start) / repeat
+    return {"first": 1e6 * first, "further": 1e6 * further}
+
+
+def _doctor_s(n: int = 900) -> float:
+    """``vnav.diagnose.diagnose`` on ``n`` observations, every hypothesis, best of 5, s."""
+    import numpy as np
+
+    from vnav import se3, so3
+    from vnav.diagnose import diagnose
+
+    rng = np.random.default_rng(0)
+    poses = np.stack(
+        [se3.make(so3.from_rpy(*rng.uniform(-1, 1, 3)), rng.normal(size=3)) for _ in range(2 * n)]
+    )
+    T_w_b, newest = poses[:n], poses[n:]
+    T_b_c = se3.make(so3.from_rpy(0.1, -0.2, 0.3), [0.15, 0.0, 0.05])
+    p_c = np.column_stack([rng.uniform(-2, 2, n), rng.uniform(-2, 2, n), rng.uniform(2, 20, n)])
+    T_w_c = T_w_b @ T_b_c
+    p_w = np.einsum("nij,nj->ni", T_w_c[:, :3, :3], p_c) + T_w_c[:, :3, 3]  # the correct chain
+    best = float("inf")
+    for _ in range(5):
+        start = time.perf_counter()
+        diagnose(p_c, T_w_b, T_b_c, p_w, T_w_b_newest=newest)
+        best = min(best, time.perf_counter() - start)
+    return best

@@ -4,7 +4,7 @@
 - ``vnav-demo show NAME``: a built-in scenario as a TOML file named ``my-NAME``, to start your
   own from.
 - ``vnav-demo run NAME|FILE.toml [...] [--all] [--out DIR] [--seed N] [--duration S] [--quiet]
-  [--estimator SPEC]``:
+  [--estimator SPEC] [--estimator-timeout-s S]``:
   runs scenarios headless, writes ``DIR/<name>.rrd`` and ``DIR/<name>.json``, prints a summary.
 - ``vnav-demo lecture``: the lecture's worked examples next to vnav's results.
 - ``vnav-demo sweep FILE.toml [--out DIR] [--workers N] [--address ADDR] [--resume]``: a
@@ -147,6 +147,14 @@ def _add_run_parser(sub) -> None:
         help="also run your function fn(obs) -> p_w at every detection, as method "
         "user:<function>, judged with depth_image's bound; SPEC is package.module:function or "
         "path/to/file.py:function (repeatable; docs/CONVENTIONS.md, 'Your own estimator')",
+    )
+    p.add_argument(
+        "--estimator-timeout-s",
+        type=float,
+        default=None,
+        metavar="S",
+        help="stop a call of an --estimator function that takes longer than S seconds: a "
+        "failure of that function, which is then not called again that run (default: no limit)",
     )
     p.add_argument(
         "--export",

@@ -129,6 +129,7 @@ LONGEST_FIRST = (
     "tests/test_readme.py::test_vnav_demo_commands_run_in_order",
     "tests/test_sweep.py::test_an_existing_cluster_gives_the_serial_rows",
     "builtin-runs",
+    "tests/test_plugin_mistakes.py",
     "tests/test_readme.py::test_sweep_commands_run",
     "tests/test_sweep.py::test_resume_after_an_interruption_runs_only_the_missing_episodes",
     "tests/test_sweep.py::test_a_killed_worker_costs_no_episode",

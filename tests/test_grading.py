@@ -47,6 +47,14 @@ def user_file(tmp_path):
     return path
 
 
+def _untimed(entry: dict) -> dict:
+    """A report's ``estimators`` entry without its call times (and its second pass's)."""
+    out = {k: v for k, v in entry.items() if k != "time_s"}
+    if isinstance(out.get("recovered_mount"), dict):
+        out["recovered_mount"] = _untimed(out["recovered_mount"])
+    return out
+
+
 @pytest.fixture(scope="session")
 def judge() -> grading.Judge:
     """One judge for the tests here: frame-problem flown once for them all (per process)."""
@@ -75,7 +83,12 @@ def test_a_verdict_is_what_vnav_demo_run_reports(tmp_path, user_file, judge, fun
     shown = [(c["name"], c["outcome"], c["shown"]) for c in report["checks"]]
     assert [(c.name, c.outcome.value, c.shown) for c in verdict.checks] == shown
     assert verdict.report["methods"][name] == report["methods"][name]
-    assert verdict.report["estimators"][name] == report["estimators"][name]
+    assert _untimed(verdict.report["estimators"][name]) == _untimed(report["estimators"][name])
+    # Call times are the machine's: the same calls were timed, not to the same seconds.
+    assert (
+        verdict.report["estimators"][name]["time_s"]["calls"]
+        == report["estimators"][name]["time_s"]["calls"]
+    )
     errors = report["methods"][name]["position_error_m"]
     assert len(verdict.errors) == errors["count"]
     if errors["count"]:
@@ -94,8 +107,10 @@ def test_a_calibrated_runs_verdict_is_what_vnav_demo_run_reports(tmp_path, user_
     assert main([*args, "--estimator", spec]) == 1
     report = json.loads((out / "calibration.json").read_text())
     assert report["calibration"]["position_error_m"]["recovered_mount"]["user:transposed"]
-    for key in ("passed", "checks", "methods", "estimators", "calibration"):
+    for key in ("passed", "checks", "methods", "calibration"):
         assert verdict.report[key] == report[key], key
+    (name,) = report["estimators"]
+    assert _untimed(verdict.report["estimators"][name]) == _untimed(report["estimators"][name])
     assert not verdict.passed
 
 

@@ -5,9 +5,14 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import re
+import signal
 import sys
 import textwrap
+import threading
+import time
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -16,15 +21,25 @@ from scenarios import pipeline
 from scenarios.cli import main
 from scenarios.scenario import builtin
 from vnav import quat, so3
+from vnav.estimators import NoEstimate
 from vnav.methods import METHOD_NAMES, METHODS, active_methods, extended
-from vnav.plugin import load_estimator, plugin_method, reference_estimate
+from vnav.plugin import (
+    Failure,
+    PluginEstimator,
+    load_estimator,
+    plugin_method,
+    reference_estimate,
+)
 
 DURATION = ["--duration", "2"]
 
 USER_FUNCTIONS = textwrap.dedent("""\
     import math
+    import time
 
     import numpy as np
+
+    from vnav.plugin import reference_estimate
 
 
     def transposed(obs):
@@ -75,6 +90,16 @@ USER_FUNCTIONS = textwrap.dedent("""\
         assert np.allclose(obs.K @ obs.p_c / obs.depth_m, [*obs.uv, 1.0], atol=1e-9)
         p_b = obs.T_b_c[:3, :3] @ obs.p_c + obs.T_b_c[:3, 3]
         return R_q @ p_b + obs.T_w_b[:3, 3]
+
+
+    def sleeps(obs):
+        time.sleep(1.0)
+        return reference_estimate(obs)
+
+
+    def a_bit_slow(obs):
+        time.sleep(0.03)
+        return reference_estimate(obs)
 
 
     NOT_A_FUNCTION = 3
@@ -211,12 +236,15 @@ def test_failing_functions_are_reported_and_the_run_goes_on(tmp_path, user_file,
         ("vnav.plugin:USER_PREFIX", r"vnav\.plugin\.USER_PREFIX is not callable"),
         ("{dir}/missing.py:fn", r"missing\.py does not import: no such file"),
         ("{dir}/broken.py:fn", r"broken\.py does not import: invalid syntax"),
+        ("{dir}/fails.py:fn", r"fails\.py does not import: no camera on this machine"),
         ("{dir}/mine.py:NOT_A_FUNCTION", r"NOT_A_FUNCTION is not callable"),
         ("vnav.plugin", r"expected package\.module:function or path/to/file\.py:function"),
     ],
 )
 def test_bad_spec_exit_2_one_line_nothing_written(tmp_path, user_file, capsys, spec, message):
     (tmp_path / "broken.py").write_text("def fn(:\n", encoding="utf-8")
+    fails = "raise RuntimeError('no camera on this machine')\ndef fn(obs):\n    return None\n"
+    (tmp_path / "fails.py").write_text(fails, encoding="utf-8")
     out = tmp_path / "out"
     args = ["run", "frame-problem", "--out", str(out), "--estimator", spec.format(dir=tmp_path)]
     assert main(args) == 2
@@ -386,3 +414,213 @@ def test_extending_the_methods_holds_for_its_own_thread_only():
     assert seen["plain"] is METHODS
     assert seen["own"] == [*(m.name for m in METHODS), "user:other"]
     assert active_methods() is METHODS
+
+
+# ------------------------------------------------------------------ time
+
+
+def test_a_function_that_never_estimates_fails_its_check(tmp_path, user_file, capsys):
+    """None at every detection: nothing to judge, so its check has no data, which fails the
+    run (exit 1), as a built-in without estimates would."""
+    status, report = _run(tmp_path, f"{user_file}:nothing")
+    assert status == 1
+    entry = report["estimators"]["user:nothing"]
+    assert entry["calls"] == entry["returned_none"] > 0 and entry["failures"] == {}
+    assert entry["diagnosis"] is None
+    check = _check(report, "user:nothing")
+    assert check["outcome"] == "no data" and not report["passed"]
+    assert "Traceback" not in capsys.readouterr().err
+
+
+def test_a_slow_function_is_stopped_at_its_time_limit(tmp_path, user_file, capsys):
+    """A function sleeping 1 s a call, limited to 0.05 s: its first call is stopped, it is not
+    called again, and the run ends in about the time it takes without it (20 calls would take
+    20 s); exit 1, no traceback; the alarm is disarmed and SIGALRM's handler put back."""
+    handler = signal.getsignal(signal.SIGALRM)
+    out = tmp_path / "out"
+    args = ["run", "frame-problem", "--out", str(out), *DURATION]
+    started_s = time.perf_counter()
+    status = main([*args, "--estimator", f"{user_file}:sleeps", "--estimator-timeout-s", "0.05"])
+    wall_s = time.perf_counter() - started_s
+    captured = capsys.readouterr()
+    assert status == 1 and "Traceback" not in captured.err
+    assert signal.getsignal(signal.SIGALRM) is handler
+    assert signal.getitimer(signal.ITIMER_REAL) == (0.0, 0.0)
+    report = json.loads((out / "frame-problem.json").read_text())
+    n = report["methods"]["depth_image"]["position_error_m"]["count"]
+    assert n == report["camera_ticks"] > 2
+    assert wall_s < 0.4 * n  # each call would sleep 1 s
+    entry = report["estimators"]["user:sleeps"]
+    assert entry["timeout_s"] == 0.05
+    assert entry["calls"] == 1 and entry["skipped"] == n - 1
+    assert list(entry["failures"]) == ["timed_out"]
+    failure = entry["failures"]["timed_out"]
+    assert failure["count"] == 1 and failure["ticks"] == [0]
+    assert failure["first_message"].startswith("took longer than the 0.05 s limit at t = 0.000 s")
+    assert entry["time_s"]["calls"] == 1
+    assert 0.05 <= entry["time_s"]["max"] < 0.5  # stopped, not slept through
+    assert report["methods"]["user:sleeps"]["no_estimate"] == {
+        "function_error": 1,
+        "function_stopped": n - 1,
+    }
+    check = _check(report, "user:sleeps")
+    assert check["outcome"] == "failed"
+    assert f"failed on 1 of {n} detections, and was not called on {n - 1}" in check["shown"]
+    printed = " ".join(captured.out.split())
+    assert "user:sleeps failed 1x (timed out), first at tick 0: took longer than the 0.05 s" in (
+        printed
+    )
+    assert f"user:sleeps was not called on the {n - 1} later detections" in printed
+
+
+def test_a_function_that_swallows_the_alarm_still_times_out():
+    """``except BaseException: pass`` around a sleep catches the limit's alarm and returns an
+    estimate: the call still took longer than the limit, and is a timeout all the same."""
+
+    def swallows(obs):
+        try:
+            time.sleep(1.0)
+        except BaseException:  # a student's catch-all, the alarm included
+            pass
+        return reference_estimate(obs)
+
+    estimator = PluginEstimator(swallows, timeout_s=0.05)
+    started_s = time.perf_counter()
+    assert estimator.estimate(_fake_observation(), np.zeros(3), 0.0) is NoEstimate.FUNCTION_ERROR
+    assert time.perf_counter() - started_s < 0.5
+    assert estimator.failures.count == {Failure.TIMED_OUT: 1} and estimator.stopped
+    assert signal.getitimer(signal.ITIMER_REAL) == (0.0, 0.0)
+
+
+def test_slow_functions_say_their_time(tmp_path, user_file, capsys):
+    """Each call is timed: a function of 30 ms a call is said to be slow under the table, the
+    reference (microseconds) is not; both have ``time_s`` in the report."""
+    out = tmp_path / "out"
+    args = ["run", "frame-problem", "--out", str(out), *DURATION]
+    specs = [f"{user_file}:a_bit_slow", "vnav.plugin:reference_estimate"]
+    status = main([*args, *(a for s in specs for a in ("--estimator", s))])
+    printed = " ".join(capsys.readouterr().out.split())
+    assert status == 0
+    report = json.loads((out / "frame-problem.json").read_text())
+    slow = report["estimators"]["user:a_bit_slow"]["time_s"]
+    fast = report["estimators"]["user:reference_estimate"]["time_s"]
+    n = report["methods"]["depth_image"]["position_error_m"]["count"]
+    assert slow["calls"] == fast["calls"] == n > 0
+    assert 0.03 <= slow["mean"] <= slow["max"] and slow["total"] >= 0.03 * n
+    assert slow["mean"] == pytest.approx(slow["total"] / n, abs=1e-6)
+    assert fast["max"] < 0.01
+    said = re.search(
+        r"user:a_bit_slow took ([\d.]+) ms per call \((\d+) calls, ([\d.]+) (m?s)", printed
+    )
+    assert said, printed
+    assert float(said[1]) == pytest.approx(1e3 * slow["mean"], abs=0.05) and int(said[2]) == n
+    assert "user:reference_estimate took" not in printed
+
+
+@pytest.mark.parametrize(
+    ("value", "message"),
+    [
+        ("0", "--estimator-timeout-s must be a positive number of seconds, got 0.0"),
+        ("-1", "--estimator-timeout-s must be a positive number of seconds, got -1.0"),
+        ("nan", "--estimator-timeout-s must be a positive number of seconds, got nan"),
+        ("inf", "--estimator-timeout-s must be a positive number of seconds, got inf"),
+        ("soon", "invalid float value: 'soon'"),
+        (None, "--estimator-timeout-s limits an --estimator function: give one"),
+    ],
+)
+def test_bad_timeout_exit_2_one_line(tmp_path, capsys, value, message):
+    out = tmp_path / "out"
+    args = ["run", "frame-problem", "--out", str(out), "--estimator-timeout-s", value or "1"]
+    if value is not None:
+        args += ["--estimator", "vnav.plugin:reference_estimate"]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and message in err, err
+    assert not out.exists() or not any(out.iterdir())
+
+
+def _fake_observation() -> SimpleNamespace:
+    """What ``PluginEstimator.estimate`` reads of a ``vnav.observation.Observation``."""
+    exposure = SimpleNamespace(
+        T_w_b=np.eye(4), T_b_c=np.eye(4), camera=SimpleNamespace(K=np.eye(3))
+    )
+    view = SimpleNamespace(camera_coordinates=lambda p_w: np.array([0.0, 0.0, 5.0]))
+    return SimpleNamespace(exposure=exposure, view=view)
+
+
+def _sleeper(seconds: float):
+    def fn(obs):
+        time.sleep(seconds)
+        return reference_estimate(obs)
+
+    return fn
+
+
+def test_off_the_main_thread_a_slow_call_is_counted_once_it_returns():
+    """Python cannot interrupt a call on another thread: it runs to its end, then is a
+    timeout (its estimate thrown away), and the function is not called again."""
+    estimator = PluginEstimator(_sleeper(0.2), timeout_s=0.05)
+    results = []
+
+    def work() -> None:
+        obs = _fake_observation()
+        results.extend(estimator.estimate(obs, np.zeros(3), float(t)) for t in range(3))
+
+    thread = threading.Thread(target=work)
+    thread.start()
+    thread.join(timeout=30)
+    assert results == [
+        NoEstimate.FUNCTION_ERROR,
+        NoEstimate.FUNCTION_STOPPED,
+        NoEstimate.FUNCTION_STOPPED,
+    ]
+    f = estimator.failures
+    assert f.count == {Failure.TIMED_OUT: 1} and f.calls == 1 and f.skipped == 2
+    assert "returned after it" in f.first_message[Failure.TIMED_OUT]
+    assert estimator.times.calls == 1 and estimator.times.max_s >= 0.2  # not interrupted
+    # A second pass (a calibrated run's) of a stopped function does not call it either.
+    again = estimator.second_pass()
+    assert again.estimate(_fake_observation(), np.zeros(3), 0.0) is NoEstimate.FUNCTION_STOPPED
+    assert estimator.again is again and again.failures.skipped == 1
+
+
+def test_the_alarm_puts_back_the_previous_handler_and_timer():
+    """On the main thread the limit borrows SIGALRM: whoever had it gets it back, with what
+    was left of their timer; a fast call leaves no alarm armed either."""
+    fired = []
+
+    def mine(signum, frame):
+        fired.append(signum)
+
+    previous = signal.signal(signal.SIGALRM, mine)
+    try:
+        signal.setitimer(signal.ITIMER_REAL, 100.0)
+        estimator = PluginEstimator(_sleeper(1.0), timeout_s=0.05)
+        started_s = time.perf_counter()
+        assert estimator.estimate(_fake_observation(), np.zeros(3), 1.5) is (
+            NoEstimate.FUNCTION_ERROR
+        )
+        assert time.perf_counter() - started_s < 0.5
+        assert estimator.failures.count == {Failure.TIMED_OUT: 1}
+        assert "at t = 1.500 s (stopped" in estimator.failures.first_message[Failure.TIMED_OUT]
+        assert signal.getsignal(signal.SIGALRM) is mine
+        left_s, _ = signal.getitimer(signal.ITIMER_REAL)
+        assert 98.0 < left_s < 100.0 and not fired
+        signal.setitimer(signal.ITIMER_REAL, 0.0)
+        fast = PluginEstimator(reference_estimate, timeout_s=0.05)
+        p_w = fast.estimate(_fake_observation(), np.zeros(3), 0.0)
+        np.testing.assert_allclose(p_w, [0.0, 0.0, 5.0])
+        assert signal.getitimer(signal.ITIMER_REAL) == (0.0, 0.0)
+        time.sleep(0.1)
+        assert not fired and fast.failures.total == 0
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0.0)
+        signal.signal(signal.SIGALRM, previous)
+
+
+@pytest.mark.parametrize("timeout_s", [0.0, -1.0, math.nan, math.inf, "1", True])
+def test_a_bad_time_limit_is_a_value_error(timeout_s):
+    with pytest.raises(ValueError, match="timeout_s"):
+        PluginEstimator(reference_estimate, timeout_s=timeout_s)
+    with pytest.raises(ValueError, match="timeout_s"):
+        plugin_method("vnav.plugin:reference_estimate", timeout_s=timeout_s)

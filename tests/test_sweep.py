@@ -3,11 +3,14 @@ rows bit for bit; --resume after an interruption; the tables against summary.jso
 seed replayed by vnav-demo run; bad input.
 
 The sweep: frame-problem cut to 2 s, two grid points (attitude noise 0 and 1 deg) x 3 seeds,
-so that seeds give different numbers where there is noise.
+so that seeds give different numbers where there is noise, with a user's estimator beside the
+built-ins (``estimator``, the reference solution in a file beside the sweep file): its columns
+are depth_image's, and every test comparing serial and Ray rows compares them too.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import os
@@ -40,6 +43,22 @@ seeds = 3
 "duration_s" = [2.0]
 """
 
+USER_FUNCTIONS = """\
+import numpy as np
+
+
+def ref(obs):
+    return (obs.T_w_b @ obs.T_b_c @ np.append(obs.p_c, 1.0))[:3]
+
+
+def raises(obs):
+    raise RuntimeError("not written yet")
+"""
+"""The reference solution, and a function that always raises: written as ``est/funcs.py``."""
+
+SMALL = 'estimator = "est/funcs.py:ref"\n' + SWEEP
+"""The sweep of the session's ``small.toml``: SWEEP, with the reference as a user's function."""
+
 
 def sweep_cli(*args: str, cwd: Path, timeout: float = 300) -> subprocess.CompletedProcess:
     return subprocess.run(
@@ -56,7 +75,9 @@ def sweep_cli(*args: str, cwd: Path, timeout: float = 300) -> subprocess.Complet
 @pytest.fixture(scope="session")
 def work(tmp_path_factory) -> Path:
     root = tmp_path_factory.mktemp("sweep")
-    (root / "small.toml").write_text(SWEEP)
+    (root / "small.toml").write_text(SMALL)
+    (root / "est").mkdir()
+    (root / "est" / "funcs.py").write_text(USER_FUNCTIONS)
     return root
 
 
@@ -89,12 +110,17 @@ def assert_same_rows(a: list[dict], b: list[dict]) -> None:
 
 def test_serial_rows(serial):
     table = pq.read_table(serial / "results.parquet")
+    builtin = row_columns()  # without a user's function
+    user = [method_column("user:ref", s) for s in ("count", "mean", "median", "rmse", "max")]
     assert table.column_names == [
         "point",
         "seed",
         "noise__attitude_std_deg",
         "duration_s",
-        *row_columns(),
+        *builtin[:-2],
+        *user,
+        "user_ref__failures",
+        *builtin[-2:],
     ]
     got = rows(serial)
     assert [(r["point"], r["seed"]) for r in got] == [(p, s) for p in (0, 1) for s in (1, 2, 3)]
@@ -104,6 +130,41 @@ def test_serial_rows(serial):
     assert len(set(noisy)) == 3  # 1 deg of attitude noise: each seed its own
     assert all(r["status"] == "passed" for r in got if r["point"] == 0)
     assert all(r["status"] == "failed" and r["failed_checks"] for r in got if r["point"] == 1)
+
+
+def test_the_reference_as_a_users_function_gives_depth_images_numbers(serial):
+    """The reference solution reproduces depth_image to rounding (about 1e-15 of the
+    coordinates): in every row its statistics are depth_image's, estimate by estimate in
+    estimates.parquet, and it never fails; summary.json and the printed table show it as a
+    method, and the replay command carries its --estimator."""
+    got = rows(serial)
+    for r in got:
+        assert r["user_ref__count"] == r["depth_image__count"] > 0
+        for stat in ("mean", "median", "rmse", "max"):
+            assert r[f"user_ref__{stat}_m"] == pytest.approx(r[f"depth_image__{stat}_m"], abs=1e-9)
+        assert r["user_ref__failures"] == 0
+        bound = "every error <= max(5 cm, 1% of range)"  # depth_image's, judging both
+        failed = r["failed_checks"]
+        assert (f"user:ref {bound}" in failed) == (f"depth_image {bound}" in failed)
+    estimates = pq.read_table(serial / "estimates.parquet").to_pylist()
+    by = {"depth_image": {}, "user:ref": {}}
+    for e in estimates:
+        if e["method"] in by:
+            by[e["method"]][e["point"], e["seed"], e["tick"], e["cone"]] = e
+    assert by["user:ref"].keys() == by["depth_image"].keys() and by["user:ref"]
+    for key, e in by["user:ref"].items():
+        assert e["range_m"] == by["depth_image"][key]["range_m"]
+        assert e["error_m"] == pytest.approx(by["depth_image"][key]["error_m"], abs=1e-9)
+    summary = json.loads((serial / "summary.json").read_text())
+    sha256 = hashlib.sha256((serial.parent / "est" / "funcs.py").read_bytes()).hexdigest()
+    assert summary["estimators"] == [{"spec": "est/funcs.py:ref", "sha256": sha256}]
+    assert json.loads((serial / "sweep.json").read_text())["estimators"] == summary["estimators"]
+    for point in summary["points"]:
+        mine, reference = point["methods"]["user:ref"], point["methods"]["depth_image"]
+        assert mine["failures"] == 0
+        median_m = reference["median_m"]["median"]
+        assert mine["median_m"]["median"] == pytest.approx(median_m, abs=1e-9)
+    assert shlex.split(summary["worst"][0]["replay"])[-2:] == ["--estimator", "est/funcs.py:ref"]
 
 
 def test_tables_read_without_quoting(serial):
@@ -429,7 +490,7 @@ def test_on_ray_an_episode_that_raises_or_kills_its_worker_costs_itself_only(
     monkeypatch.setattr(engines, "_Worker", Faulty)
     plan = load(work / "small.toml")
     tasks = {(p, s): engines.Task(p, s, plan.points[p].scenario_toml) for p, s in plan.episodes}
-    engine = engines.RayEngine(workers=1)
+    engine = engines.RayEngine(workers=1, estimators=plan.estimators)  # the sweep's user:ref
     try:
         import ray
 
@@ -517,10 +578,10 @@ def test_worst_seed_replays_to_the_same_numbers(work, serial):
     (report_path,) = (work / "replay").glob("*.json")
     report = json.loads(report_path.read_text())
     (row,) = [r for r in rows(serial) if (r["point"], r["seed"]) == (1, worst["seed"])]
-    for m in METHOD_NAMES:
+    for m in (*METHOD_NAMES, "user:ref"):  # with the user's function: --estimator
         for stat, value in report["methods"][m]["position_error_m"].items():
             if stat in ("count", "mean", "median", "rmse", "max"):
-                column = f"{m}__{stat}" if stat == "count" else f"{m}__{stat}_m"
+                column = method_column(m, stat)
                 assert same(row[column], math.nan if value is None else value), column
     assert row["detections"] == report["detections"]
 
@@ -641,6 +702,9 @@ def test_record_worst(work, serial):
         (SWEEP, ["--workers", "0", "--address", "auto"], "cannot go with --address"),
         (SWEEP, ["--record-worst", "-2"], "--record-worst"),
         (SWEEP, ["--address", "nonsense"], "--address must be auto, host:port or ray://"),
+        ('estimator = "absent.py:ref"\n' + SWEEP, [], "bad.toml: estimator: "),
+        ('estimator = "bad.toml:ref"\n' + SWEEP, [], "estimator: "),
+        ('estimator = "json:dumps_nothing"\n' + SWEEP, [], "estimator: "),
     ],
 )
 def test_bad_input_exits_2_with_one_line(tmp_path, text, args, message):
@@ -883,6 +947,39 @@ def test_replay_command_is_shell_quoted(tiny, tmp_path):
             if stat in ("count", "mean", "median", "rmse", "max"):
                 column = method_column(m, stat)
                 assert same(row[column], math.nan if value is None else value), column
+
+
+def test_a_raising_function_fails_and_resume_refuses_its_changed_file(tmp_path):
+    """A user's function that always raises, beside the built-ins (the tiny sweep, in this
+    process): it fails on every detection (its failures column counts them) and every
+    episode fails its check. Once its file has changed, --resume refuses the directory in one
+    line naming the estimator, from the manifest or, without it, from the journal, and
+    changes nothing."""
+    (tmp_path / "est").mkdir()
+    (tmp_path / "est" / "funcs.py").write_text(USER_FUNCTIONS)
+    (tmp_path / "r.toml").write_text('estimator = ["est/funcs.py:raises"]\n' + TINY)
+    proc = sweep_cli("r.toml", "--out", "out", "--workers", "0", cwd=tmp_path)
+    assert proc.returncode == 1, proc.stderr
+    got = rows(tmp_path / "out")
+    assert len(got) == 4
+    for r in got:
+        assert r["user_raises__failures"] == r["detections"] > 0
+        assert r["user_raises__count"] == 0 and math.isnan(r["user_raises__median_m"])
+        assert "user:raises every error <= max(5 cm, 1% of range)" in r["failed_checks"]
+    failed = sum(r["user_raises__failures"] for r in got if r["point"] == 0)
+    assert f"user:raises no estimate, failed on {failed} detections" in proc.stdout
+    (tmp_path / "est" / "funcs.py").write_text(USER_FUNCTIONS.replace("yet", "yet!"))
+    before = files_of(tmp_path / "out")
+    resume = ("r.toml", "--out", "out", "--workers", "0", "--resume")
+    for without_manifest in (False, True):
+        if without_manifest:
+            (tmp_path / "out" / "sweep.json").unlink()
+            del before["sweep.json"]
+        proc = sweep_cli(*resume, cwd=tmp_path)
+        assert proc.returncode == 2, proc.stdout + proc.stderr
+        assert len(proc.stderr.strip().splitlines()) == 1
+        assert "estimator est/funcs.py:raises: its function's file changed" in proc.stderr
+        assert files_of(tmp_path / "out") == before
 
 
 def test_seeds_that_change_nothing_are_said(tiny, tmp_path):

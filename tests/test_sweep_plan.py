@@ -4,13 +4,17 @@ from __future__ import annotations
 
 import dataclasses
 import datetime as dt
+import hashlib
 import itertools
+import json
 import tomllib
+from pathlib import Path
 
 import pytest
 
 from scenarios.scenario import builtin, spec, toml_out
 from scenarios.sweep.plan import SweepError, load, plan
+from vnav.methods import METHOD_NAMES
 
 
 def test_grid_is_the_full_product_in_row_major_order():
@@ -162,3 +166,104 @@ def test_a_grid_of_more_points_than_plan_in_seconds_is_refused_before_planning(m
     }
     with pytest.raises(SweepError, match="grid points is more than"):
         plan({"scenario": "approach", "grid": one_over}, "s.toml")
+
+
+# ------------------------------------------------------------------ a user's estimator
+REFERENCE = """\
+import numpy as np
+
+
+def ref(obs):
+    return (obs.T_w_b @ obs.T_b_c @ np.append(obs.p_c, 1.0))[:3]
+
+
+def _private(obs):
+    return None
+
+
+NOT_CALLABLE = 3
+"""
+
+
+def test_an_estimator_file_is_found_beside_the_sweep_file(tmp_path, monkeypatch):
+    """``estimator`` paths are relative to the sweep file, as its scenario file is, whatever
+    the current directory: imported once, made absolute for workers, kept as the command's
+    directory reaches it for the replay command, hashed from the file's bytes."""
+    (tmp_path / "sweeps" / "est").mkdir(parents=True)
+    source = tmp_path / "sweeps" / "est" / "mine.py"
+    source.write_text(REFERENCE)
+    (tmp_path / "sweeps" / "s.toml").write_text(
+        'scenario = "approach"\nestimator = ["est/mine.py:ref", "vnav.plugin:reference_estimate"]\n'
+    )
+    (tmp_path / "elsewhere").mkdir()
+    monkeypatch.chdir(tmp_path / "elsewhere")
+    p = load("../sweeps/s.toml")
+    mine, module = p.estimators
+    assert mine.spec == "est/mine.py:ref"
+    assert mine.shown == "../sweeps/est/mine.py:ref"
+    assert mine.absolute == f"{source.resolve()}:ref"
+    assert mine.sha256 == hashlib.sha256(source.read_bytes()).hexdigest()
+    import vnav.plugin
+
+    assert module.absolute == module.shown == module.spec == "vnav.plugin:reference_estimate"
+    assert module.sha256 == hashlib.sha256(Path(vnav.plugin.__file__).read_bytes()).hexdigest()
+    assert [m.name for m in p.user_methods] == ["user:ref", "user:reference_estimate"]
+    assert [m.name for m in p.methods] == [*METHOD_NAMES, "user:ref", "user:reference_estimate"]
+    # A worker imports it again itself, from the absolute path, wherever it runs.
+    monkeypatch.chdir(tmp_path)
+    assert mine.load().estimator.fn.__name__ == "ref"
+
+
+def test_fingerprint_holds_the_estimators_and_their_files(tmp_path):
+    """A sweep without an estimator keeps the fingerprint it always had (its scenarios and
+    seeds); with one, the fingerprint changes with its spec and with its file's bytes."""
+    (tmp_path / "mine.py").write_text(REFERENCE)
+    base = {"scenario": "approach", "seeds": 2}
+    plain = plan(base, "s.toml", base_dir=tmp_path)
+    text = json.dumps([[pt.scenario_toml for pt in plain.points], [1, 2]])
+    assert plain.fingerprint == hashlib.sha256(text.encode()).hexdigest()[:16]
+    with_ref = plan({**base, "estimator": "mine.py:ref"}, "s.toml", base_dir=tmp_path)
+    assert with_ref.fingerprint != plain.fingerprint
+    as_list = plan({**base, "estimator": ["mine.py:ref"]}, "s.toml", base_dir=tmp_path)
+    assert as_list.fingerprint == with_ref.fingerprint
+    (tmp_path / "mine.py").write_text(REFERENCE + "\n# changed\n")
+    changed = plan({**base, "estimator": "mine.py:ref"}, "s.toml", base_dir=tmp_path)
+    assert changed.fingerprint not in (with_ref.fingerprint, plain.fingerprint)
+
+
+def test_a_worker_refuses_an_estimator_file_changed_since_the_sweep_started(tmp_path):
+    (tmp_path / "mine.py").write_text(REFERENCE)
+    p = plan({"scenario": "approach", "estimator": "mine.py:ref"}, "s.toml", base_dir=tmp_path)
+    (source,) = p.estimators
+    assert source.load().name == "user:ref"
+    (tmp_path / "mine.py").write_text(REFERENCE.replace("[:3]", "[:3] * 2.0"))
+    with pytest.raises(ValueError, match=r"estimator mine.py:ref: its file changed since"):
+        source.load()
+
+
+@pytest.mark.parametrize(
+    ("estimator", "message"),
+    [
+        ("absent.py:ref", "absent.py does not import: no such file"),
+        ("mine.py:nothing", "has no attribute 'nothing'"),
+        ("mine.py:NOT_CALLABLE", "is not callable"),
+        ("mine.py", "expected package.module:function"),
+        ("no_such_module_here:f", "does not import"),
+        ("mine.py:_private", "user:_private: no plain column name"),
+        (["mine.py:ref", "mine.py:ref"], "is user:ref, as another one is"),
+        (3, "estimator: must be a spec"),
+        ([3], "estimator: must be a spec"),
+    ],
+)
+def test_a_bad_estimator_is_refused_naming_the_key(tmp_path, estimator, message):
+    (tmp_path / "mine.py").write_text(REFERENCE)
+    with pytest.raises(SweepError) as info:
+        plan({"scenario": "approach", "estimator": estimator}, "s.toml", base_dir=tmp_path)
+    assert str(info.value).startswith("s.toml: estimator: ")
+    assert message in str(info.value) and "\n" not in str(info.value)
+
+
+def test_rank_by_may_name_a_users_function(tmp_path):
+    (tmp_path / "mine.py").write_text(REFERENCE)
+    data = {"scenario": "approach", "estimator": "mine.py:ref", "rank_by": "user:ref"}
+    assert plan(data, "s.toml", base_dir=tmp_path).rank_by == "user:ref"

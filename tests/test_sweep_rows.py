@@ -21,6 +21,7 @@ from scenarios.sweep import episode, plots, summary
 from scenarios.sweep.plan import plan
 from scenarios.sweep.rows import (
     ESTIMATE_COLUMNS,
+    STATS,
     TABLES_VERSION,
     Episode,
     grid_column,
@@ -352,3 +353,40 @@ def test_every_scenario_key_has_a_plain_column():
     for bad in ("a..b", "_x", "x_", "a__b", "2.x", "a-b", "é"):
         with pytest.raises(ValueError, match="no plain column name"):
             grid_column(bad)
+
+
+def test_a_users_function_has_plain_columns(tmp_path, rng, figures):
+    """A user's function ``user:ref`` is the part ``user_ref`` of its columns (the statistics
+    and ``__failures``, a count), after the built-ins' and before ``simulated_s``; the
+    metadata maps each method to its part; a name that would not read back is refused. The
+    summary and the plots show it as a method (in black: its recordings' white would not
+    show on the page)."""
+    (tmp_path / "mine.py").write_text("def ref(obs):\n    return None\n")
+    sweep = plan({**README_SWEEP, "estimator": "mine.py:ref"}, "my-sweep.toml", base_dir=tmp_path)
+    columns = row_columns(sweep.methods)
+    builtin = row_columns()
+    users = [f"user_ref__{s}" if s == "count" else f"user_ref__{s}_m" for s in STATS]
+    assert columns == [*builtin[:-2], *users, "user_ref__failures", *builtin[-2:]]
+    assert method_column("user:ref", "failures") == "user_ref__failures"
+    for bad in ("user:_ref", "user:ref_", "user:my__ref", "user:é"):
+        with pytest.raises(ValueError, match="no plain column name"):
+            method_column(bad, "count")
+    episodes = _episodes(sweep, rng)
+    for e in episodes:
+        e.row.update({c: 1.5 for c in users}, user_ref__count=3, user_ref__failures=2)
+    results = results_table(sweep, episodes)
+    assert results.column_names == ["point", "seed", *map(grid_column, sweep.keys), *columns]
+    assert results.schema.field("user_ref__failures").type == pa.int64()
+    assert results["user_ref__failures"].to_pylist() == [2] * len(episodes)
+    held = table_metadata(sweep)["method_columns"]
+    assert held == {**{m: m for m in METHOD_NAMES}, "user:ref": "user_ref"}
+    doc = summary.build(sweep, episodes, out_dir="d", point_files=["a"] * 6, complete=True)
+    assert doc["points"][0]["methods"]["user:ref"]["failures"] == 2 * len(sweep.seeds)
+    assert "failures" not in doc["points"][0]["methods"]["depth_image"]
+    assert doc["estimators"] == [{"spec": "mine.py:ref", "sha256": sweep.estimators[0].sha256}]
+    assert doc["worst"][0]["replay"].endswith(f"--estimator {tmp_path}/mine.py:ref")
+    plots.error_vs_key_png(sweep, episodes, "camera.pitch_down_deg")
+    (fig,) = figures
+    lines = {line.get_label(): line for ax in fig.axes for line in ax.lines}
+    assert lines["user:ref median"].get_color() == plots.USER_COLORS[0] == "#000000"
+    assert list(lines["user:ref median"].get_ydata()) == [1.5, 1.5, 1.5]

@@ -93,6 +93,7 @@ class NoEstimate(enum.Enum):
     PARALLAX = "parallax"
     FUNCTION_NONE = "function_none"
     FUNCTION_ERROR = "function_error"
+    FUNCTION_STOPPED = "function_stopped"
 
     @property
     def text(self) -> str:
@@ -124,6 +125,7 @@ _NO_ESTIMATE_TEXT = {
     NoEstimate.PARALLAX: "whose views do not cross widely enough (too little motion for the noise)",
     NoEstimate.FUNCTION_NONE: "for which the user's function returned None",
     NoEstimate.FUNCTION_ERROR: "where the user's function failed (the report's estimators say how)",
+    NoEstimate.FUNCTION_STOPPED: "after the user's function was stopped for its time limit",
 }
 _GEOMETRIC = frozenset(
     {

@@ -288,9 +288,11 @@ def _localize(
     with_covariance: bool,
     methods: tuple[Method, ...] = METHODS,
     t_s: float = 0.0,
+    T_w_b_newest: np.ndarray | None = None,
 ) -> ConeEstimates:
     """Every single-image method on ``obs``, then those built from the best estimate, then
-    the users' functions (given the ``depth_image`` estimate and the exposure stamp ``t_s``)."""
+    the users' functions (given the ``depth_image`` estimate, the exposure stamp ``t_s`` and
+    the newest pose received when the image arrived, ``T_w_b_newest``)."""
     names = _names(methods)
     if obs is None:
         return ConeEstimates({}, dict.fromkeys(names, NoEstimate.BORDER), method_names=names)
@@ -316,7 +318,7 @@ def _localize(
         result = (
             no_estimate[USER_INPUT]
             if p_w_depth is None
-            else estimator.estimate(obs, p_w_depth, t_s)
+            else estimator.estimate(obs, p_w_depth, t_s, T_w_b_newest)
         )
         if isinstance(result, NoEstimate):
             no_estimate[name] = result
@@ -382,6 +384,7 @@ class Localizer:
         *,
         cov_T_w_b: np.ndarray | None = None,
         cov_T_b_c: np.ndarray | None = None,
+        T_w_b_newest: np.ndarray | None = None,
     ) -> list[ConeEstimates]:
         """Every estimate of each detection in one image, with its covariance.
 
@@ -398,6 +401,9 @@ class Localizer:
             The body pose at the exposure and the camera mount, as the estimator knows them.
         cov_T_w_b, cov_T_b_c : ndarray, shape (6, 6), optional
             Their left-perturbation covariances; default zero.
+        T_w_b_newest : ndarray, shape (4, 4), optional
+            The newest body pose received when the image arrived, for the users' functions
+            (``vnav.plugin.PluginObservation.T_w_b_newest``); default ``T_w_b``.
 
         Returns
         -------
@@ -411,9 +417,11 @@ class Localizer:
             As ``localize``, or for a time earlier than the previous image's.
         """
         exposure = self._exposure(T_w_b, T_b_c, cov_T_w_b, cov_T_b_c)
+        if T_w_b_newest is not None:
+            T_w_b_newest = se3.check_pose(T_w_b_newest, "T_w_b_newest")
         observations = [_observation(exposure, d, depth) for d in detections]
         estimates = [
-            _localize(o, d, True, self.methods, t_s)
+            _localize(o, d, True, self.methods, t_s, T_w_b_newest)
             for o, d in zip(observations, detections, strict=True)
         ]
         for name, track in self._tracks.items():

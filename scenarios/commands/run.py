@@ -193,7 +193,7 @@ def summary(rep: dict, rrd: Path, json_path: Path) -> str:
         "  error, m"
     )
     lines += _method_rows(rep["methods"], width)
-    lines += _estimator_lines(rep.get("estimators", {}))
+    lines += _estimator_lines(rep.get("estimators", {}), timing["total"])
     lines += _latest_pose_lines(rep)
     lines += _recovered_mount_lines(rep)
     lines += _navigation_lines(rep.get("navigation"))
@@ -223,9 +223,18 @@ def _method_rows(methods: dict, width: int = 13) -> list[str]:
     return lines
 
 
-def _estimator_lines(estimators: dict) -> list[str]:
-    """Under the methods' rows, how each user's function failed (the report's ``estimators``):
-    each kind's count, first camera tick and first message."""
+SLOW_CALL_S = 0.010
+"""A user's function whose mean call takes longer than this is said to be slow (seconds)."""
+
+SLOW_SHARE = 0.10
+"""... as is one whose calls take more than this share of the run's wall time."""
+
+
+def _estimator_lines(estimators: dict, run_wall_s: float) -> list[str]:
+    """Under the methods' rows, each user's function's diagnosis, how it failed (the report's
+    ``estimators``: each kind's count, first camera tick and first message), how many
+    detections it was skipped on after timing out, and its time when slow (a mean call over
+    ``SLOW_CALL_S``, or its calls over ``SLOW_SHARE`` of the run's wall time ``run_wall_s``)."""
     lines = []
     for name, entry in estimators.items():
         diagnosis = entry.get("diagnosis")
@@ -237,6 +246,22 @@ def _estimator_lines(estimators: dict) -> list[str]:
             lines += _wrap(
                 f"{name} failed {f['count']}x ({kind.replace('_', ' ')}), first at {where}: "
                 f"{f['first_message']}",
+                4,
+                "    ",
+            )
+        if entry["skipped"]:
+            lines += _wrap(
+                f"{name} was not called on the {entry['skipped']} later detections (stopped "
+                f"after exceeding its {entry['timeout_s']:g} s limit)",
+                4,
+                "    ",
+            )
+        t = entry["time_s"]
+        if t["calls"] and (t["mean"] > SLOW_CALL_S or t["total"] > SLOW_SHARE * run_wall_s):
+            lines += _wrap(
+                f"{name} took {_seconds(t['mean'])} per call ({t['calls']} "
+                f"call{'s' if t['calls'] != 1 else ''}, "
+                f"{_seconds(t['total'])}, longest {_seconds(t['max'])})",
                 4,
                 "    ",
             )
@@ -264,6 +289,11 @@ def _navigation_lines(nav: dict | None) -> list[str]:
         f"{nav['min_clearance_m']:.3f} m, flew {nav['path_length_m']:.2f} m",
         2,
     )
+
+
+def _seconds(value_s: float) -> str:
+    """A duration in words: ``1.00 s``, ``12.3 ms``."""
+    return f"{value_s:.2f} s" if value_s >= 1.0 else f"{1e3 * value_s:.1f} ms"
 
 
 def _recovered_mount_lines(rep: dict) -> list[str]:
@@ -433,21 +463,30 @@ def _validate(args: argparse.Namespace) -> tuple[list[ScenarioSpec], Path]:
             )
         specs = [dataclasses.replace(s, duration_s=min(args.duration, s.end_s)) for s in specs]
     check_lengths(specs, args.max_ticks)
-    args.user_methods = user_methods(getattr(args, "estimator", None) or [])
+    timeout_s = getattr(args, "estimator_timeout_s", None)
+    if timeout_s is not None:
+        if not (math.isfinite(timeout_s) and timeout_s > 0.0):
+            raise InputError(
+                f"--estimator-timeout-s must be a positive number of seconds, got {timeout_s}"
+            )
+        if not getattr(args, "estimator", None):
+            raise InputError("--estimator-timeout-s limits an --estimator function: give one")
+    args.user_methods = user_methods(getattr(args, "estimator", None) or [], timeout_s)
     out_dir = prepare_out_dir(args.out)
     check_outputs(specs, out_dir, getattr(args, "export", None))
     return specs, out_dir
 
 
-def user_methods(specs: list[str]) -> tuple[Method, ...]:
-    """The methods of ``--estimator SPEC`` (``vnav.plugin``), each function imported now;
-    InputError for a spec that does not import or names no callable, or two of one name."""
+def user_methods(specs: list[str], timeout_s: float | None = None) -> tuple[Method, ...]:
+    """The methods of ``--estimator SPEC`` (``vnav.plugin``), each function imported now and
+    held to ``timeout_s`` seconds a call (``--estimator-timeout-s``); InputError for a spec
+    that does not import or names no callable, or two of one name."""
     from vnav.plugin import plugin_method
 
     found: dict[str, Method] = {}
     for spec in specs:
         try:
-            m = plugin_method(spec)
+            m = plugin_method(spec, timeout_s)
         except ValueError as exc:
             raise InputError(f"--estimator: {exc}") from None
         if m.name in found:

@@ -39,6 +39,7 @@ from scenarios.sweep import plots, summary
 from scenarios.sweep.plan import SweepError, SweepPlan, draws_from_seed, load
 from scenarios.sweep.rows import method_column
 from scenarios.sweep.store import SweepStore, pyarrow_missing
+from vnav.methods import extended
 
 __all__ = ["command"]
 
@@ -124,7 +125,7 @@ def _sweep(plan: SweepPlan, out_dir: Path, args: argparse.Namespace, started_s: 
         for line in (_bad_entries(store), _seedless(plan)):
             if line:
                 say(line)
-    engine = _start_engine(args) if pending else None
+    engine = _start_engine(args, plan) if pending else None
     if engine is None and pending:
         return EXIT_BAD_INPUT  # said by _start_engine; nothing was written
     try:
@@ -219,12 +220,13 @@ def _took(total_s: float, engine, run: _Run) -> str:
     return f"took {total_s:.1f} s in all, wall clock ({', '.join(parts)})"
 
 
-def _start_engine(args: argparse.Namespace):
-    """The engine the options ask for, or None (said in one line) if Ray cannot be joined."""
+def _start_engine(args: argparse.Namespace, plan: SweepPlan):
+    """The engine the options ask for, running ``plan``'s user estimators in every episode,
+    or None (said in one line) if Ray cannot be joined."""
     if args.workers == 0:
-        return engines.SerialEngine()
+        return engines.SerialEngine(plan.estimators)
     try:
-        engine = engines.RayEngine(args.workers, args.address)
+        engine = engines.RayEngine(args.workers, args.address, estimators=plan.estimators)
     except engines.EngineError as exc:
         _error(str(exc))
         return None
@@ -301,7 +303,8 @@ def _record_worst(store: SweepStore, out_dir: Path, args) -> dict[tuple[int, int
             continue  # its flight diverges again: a run that diverges writes no recording
         point = store.plan.points[e.point]
         spec = dataclasses.replace(point.spec, name=f"{point.spec.name}-s{e.seed}")
-        outcome = pipeline.run(spec, seed=e.seed, out_dir=worst_dir)
+        with extended(store.plan.user_methods):  # as the episode ran, with the user's functions
+            outcome = pipeline.run(spec, seed=e.seed, out_dir=worst_dir)
         written[e.point, e.seed] = str(outcome.rrd_path.relative_to(out_dir))
     return written
 
@@ -331,6 +334,16 @@ def _write_summary(
     )
     text = json.dumps(doc, indent=1, allow_nan=False) + "\n"
     outputs.write_atomic(out_dir / "summary.json", lambda tmp: tmp.write_text(text))
+
+
+def _user_figure(name: str, episodes: list) -> str:
+    """A user's function at one grid point, as the rank method's figure is given: the median
+    of its episodes' median errors, and the detections it failed on."""
+    medians = [e.row[method_column(name, "median")] for e in episodes]
+    finite = [m for m in medians if math.isfinite(m)]
+    figure = f"median {statistics.median(finite):.3f} m" if finite else "no estimate"
+    failed = sum(e.row[method_column(name, "failures")] for e in episodes)
+    return f"{name} {figure}, failed on {failed} detections"
 
 
 def _final(
@@ -363,14 +376,16 @@ def _final(
             f"      passed {sum(e.row['passed'] for e in mine)}/{len(mine)}, {figure}, "
             f"worst seed {w.seed}"
         )
+        lines += [f"      {_user_figure(m.name, mine)}" for m in plan.user_methods]
     if len(plan.points) > SHOWN_POINTS:
         lines.append(f"  ... {len(plan.points) - SHOWN_POINTS} more grid points in summary.json")
     lines.append(f"wrote {out_dir}/results.parquet, estimates.parquet, summary.json, plots/")
     if episodes:
         (w,) = summary.worst(episodes, rank, 1)
-        lines.append(
-            "worst: " + summary.replay_command(str(out_dir), store.point_file(w.point), w.seed)
+        replay = summary.replay_command(
+            str(out_dir), store.point_file(w.point), w.seed, summary.replay_specs(plan)
         )
+        lines.append(f"worst: {replay}")
     if recordings:
         first = shlex.join(["rerun", f"{out_dir}/{next(iter(recordings.values()))}"])
         lines.append(

@@ -50,6 +50,7 @@ from vnav.plugin import (
     function_method,
     load_estimator,
     observation_for,
+    second_pass_methods,
 )
 
 __all__ = [
@@ -87,12 +88,22 @@ class _Keeper:
     def reset(self) -> None:
         """Nothing to forget: a keeper serves one run."""
 
+    def second_pass(self) -> _Keeper:
+        """The keeper itself: what the second pass is given is kept by ``phase``."""
+        return self
+
     def diagnosis(self) -> None:
         return None
 
-    def estimate(self, obs: Observation, p_w_depth: np.ndarray, t_s: float) -> NoEstimate:
+    def estimate(
+        self,
+        obs: Observation,
+        p_w_depth: np.ndarray,
+        t_s: float,
+        T_w_b_newest: np.ndarray | None = None,
+    ) -> NoEstimate:
         kept = self.given[self.phase]
-        kept.setdefault(id(obs.view.detection), observation_for(obs, p_w_depth, t_s))
+        kept.setdefault(id(obs.view.detection), observation_for(obs, p_w_depth, t_s, T_w_b_newest))
         return NoEstimate.FUNCTION_NONE
 
     def covariance(self, obs: Observation, p_w: np.ndarray) -> np.ndarray:
@@ -376,7 +387,10 @@ def judge_function(
     calibration = run.calibration
     if calibration is not None and stored.given_recovered is not None:
         assert calibration.ticks_recovered is not None
-        recovered = _filled(calibration.ticks_recovered, stored.given_recovered, user, run.cones_w)
+        # As in the run: the recovered mount's pass calls the function through a second
+        # estimator of its own (``PluginEstimator.second_pass``), its tallies kept apart.
+        (again,) = second_pass_methods((user,))
+        recovered = _filled(calibration.ticks_recovered, stored.given_recovered, again, run.cones_w)
         calibration = dataclasses.replace(calibration, ticks_recovered=recovered)
     result = dataclasses.replace(
         run, ticks=ticks, timing_s=dict(run.timing_s), calibration=calibration

@@ -22,6 +22,8 @@ from vnav.camera import PinholeCamera
 from vnav.cone import TRAFFIC_CONE
 from vnav.frames import ExtrapolationError
 from vnav.localize import Localizer
+from vnav.methods import active_methods
+from vnav.plugin import second_pass_methods
 from vnav.sensor_noise import mount_covariance
 from vnav.silhouette import SilhouetteView
 
@@ -172,9 +174,14 @@ def estimate_with_mount(
     """Every tick of ``result`` estimated again with the camera mount ``T_b_c`` in place of
     the declared one, by a new ``vnav.localize.Localizer`` configured as the run's (camera,
     far plane, the noise it is told, the declared mount's covariance), on the same detections,
-    depth and poses (``scenarios.run.evaluate.reevaluate``)."""
+    depth and poses (``scenarios.run.evaluate.reevaluate``). A user's function
+    (``vnav.plugin``) is called again, with the recovered mount as its ``T_b_c``, by a second
+    estimator of its own (``PluginEstimator.second_pass``): the run's calls, failures and
+    diagnosis stay those of the declared mount; a function stopped for its time limit in the
+    run is not called again."""
     spec = result.spec
-    localizer = Localizer(camera, far_m=spec.scene.zfar_m, noise=spec.noise)
+    methods = second_pass_methods(active_methods())
+    localizer = Localizer(camera, far_m=spec.scene.zfar_m, noise=spec.noise, methods=methods)
     return reevaluate(
         result.ticks, result.cones_w, localizer, T_b_c, cov_T_b_c=mount_covariance(spec.noise)
     )

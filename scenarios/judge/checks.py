@@ -223,8 +223,12 @@ def _shown_bound(check: Check, value: float, op: str, run: RunResult) -> str:
     assert bound is not None  # the parser refuses error_bound on a method without one
     failed = _function_failures(run, check.method)
     if failed:
+        stopped = sum(
+            d.no_estimate.get(check.method) is NoEstimate.FUNCTION_STOPPED for d in _detections(run)
+        )
+        after = f", and was not called on {stopped} after its time limit" if stopped else ""
         return (
-            f"the function failed on {failed} of {len(_detections(run))} detections "
+            f"the function failed on {failed} of {len(_detections(run))} detections{after} "
             "(the report's estimators say where and how)"
         )
     statistic = "worst" if bound.statistic == "max" else "median"

@@ -53,10 +53,14 @@ gives. ``timing_s`` adds ``calibrate`` (the calibration and that second estimate
 (the checks), ``total`` (the whole run, from its start to its report, wall seconds) and
 ``total_cpu`` (the process's CPU time, user and system, over the same span).
 Also in 8, only in the report of a run with a user's function (``vnav.plugin``): ``estimators``,
-per function its spec, calls, how many returned None, its failures by kind (count, first
-message, camera ticks) and the frame-bug doctor's ``diagnosis`` of its estimates
-(``vnav.diagnose.Diagnosis.to_dict``, None without any); its statistics are under ``methods``
-as a built-in's. Only in the report of a navigating flight: ``navigation`` (``navigation``)."""
+per function its spec, its time limit (``timeout_s``, None without one), calls, how many
+returned None, how many detections it was skipped on after timing out (``skipped``), its calls'
+wall time (``time_s``: ``calls``, ``total``, ``mean``, ``max``, seconds), its failures by kind
+(count, first message, camera ticks), the frame-bug doctor's ``diagnosis`` of its estimates
+(``vnav.diagnose.Diagnosis.to_dict``, None without any) and, in a calibrated run, the same
+for its second pass with the recovered mount (``recovered_mount``); its statistics are under
+``methods`` as a built-in's. Only in the report of a navigating flight: ``navigation``
+(``navigation``)."""
 
 
 def _calibration(run: RunResult) -> dict[str, Any] | None:
@@ -156,15 +160,41 @@ def _names() -> list[str]:
 
 def estimator_summary(run: RunResult, m: Method) -> dict[str, Any]:
     """A user's function over the run (``vnav.plugin``): its spec, calls, how many returned
-    None, and each kind of failure with its count, first message and the camera ticks."""
-    f = m.estimator.failures
+    None, how many detections it was not called on after timing out (``skipped``), its calls'
+    wall time (``time_s``), each kind of failure with its count, first message and the camera
+    ticks, the doctor's diagnosis; in a calibrated run, the same tallies of its second pass
+    with the recovered mount (``recovered_mount``)."""
+    estimator = m.estimator
     tick_of = {(t.t_s if t.timing is None else t.timing.exposure_pose_s): t.tick for t in run.ticks}
-    diagnosis = m.estimator.diagnosis()
-    return {
+    diagnosis = estimator.diagnosis()
+    out = {
         "spec": m.implementation,
+        "timeout_s": estimator.timeout_s,
+        **_tallies(estimator, tick_of),
+        "diagnosis": None if diagnosis is None else diagnosis.to_dict(),
+    }
+    if estimator.again is not None:
+        again = estimator.again.diagnosis()
+        out["recovered_mount"] = {
+            **_tallies(estimator.again, tick_of),
+            "diagnosis": None if again is None else again.to_dict(),
+        }
+    return out
+
+
+def _tallies(estimator: Any, tick_of: dict[float, int]) -> dict[str, Any]:
+    """A ``vnav.plugin.PluginEstimator``'s calls, times and failures, as the report has them."""
+    f, times = estimator.failures, estimator.times
+    return {
         "calls": f.calls,
         "returned_none": f.returned_none,
-        "diagnosis": None if diagnosis is None else diagnosis.to_dict(),
+        "skipped": f.skipped,
+        "time_s": {
+            "calls": times.calls,
+            "total": round(times.total_s, 6),
+            "mean": round(times.mean_s, 6),
+            "max": round(times.max_s, 6),
+        },
         "failures": {
             kind.value: {
                 "count": f.count[kind],

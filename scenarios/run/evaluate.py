@@ -84,6 +84,7 @@ def evaluate_tick(
     cov_T_w_b: np.ndarray | None = None,
     cov_T_b_c: np.ndarray | None = None,
     keep_depth: bool = False,
+    T_w_b_newest: np.ndarray | None = None,
 ) -> TickRecord:
     """Localise every detection with what the estimator was told and compare with the truth.
 
@@ -112,6 +113,9 @@ def evaluate_tick(
     keep_depth : bool
         Keep each detection's depth under its mask (``DetectionRecord.depth_under_mask_m``),
         so that ``reevaluate`` can estimate the tick again (a calibrated run's).
+    T_w_b_newest : ndarray, shape (4, 4), optional
+        The newest pose received when the image arrived, as users' functions are shown it
+        (``vnav.plugin``); default ``timing.T_w_b_latest``.
 
     Returns
     -------
@@ -128,8 +132,18 @@ def evaluate_tick(
     T_b_c_est = truth.T_b_c if T_b_c_est is None else T_b_c_est
     # The estimator stamps the image with its exposure time, not the simulator's.
     t_s = truth.t_s if timing is None else timing.exposure_pose_s
+    if T_w_b_newest is None and timing is not None:
+        # A user's function is shown the newest pose too (the stale-pose mistake, vnav.plugin).
+        T_w_b_newest = timing.T_w_b_latest
     estimates = localizer.update(
-        t_s, detections, depth_m, T_w_b_est, T_b_c_est, cov_T_w_b=cov_T_w_b, cov_T_b_c=cov_T_b_c
+        t_s,
+        detections,
+        depth_m,
+        T_w_b_est,
+        T_b_c_est,
+        cov_T_w_b=cov_T_w_b,
+        cov_T_b_c=cov_T_b_c,
+        T_w_b_newest=T_w_b_newest,
     )
     cone_of = _match(estimates, truth.cones_w)
     T_c_w = se3.invert(T_w_c)
@@ -235,6 +249,8 @@ def reevaluate(
                 T_b_c_est=T_b_c_est,
                 cov_T_w_b=t.cov_T_w_b_est,
                 cov_T_b_c=cov_T_b_c,
+                # Users' functions are shown what they were in the run (vnav.plugin).
+                T_w_b_newest=None if t.timing is None else t.timing.T_w_b_latest,
             )
         )
     return out

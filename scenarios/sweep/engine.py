@@ -28,11 +28,12 @@ import signal
 import socket
 import time
 from collections import deque
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 from scenarios.sweep.episode import EpisodeRunner
+from scenarios.sweep.plan import EstimatorSource
 from scenarios.sweep.rows import Episode
 
 __all__ = [
@@ -124,13 +125,14 @@ def ray_missing() -> str | None:
 
 
 class SerialEngine:
-    """Every episode in this process, one after another (``--workers 0``: for debugging)."""
+    """Every episode in this process, one after another (``--workers 0``: for debugging);
+    ``estimators``, the sweep's user estimators, run in each (``EpisodeRunner``)."""
 
     workers = 0
     startup_s = 0.0
 
-    def __init__(self) -> None:
-        self._runner = EpisodeRunner()
+    def __init__(self, estimators: Sequence[EstimatorSource] = ()) -> None:
+        self._runner = EpisodeRunner(estimators)
 
     def run(self, tasks: Iterable[Task]) -> Iterator[Episode | Failure]:
         for task in tasks:
@@ -150,13 +152,13 @@ class _Worker(EpisodeRunner):
     """An ``EpisodeRunner`` with OpenCV's threads as the environment says, and a ``ready``
     probe."""
 
-    def __init__(self) -> None:
+    def __init__(self, estimators: Sequence[EstimatorSource] = ()) -> None:
         threads = os.environ.get("OPENCV_FOR_THREADS_NUM")
         if threads:
             import cv2
 
             cv2.setNumThreads(int(threads))
-        super().__init__()
+        super().__init__(estimators)
 
     def ready(self) -> int:
         return os.getpid()
@@ -176,6 +178,9 @@ class RayEngine:
         installed.
     env : dict, optional
         The workers' environment variables (default ``WORKER_ENV``; the benchmark compares).
+    estimators : sequence of EstimatorSource, optional
+        The sweep's user estimators: each worker imports them itself (``EpisodeRunner``),
+        from their absolute paths (a cluster's nodes need the files at the same paths).
 
     Attributes
     ----------
@@ -189,7 +194,11 @@ class RayEngine:
     """
 
     def __init__(
-        self, workers: int | None, address: str | None = None, env: dict[str, str] | None = None
+        self,
+        workers: int | None,
+        address: str | None = None,
+        env: dict[str, str] | None = None,
+        estimators: Sequence[EstimatorSource] = (),
     ) -> None:
         import ray
 
@@ -213,7 +222,7 @@ class RayEngine:
                 max_task_retries=0,
                 runtime_env={"env_vars": env},
             )(_Worker)
-            self._actors = [actor.remote() for _ in range(self.workers)]
+            self._actors = [actor.remote(tuple(estimators)) for _ in range(self.workers)]
             ray.get([a.ready.remote() for a in self._actors])
         except BaseException:
             self.close()

@@ -6,7 +6,9 @@ worker, replayed by ``vnav-demo run``); the tests compare them. The statistics a
 report's (``scenarios.judge.report``), so a row and ``vnav-demo run``'s report agree to the digit.
 
 ``EpisodeRunner`` is what a worker holds: the scenes it has built (``sim.scene_cache``), so
-that the next episode of the same grid point reuses the world and its OpenGL context.
+that the next episode of the same grid point reuses the world and its OpenGL context, and the
+sweep's user estimators (``vnav.plugin``), which it imports itself and runs beside the built-ins
+(``vnav.methods.extended``): a row has the columns of ``active_methods()`` within it.
 """
 
 from __future__ import annotations
@@ -14,16 +16,18 @@ from __future__ import annotations
 import math
 import time
 import tomllib
+from collections.abc import Sequence
 from typing import Any
 
 from scenarios import pipeline
 from scenarios.judge import checks
 from scenarios.run.records import RunResult
 from scenarios.scenario.spec import ScenarioSpec, from_dict
+from scenarios.sweep.plan import EstimatorSource
 from scenarios.sweep.rows import ESTIMATE_COLUMNS, STATS, Episode, method_column, row_columns
 from sim.scene_cache import SceneCache
 from sim.world import SimulationError
-from vnav.methods import METHOD_NAMES
+from vnav.methods import Method, active_methods, extended
 
 __all__ = ["EpisodeRunner", "run_episode"]
 
@@ -47,22 +51,28 @@ def _row(run: RunResult, report: dict[str, Any], judged: list[checks.CheckResult
         "cones_detected": detected,
         "detection_rate": detected / seen if seen else math.nan,
     }
-    for m in METHOD_NAMES:
-        stats = report["methods"][m]["position_error_m"]
+    methods = active_methods()
+    for m in methods:
+        stats = report["methods"][m.name]["position_error_m"]
         for s in STATS:
             value = stats[s]
-            row[method_column(m, s)] = int(value) if s == "count" else _nan_if_none(value)
+            row[method_column(m.name, s)] = int(value) if s == "count" else _nan_if_none(value)
+    for m in methods:
+        if m.images == "user":  # the detections it failed on, every kind (the report's)
+            failures = report["estimators"][m.name]["failures"].values()
+            row[method_column(m.name, "failures")] = sum(f["count"] for f in failures)
     row["simulated_s"] = float(report["simulated_s"])
     return row
 
 
 def _estimates(run: RunResult) -> dict[str, list]:
     out: dict[str, list] = {c: [] for c in ESTIMATE_COLUMNS}
+    names = [m.name for m in active_methods()]
     for t in run.ticks:
         for d in t.detections:
             if d.cone_index is None:
                 continue
-            for m in METHOD_NAMES:
+            for m in names:
                 if m in d.errors_m:
                     for c, v in zip(
                         ESTIMATE_COLUMNS,
@@ -86,7 +96,9 @@ def _diverged(spec: ScenarioSpec, exc: SimulationError) -> dict[str, Any]:
         cones_in_view=0,
         cones_detected=0,
     )
-    row.update({method_column(m, "count"): 0 for m in METHOD_NAMES})
+    methods = active_methods()
+    row.update({method_column(m.name, "count"): 0 for m in methods})
+    row.update({method_column(m.name, "failures"): 0 for m in methods if m.images == "user"})
     return row
 
 
@@ -114,12 +126,26 @@ class EpisodeRunner:
     """Runs episodes in one process, keeping the scenes it builds (``SceneCache``).
 
     This is the class a Ray worker holds (``scenarios.sweep.engine``): created inside the
-    worker, its OpenGL contexts are made there too.
+    worker, its OpenGL contexts are made there too, and it imports the user's estimators
+    itself, on its first episode.
+
+    Parameters
+    ----------
+    estimators : sequence of EstimatorSource, optional
+        The sweep's user estimators, run in every episode beside the built-ins.
+
+    Raises
+    ------
+    ValueError
+        From ``run``, where an estimator no longer imports or its file changed
+        (``EstimatorSource.load``): that episode's error; the next one tries again.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, estimators: Sequence[EstimatorSource] = ()) -> None:
         self._scenes = SceneCache(capacity=2)
         self._specs: dict[str, ScenarioSpec] = {}
+        self._sources = tuple(estimators)
+        self._methods: tuple[Method, ...] | None = None
 
     def run(self, scenario_toml: str, point: int, seed: int) -> Episode:
         """The episode of the grid point whose scenario file is ``scenario_toml``."""
@@ -127,7 +153,10 @@ class EpisodeRunner:
         if spec is None:
             spec = from_dict(tomllib.loads(scenario_toml), where=f"grid point {point}")
             self._specs = {scenario_toml: spec}  # one point at a time, mostly
-        return run_episode(spec, point, seed, self._scenes)
+        if self._methods is None:
+            self._methods = tuple(source.load() for source in self._sources)
+        with extended(self._methods):
+            return run_episode(spec, point, seed, self._scenes)
 
     def scenes_built(self) -> int:
         """Scenes this runner has built (fewer than the episodes when they are reused)."""

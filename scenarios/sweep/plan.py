@@ -6,6 +6,8 @@ A sweep file (TOML)::
                                        # to the sweep file's directory, or absolute)
     seeds = 50                         # episodes per grid point: seeds 1..50 (or a list)
     rank_by = "depth_image"            # optional: whose median error ranks the worst seeds
+    estimator = "mine.py:my_estimate"  # optional: your function beside the built-ins (a spec,
+                                       # or a list of specs; a path relative to the sweep file)
     [grid]                             # dotted keys into the scenario; full product
     "camera.pitch_down_deg" = [10.0, 30.0, 50.0]
     "noise.attitude_std_deg" = [0.0, 0.5, 1.0]
@@ -21,6 +23,13 @@ naming the grid point and the key, and each point's file is what ``vnav-demo run
 replays, number for number. That takes a few milliseconds a point, so a sweep holds at most
 ``MAX_POINTS`` grid points (planned in seconds); statistics come from seeds, which cost nothing
 to plan (``MAX_EPISODES`` episodes in all).
+
+``estimator`` runs a user's function in every episode as ``vnav-demo run --estimator`` does
+(``vnav.plugin``): each spec is imported once here, so that one that does not import stops the
+sweep before anything is written, and its file's SHA-256 is part of the sweep's identity
+(``SweepPlan.fingerprint``): ``--resume`` after the function changed refuses to mix its rows
+with the old function's. Each worker imports the function again itself (``EstimatorSource``:
+plain strings, an absolute path, whatever the worker's directory) and checks the file's hash.
 """
 
 from __future__ import annotations
@@ -31,7 +40,9 @@ import hashlib
 import itertools
 import json
 import math
+import os
 import re
+import sys
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -46,12 +57,14 @@ from scenarios.scenario.spec import (
     from_dict,
     read_toml,
 )
-from vnav.methods import METHOD_NAMES, PREFERENCE
+from scenarios.sweep.rows import method_column
+from vnav.methods import METHODS, PREFERENCE, Method
 from vnav.noise_model import SENSORS
 
 __all__ = [
     "MAX_EPISODES",
     "MAX_POINTS",
+    "EstimatorSource",
     "GridPoint",
     "SweepError",
     "SweepPlan",
@@ -67,7 +80,7 @@ MAX_POINTS = 1_000
 """Most grid points one sweep may hold. Each is written out, parsed back and checked before
 anything runs, 2-5 ms a point: a thousand take seconds, a million would take an hour (and
 write a million scenario files) before the first episode."""
-_TOP_KEYS = ("scenario", "seeds", "grid", "rank_by")
+_TOP_KEYS = ("scenario", "seeds", "grid", "rank_by", "estimator")
 _INDEX = re.compile(r"[0-9]+")
 """A part of a grid key that indexes a list."""
 
@@ -111,6 +124,54 @@ class GridPoint:
 
 
 @dataclass(frozen=True)
+class EstimatorSource:
+    """A user's estimator of the sweep (``estimator = "SPEC"``), as plain strings: what a
+    worker needs to import it itself (``load``), sent to Ray workers as it is.
+
+    Attributes
+    ----------
+    spec : str
+        As the sweep file writes it (``mine.py:my_estimate``, ``package.module:function``).
+    shown : str
+        As the command's directory reaches it: a relative file path joined to the sweep file's
+        directory (what ``vnav-demo run --estimator`` is given to replay an episode).
+    absolute : str
+        The spec with its file's absolute path (a module spec as written): what workers
+        import, whatever their current directory.
+    sha256 : str or None
+        The SHA-256 (hex) of the file the function was imported from (the ``.py`` file, or the
+        module's file); None for a module without one.
+    search_dir : str
+        The command's directory, absolute: where a module spec is looked up as well as on
+        ``sys.path`` (as ``vnav-demo run`` does in its own directory).
+    """
+
+    spec: str
+    shown: str
+    absolute: str
+    sha256: str | None
+    search_dir: str
+
+    def load(self) -> Method:
+        """Import the function and make it a method (``vnav.plugin.plugin_method``), checking
+        that its file is still the one the sweep hashed.
+
+        Raises
+        ------
+        ValueError
+            The spec does not import (``plugin_method``'s message), or the file changed.
+        """
+        m = _import_method(self.absolute, self.search_dir)
+        digest = _source_sha256(self.absolute)
+        if digest != self.sha256:
+            raise ValueError(
+                f"estimator {self.spec}: its file changed since the sweep started (SHA-256 "
+                f"{_short(self.sha256)} then, {_short(digest)} now)"
+            )
+        return m
+
+
+@dataclass(frozen=True)
 class SweepPlan:
     """A sweep: a scenario, the grid points made from it, the seeds run at each.
 
@@ -126,6 +187,11 @@ class SweepPlan:
     points : tuple of GridPoint
     rank_by : str
         The method whose median error ranks episodes (``worst`` first).
+    estimators : tuple of EstimatorSource
+        The user's functions every episode runs beside the built-ins (none by default).
+    user_methods : tuple of vnav.methods.Method
+        Those functions as methods, imported by ``plan`` (in this process, for the tables and
+        the recordings of the worst episodes; workers import their own).
     """
 
     path: str
@@ -134,6 +200,14 @@ class SweepPlan:
     seeds: tuple[int, ...]
     points: tuple[GridPoint, ...]
     rank_by: str
+    estimators: tuple[EstimatorSource, ...] = ()
+    user_methods: tuple[Method, ...] = field(default=(), compare=False, repr=False)
+
+    @property
+    def methods(self) -> tuple[Method, ...]:
+        """Every method an episode runs: the built-ins, then the user's functions (what
+        ``vnav.methods.active_methods()`` is within an episode)."""
+        return (*METHODS, *self.user_methods)
 
     @property
     def episodes(self) -> list[tuple[int, int]]:
@@ -142,10 +216,20 @@ class SweepPlan:
 
     @functools.cached_property
     def fingerprint(self) -> str:
-        """A hash of what the sweep runs (every point's scenario, the seeds): ``--resume``
-        refuses a directory, or a journal entry, whose sweep has another."""
-        text = json.dumps([[p.scenario_toml for p in self.points], list(self.seeds)])
+        """A hash of what the sweep runs (every point's scenario, the seeds, and each user
+        estimator's spec and file hash): ``--resume`` refuses a directory, or a journal entry,
+        whose sweep has another."""
+        parts: list[Any] = [[p.scenario_toml for p in self.points], list(self.seeds)]
+        if self.estimators:  # a sweep of built-ins only keeps the fingerprint it always had
+            parts.append(estimator_identity(self.estimators))
+        text = json.dumps(parts)
         return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def estimator_identity(estimators: tuple[EstimatorSource, ...]) -> list[dict[str, Any]]:
+    """Each estimator's ``spec`` (as written) and ``sha256``: what the fingerprint, the
+    manifest and the journal hold of them."""
+    return [{"spec": e.spec, "sha256": e.sha256} for e in estimators]
 
 
 def draws_from_seed(spec: ScenarioSpec) -> bool:
@@ -194,9 +278,11 @@ def plan(data: dict[str, Any], where: str, base_dir: Path = Path()) -> SweepPlan
         raise SweepError(f"{where}: scenario: required: a built-in name or a scenario file path")
     base = _base_scenario(data["scenario"], where, base_dir)
     seeds = _seeds(data.get("seeds", 1), where)
+    estimators, user_methods = _estimators(data.get("estimator", []), where, base_dir)
+    names = [m.name for m in (*METHODS, *user_methods)]
     rank_by = data.get("rank_by", PREFERENCE[0])
-    if rank_by not in METHOD_NAMES:
-        raise SweepError(f"{where}: rank_by: must be one of {list(METHOD_NAMES)}, got {rank_by!r}")
+    if rank_by not in names:
+        raise SweepError(f"{where}: rank_by: must be one of {names}, got {rank_by!r}")
     grid = data.get("grid", {})
     if not isinstance(grid, dict):
         raise SweepError(f"{where}: grid: must be a table of key = [values]")
@@ -218,7 +304,74 @@ def plan(data: dict[str, Any], where: str, base_dir: Path = Path()) -> SweepPlan
         _point(base, dict(zip(grid, combo, strict=True)), i, name(i), where)
         for i, combo in enumerate(itertools.product(*grid.values()))
     )
-    return SweepPlan(where, data["scenario"], tuple(grid), seeds, points, rank_by)
+    return SweepPlan(
+        where, data["scenario"], tuple(grid), seeds, points, rank_by, estimators, user_methods
+    )
+
+
+def _estimators(
+    raw: Any, where: str, base_dir: Path
+) -> tuple[tuple[EstimatorSource, ...], tuple[Method, ...]]:
+    """The ``estimator`` key (a spec or a list of them), each imported now; ``SweepError``
+    naming the key for one that does not import, names no callable, shares another's name,
+    or whose name makes no plain column (``scenarios.sweep.rows.method_column``)."""
+    specs = [raw] if isinstance(raw, str) else raw
+    if not isinstance(specs, list) or not all(isinstance(s, str) for s in specs):
+        raise SweepError(
+            f"{where}: estimator: must be a spec (package.module:function or "
+            f"path/to/file.py:function) or a list of them, got {raw!r}"
+        )
+    sources, methods = [], []
+    for spec in specs:
+        module, sep, function = spec.rpartition(":")
+        shown = spec
+        if sep and module.endswith(".py") and not Path(module).is_absolute():
+            shown = f"{base_dir / module}:{function}"  # relative to the sweep file
+        absolute = shown
+        if sep and module.endswith(".py"):
+            absolute = f"{Path(shown.rpartition(':')[0]).resolve()}:{function}"
+        try:
+            m = _import_method(absolute, os.getcwd())
+            method_column(m.name, "count")
+        except ValueError as exc:
+            raise SweepError(f"{where}: estimator: {exc}") from None
+        if m.name in [n.name for n in methods]:
+            raise SweepError(f"{where}: estimator: {spec} is {m.name}, as another one is")
+        sha256 = _source_sha256(absolute)
+        sources.append(EstimatorSource(spec, shown, absolute, sha256, os.getcwd()))
+        methods.append(m)
+    return tuple(sources), tuple(methods)
+
+
+def _import_method(spec: str, search_dir: str) -> Method:
+    """``vnav.plugin.plugin_method(spec)``, a module spec looked up in ``search_dir`` as
+    well as on ``sys.path``."""
+    from vnav.plugin import plugin_method
+
+    if not spec.rpartition(":")[0].endswith(".py") and search_dir not in sys.path:
+        sys.path.insert(0, search_dir)
+    return plugin_method(spec)
+
+
+def _source_sha256(spec: str) -> str | None:
+    """The SHA-256 (hex) of the file a spec's function comes from (its ``.py`` file, or its
+    module's file once imported); None where there is none."""
+    module = spec.rpartition(":")[0]
+    if module.endswith(".py"):
+        path: str | None = module
+    else:
+        path = getattr(sys.modules.get(module), "__file__", None)
+    if path is None:
+        return None
+    try:
+        return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+    except OSError:
+        return None
+
+
+def _short(sha256: str | None) -> str:
+    """A file hash in a message: its first 12 digits, or ``none``."""
+    return sha256[:12] if sha256 else "none"
 
 
 def _check_grid(grid: dict[str, Any], where: str) -> None:

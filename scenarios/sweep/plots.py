@@ -11,10 +11,13 @@ filled marker) and 90th percentile (dashed, open marker) of the episodes' own me
 as ``summary.json`` gives them per grid point. ``error_vs_range.png``: one panel per grid
 point (per combination of every swept key), its estimates binned by range, the same bins in
 every panel (bins with fewer than ``MIN_PER_BIN`` estimates are left out). The y axis is
-logarithmic where the errors span more than ``LOG_SPAN`` times. Colours are the methods' own
-(``vnav.methods``), as in recordings; the legend names the colours and the two line styles,
-drawn with the lines' own styles. A plot needing more than ``MAX_PANELS`` panels says so
-instead of drawing them (the numbers are in ``summary.json``).
+logarithmic where the errors span more than ``LOG_SPAN`` times. The methods are the plan's
+(``SweepPlan.methods``: the built-ins, then the user's functions of its ``estimator`` key).
+Colours are the methods' own (``vnav.methods``), as in recordings, but a user's function's,
+white on a recording's dark background, is one of ``USER_COLORS`` on the white page; the
+legend names the colours and the two line styles, drawn with the lines' own styles. A plot
+needing more than ``MAX_PANELS`` panels says so instead of drawing them (the numbers are in
+``summary.json``).
 """
 
 from __future__ import annotations
@@ -30,7 +33,6 @@ import numpy as np
 
 from scenarios.sweep.plan import SweepPlan, label
 from scenarios.sweep.rows import Episode, method_column
-from vnav.methods import METHODS
 
 __all__ = [
     "LOG_SPAN",
@@ -51,6 +53,9 @@ LOG_SPAN = 30.0
 RANGE_BINS = 12
 MAX_PANELS = 16
 """Most panels one plot draws (a 4 x 4 grid): past that the panels are too small to read."""
+USER_COLORS = ("#000000", "#8c564b", "#7f7f7f", "#17becf")
+"""Plot colours of a sweep's user functions, in order (black, brown, grey, cyan: none a
+built-in's), cycled past four."""
 
 MEDIAN_STYLE = {"linestyle": "-", "marker": "o", "markersize": 4.0, "linewidth": 1.5}
 P90_STYLE = {
@@ -142,7 +147,7 @@ def key_curves(plan: SweepPlan, episodes: list[Episode], key: str) -> list[Curve
             [e for p in points if repr(plan.points[p].values[key]) == repr(x) for e in by_point[p]]
             for x in xs
         ]
-        for m in METHODS:
+        for m in plan.methods:
             median, p90 = np.full(len(xs), np.nan), np.full(len(xs), np.nan)
             count = np.zeros(len(xs), dtype=np.int64)
             for i, mine in enumerate(at_x):
@@ -242,9 +247,23 @@ def _figure(title: str, xlabel: str, panel_titles: list[str], note: list[str]):
     return fig, axes
 
 
-def _finish(fig, axes: list, shown: list[float]) -> None:
-    """One scale for every panel, and the legend: the methods by colour, the statistics by
-    line style, each entry drawn with the lines' own style."""
+def _colors(plan: SweepPlan) -> dict[str, Any]:
+    """Each of the plan's methods' plot colour: its own, ``USER_COLORS`` for user functions."""
+    colors: dict[str, Any] = {}
+    users = 0
+    for m in plan.methods:
+        if m.images == "user":
+            colors[m.name] = USER_COLORS[users % len(USER_COLORS)]
+            users += 1
+        else:
+            colors[m.name] = np.array(m.color_rgb) / 255.0
+    return colors
+
+
+def _finish(fig, axes: list, shown: list[float], plan: SweepPlan) -> None:
+    """One scale for every panel, and the legend: the plan's methods by colour, the
+    statistics by line style, each entry drawn with the lines' own style."""
+    methods, colors = plan.methods, _colors(plan)
     from matplotlib.lines import Line2D
 
     finite = [v for v in shown if math.isfinite(v) and v > 0.0]
@@ -258,8 +277,8 @@ def _finish(fig, axes: list, shown: list[float]) -> None:
             ax.text(0.5, 0.5, "no estimate", transform=ax.transAxes, ha="center", fontsize=8)
     drawn = {line.get_label().split()[0] for ax in axes for line in ax.lines}
     handles = [
-        Line2D([], [], color=np.array(m.color_rgb) / 255.0, **MEDIAN_STYLE, label=m.name)
-        for m in METHODS
+        Line2D([], [], color=colors[m.name], **MEDIAN_STYLE, label=m.name)
+        for m in methods
         if m.name in drawn
     ]
     if handles:
@@ -356,7 +375,7 @@ def error_vs_key_figure(plan: SweepPlan, episodes: list[Episode], key: str):
     ]
     fig, axes = _figure(title, key, [_panel_title(c) for c in combos], note)
     x, labels = _positions(_distinct(plan, key))
-    colors = {m.name: np.array(m.color_rgb) / 255.0 for m in METHODS}
+    colors = _colors(plan)
     shown: list[float] = []
     for ax, combo in zip(axes, combos, strict=True):
         if labels is not None:
@@ -374,7 +393,7 @@ def error_vs_key_figure(plan: SweepPlan, episodes: list[Episode], key: str):
                 )
                 ax.plot(x, c.p90_m, color=colors[c.method], label=f"{c.method} p90", **P90_STYLE)
                 shown += [*c.median_m[np.isfinite(c.median_m)], *c.p90_m[np.isfinite(c.p90_m)]]
-    _finish(fig, axes, shown)
+    _finish(fig, axes, shown, plan)
     return fig
 
 
@@ -408,19 +427,20 @@ def error_vs_range_figure(plan: SweepPlan, episodes: list[Episode]):
     if ranges.size:
         edges = np.linspace(ranges.min(), ranges.max() + 1e-9, RANGE_BINS + 1)
         centres = 0.5 * (edges[:-1] + edges[1:])
+        colors = _colors(plan)
         for ax, (_, points) in zip(axes, groups, strict=True):
             mine = [e for p in points for e in by_point[p]]
             method = np.array([m for e in mine for m in e.estimates["method"]], dtype=str)
             r = np.array([v for e in mine for v in e.estimates["range_m"]], dtype=np.float64)
             err = np.array([v for e in mine for v in e.estimates["error_m"]], dtype=np.float64)
-            for m in METHODS:
+            for m in plan.methods:
                 median, p90 = _binned(r[method == m.name], err[method == m.name], edges)
                 if np.isfinite(median).any():
-                    color = np.array(m.color_rgb) / 255.0
+                    color = colors[m.name]
                     ax.plot(centres, median, color=color, label=f"{m.name} median", **MEDIAN_STYLE)
                     ax.plot(centres, p90, color=color, label=f"{m.name} p90", **P90_STYLE)
                     shown += [*median[np.isfinite(median)], *p90[np.isfinite(p90)]]
-    _finish(fig, axes, shown)
+    _finish(fig, axes, shown, plan)
     return fig
 
 

@@ -7,8 +7,11 @@ Every column name is a plain identifier (letters, digits, ``_``), so that SQL (D
 Polars and pandas (``df.camera__pitch_down_deg``) read it without quoting. A name made of
 parts joins them with ``__``, as dlt and Django do for nested names: a grid key's dots become
 ``__`` (``camera.pitch_down_deg`` -> ``camera__pitch_down_deg``, ``grid_column``), and a
-method's statistic is ``<method>__<stat>`` (``depth_image__median_m``, ``method_column``).
-The parts themselves contain single ``_`` only, so the name reads back into its parts. The
+method's statistic is ``<method>__<stat>`` (``depth_image__median_m``, ``method_column``); a
+user's function ``user:my_estimate`` (``vnav.plugin``) is the part ``user_my_estimate``
+(``user_my_estimate__median_m``), with one more column, ``user_my_estimate__failures``, the
+detections it failed on. The parts themselves contain single ``_`` only, so the name reads
+back into its parts. The
 columns are flat scalars rather than struct columns: a struct reaches pandas as one dict per
 cell and needs unnesting in Polars, while scalar columns group, filter and plot the same in
 every tool.
@@ -17,10 +20,11 @@ every tool.
 from __future__ import annotations
 
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from vnav.methods import METHOD_NAMES
+from vnav.methods import Method, active_methods
 
 __all__ = [
     "ESTIMATE_COLUMNS",
@@ -30,6 +34,7 @@ __all__ = [
     "Episode",
     "grid_column",
     "method_column",
+    "method_part",
     "row_columns",
 ]
 
@@ -51,9 +56,45 @@ _KEY_PART = re.compile(r"[A-Za-z0-9]+(?:_[A-Za-z0-9]+)*")
 """A grid key's part that joins with ``__`` into an identifier and splits back."""
 
 
+_USER_PREFIX = "user:"
+"""A user's function's method name starts so (``vnav.plugin``)."""
+
+_UNITLESS = ("count", "failures")
+"""Per-method columns that are counts, not metres."""
+
+
+def method_part(method: str) -> str:
+    """A method's part of its columns' names: its name, ``user_<function>`` for a user's
+    function ``user:<function>``.
+
+    Raises
+    ------
+    ValueError
+        A user's function whose name would not read back from the column (a name with
+        characters other than ASCII letters, digits and single inner ``_``).
+    """
+    if not method.startswith(_USER_PREFIX):
+        return method
+    function = method.removeprefix(_USER_PREFIX)
+    if not _KEY_PART.fullmatch(function):
+        raise ValueError(
+            f"{method}: no plain column name for it; name the function with ASCII letters, "
+            "digits and single inner _"
+        )
+    return f"user_{function}"
+
+
 def method_column(method: str, stat: str) -> str:
-    """A row's column for ``method``'s statistic: ``depth_image__median_m``, ``naive__count``."""
-    return f"{method}__{stat}" if stat == "count" else f"{method}__{stat}_m"
+    """A row's column for ``method``'s statistic: ``depth_image__median_m``, ``naive__count``,
+    ``user_my_estimate__failures`` (``method_part``).
+
+    Raises
+    ------
+    ValueError
+        As ``method_part``.
+    """
+    part = method_part(method)
+    return f"{part}__{stat}" if stat in _UNITLESS else f"{part}__{stat}_m"
 
 
 def grid_column(key: str) -> str:
@@ -76,12 +117,16 @@ def grid_column(key: str) -> str:
     return column
 
 
-def row_columns() -> list[str]:
-    """An episode row's columns, in order (the sweep adds the point, the seed, the grid)."""
+def row_columns(methods: Sequence[Method] | None = None) -> list[str]:
+    """An episode row's columns, in order (the sweep adds the point, the seed, the grid): the
+    statistics of each of ``methods`` (default: ``vnav.methods.active_methods()``, the run's),
+    and the failures of each user's function among them."""
+    methods = active_methods() if methods is None else methods
     head = ["status", "passed", "failed_checks", "message", "camera_ticks", "detections"]
     head += ["matched_detections", "cones_in_view", "cones_detected", "detection_rate"]
-    per_method = [method_column(m, s) for m in METHOD_NAMES for s in STATS]
-    return [*head, *per_method, "simulated_s", "wall_s"]
+    per_method = [method_column(m.name, s) for m in methods for s in STATS]
+    failures = [method_column(m.name, "failures") for m in methods if m.images == "user"]
+    return [*head, *per_method, *failures, "simulated_s", "wall_s"]
 
 
 @dataclass

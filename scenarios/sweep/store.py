@@ -10,7 +10,9 @@
 
 The tables' column names are plain identifiers (``scenarios.sweep.rows``: a grid key's dots
 become ``__``); each table's schema metadata ``vnav.sweep`` holds the sweep's fingerprint, the
-tables' version and the grid key of each grid column.
+tables' version, the grid key of each grid column and each method's part of its columns' names
+(a user's function ``user:f`` is ``user_f``). A sweep with user estimators has their columns
+too (the methods of ``SweepPlan.methods``).
 
 Every file is written whole or not at all (``scenarios.record.outputs.write_atomic``). The journal
 is the record: an episode is finished once its file is there, so an interrupted sweep loses
@@ -21,7 +23,8 @@ Journal floats are written by ``json`` in shortest round-trip form: read back, t
 same doubles.
 
 Each journal entry carries the identity of its episode: the sweep's fingerprint, its grid
-point's index, values and the SHA-256 of its scenario file, and its seed. Reading the journal
+point's index, values and the SHA-256 of its scenario file, its seed, and (in a sweep with user
+estimators) each estimator's spec and file hash. Reading the journal
 back, an entry of another sweep is refused (``SweepError`` saying what differs: nothing of
 another sweep is mixed into this one's tables), and an entry that does not read as an episode
 (not a regular file, not JSON, a missing key, a value of the wrong type) is set aside in
@@ -41,7 +44,7 @@ from typing import Any
 
 from scenarios.record import outputs
 from scenarios.record.outputs import OutputError, write_atomic
-from scenarios.sweep.plan import SweepError, SweepPlan, label
+from scenarios.sweep.plan import SweepError, SweepPlan, estimator_identity, label
 from scenarios.sweep.plots import plot_names
 from scenarios.sweep.rows import (
     ESTIMATE_COLUMNS,
@@ -49,9 +52,9 @@ from scenarios.sweep.rows import (
     TABLES_VERSION,
     Episode,
     grid_column,
+    method_part,
     row_columns,
 )
-from vnav.methods import METHOD_NAMES
 
 __all__ = ["DERIVED", "MANIFEST", "SweepStore", "pyarrow_missing", "table_metadata"]
 
@@ -71,6 +74,9 @@ FLUSH_EVERY_S = 5.0
 _ENTRY_NAME = re.compile(r"^p(\d+)-s(\d+)\.json$")
 _IDENTITY = ("journal_version", "sweep", "point", "values", "scenario_sha256", "seed")
 _ENTRY_KEYS = (*_IDENTITY, "row", "estimates")
+_OPTIONAL_KEYS = ("estimators",)
+"""Entry keys only a sweep with user estimators writes (a built-in sweep's entries are as
+they were)."""
 
 
 class _BadEntryError(ValueError):
@@ -196,6 +202,9 @@ class SweepStore:
     def _manifest_difference(self, held: dict[str, Any]) -> str:
         """What differs between the sweep a manifest describes and this one, in words."""
         plan = self.plan
+        differs = _estimator_difference(held.get("estimators", []), plan)
+        if differs:
+            return differs
         seeds, points = held.get("seeds"), held.get("points")
         if seeds != list(plan.seeds):
             if not isinstance(seeds, list) or len(seeds) != len(plan.seeds):
@@ -227,6 +236,7 @@ class SweepStore:
             "fingerprint": self.plan.fingerprint,
             "keys": list(self.plan.keys),
             "seeds": list(self.plan.seeds),
+            **self._estimators_entry(),
             "points": [
                 {
                     "index": p.index,
@@ -238,6 +248,13 @@ class SweepStore:
             ],
         }
         _write_text(self.dir / MANIFEST, json.dumps(manifest, indent=1) + "\n")
+
+    def _estimators_entry(self) -> dict[str, Any]:
+        """``{"estimators": [...]}`` (``estimator_identity``) for a sweep with user estimators,
+        else nothing: the manifest and journal of a built-in sweep are as they were."""
+        if not self.plan.estimators:
+            return {}
+        return {"estimators": estimator_identity(self.plan.estimators)}
 
     def _read_journal(self) -> None:
         """Read back every journal entry: this sweep's into ``episodes``, the ones that do not
@@ -286,9 +303,11 @@ class SweepStore:
         for key in _ENTRY_KEYS:
             if key not in entry:
                 raise _BadEntryError(f"{key}: missing")
-        unknown = sorted(set(entry) - set(_ENTRY_KEYS))
+        unknown = sorted(set(entry) - set(_ENTRY_KEYS) - set(_OPTIONAL_KEYS))
         if unknown:
             raise _BadEntryError(f"{unknown[0]}: unknown key")
+        if not isinstance(entry.get("estimators", []), list):
+            raise _BadEntryError(f"estimators: {_kind(entry['estimators'])}, expected a list")
         if entry["journal_version"] != JOURNAL_VERSION:
             version = entry["journal_version"]
             raise _BadEntryError(f"journal_version: {version!r}, expected {JOURNAL_VERSION}")
@@ -308,12 +327,17 @@ class SweepStore:
         differs = _point_difference(entry, self.plan.points[point], self.point_file(point))
         if differs:
             raise _BadEntryError(differs)
-        return Episode(point, seed, _row(entry["row"]), _estimates(entry["estimates"]))
+        methods = self.plan.methods
+        row = _row(entry["row"], row_columns(methods))
+        return Episode(point, seed, row, _estimates(entry["estimates"], [m.name for m in methods]))
 
     def _difference(self, entry: dict[str, Any]) -> tuple[str, bool]:
         """What differs between the episode of another sweep's journal entry and this sweep's
         of the same name, in words, and whether its grid point or seed does."""
         point, seed = entry["point"], entry["seed"]
+        differs = _estimator_difference(entry.get("estimators", []), self.plan)
+        if differs:
+            return differs, False
         if point >= len(self.plan.points):
             return f"grid point {point} there; this sweep has {len(self.plan.points)}", True
         differs = _point_difference(entry, self.plan.points[point], self.point_file(point))
@@ -344,6 +368,7 @@ class SweepStore:
             "values": point.values,
             "scenario_sha256": point.scenario_sha256,
             "seed": episode.seed,
+            **self._estimators_entry(),
             "row": episode.row,
             "estimates": episode.estimates,
         }
@@ -473,8 +498,38 @@ def _point_difference(there: Any, point, point_file: str) -> str | None:
     return None
 
 
-def _row(row: Any) -> dict[str, Any]:
-    """A journal entry's row, checked: every column of ``row_columns()``, of its type.
+def _estimator_difference(there: Any, plan: SweepPlan) -> str | None:
+    """How the user estimators a manifest or journal entry names (``estimator_identity``)
+    differ from ``plan``'s, in words, or None."""
+    here = estimator_identity(plan.estimators)
+    if there == here:
+        return None
+    listed = there if isinstance(there, list) else [there]
+    specs = [str(e.get("spec") if isinstance(e, dict) else e) for e in listed]
+    if specs != [e["spec"] for e in here]:
+        mine = [e["spec"] for e in here]
+        return (
+            f"its estimator is {', '.join(specs) or 'none'}, this sweep's "
+            f"{', '.join(mine) or 'none'}"
+        )
+    for old, new in zip(listed, here, strict=True):
+        old_sha256 = old.get("sha256") if isinstance(old, dict) else None
+        if old_sha256 != new["sha256"]:
+            return (
+                f"estimator {new['spec']}: its function's file changed (SHA-256 "
+                f"{_short(old_sha256)} there, {_short(new['sha256'])} here)"
+            )
+    return "its estimators differ"
+
+
+def _short(sha256: Any) -> str:
+    """A file hash in a message: its first 12 digits, or ``none``."""
+    return sha256[:12] if isinstance(sha256, str) else "none"
+
+
+def _row(row: Any, columns: list[str]) -> dict[str, Any]:
+    """A journal entry's row, checked: every one of ``columns`` (``row_columns``), of its
+    type.
 
     Raises
     ------
@@ -482,7 +537,6 @@ def _row(row: Any) -> dict[str, Any]:
         Naming the first column missing, unknown or of the wrong type.
     """
     _expect(row, dict, "row")
-    columns = row_columns()
     for name in columns:
         if name not in row:
             raise _BadEntryError(f"row.{name}: missing")
@@ -505,9 +559,9 @@ def _row(row: Any) -> dict[str, Any]:
     return row
 
 
-def _estimates(estimates: Any) -> dict[str, list]:
+def _estimates(estimates: Any, methods: list[str]) -> dict[str, list]:
     """A journal entry's estimates, checked: a list per ``ESTIMATE_COLUMNS``, all as long,
-    each value of its column's type.
+    each value of its column's type (a method one of ``methods``).
 
     Raises
     ------
@@ -527,7 +581,7 @@ def _estimates(estimates: Any) -> dict[str, list]:
         if name in ("tick", "cone"):
             ok = all(type(v) is int for v in values)
         elif name == "method":
-            ok = all(isinstance(v, str) and v in METHOD_NAMES for v in values)
+            ok = all(isinstance(v, str) and v in methods for v in values)
         else:
             ok = all(type(v) is float or type(v) is int for v in values)
         if not ok:
@@ -540,7 +594,7 @@ def _estimates(estimates: Any) -> dict[str, list]:
 def _column_type(name: str) -> str:
     """The type of a row's column: ``int``, ``text``, ``list`` (of strings), ``bool`` or
     ``float``: the journal's check and the table's types both read it."""
-    if name.endswith("__count") or name in _INT_COLUMNS:
+    if name.endswith(("__count", "__failures")) or name in _INT_COLUMNS:
         return "int"
     if name in _TEXT_COLUMNS:
         return "text"
@@ -562,17 +616,19 @@ def _column(values: list[Any]):
 
 def table_metadata(plan: SweepPlan) -> dict[str, Any]:
     """What each table's schema metadata ``vnav.sweep`` holds (as JSON): the sweep's
-    ``fingerprint``, ``tables_version`` and ``grid_columns``, each grid key to its column."""
+    ``fingerprint``, ``tables_version``, ``grid_columns``, each grid key to its column, and
+    ``method_columns``, each method to its part of its columns' names (``method_part``)."""
     return {
         "fingerprint": plan.fingerprint,
         "tables_version": TABLES_VERSION,
         "grid_columns": {key: grid_column(key) for key in plan.keys},
+        "method_columns": {m.name: method_part(m.name) for m in plan.methods},
     }
 
 
 def results_table(plan: SweepPlan, episodes: list[Episode]):
     """One row per episode: ``point``, ``seed``, each grid key's column (``grid_column``), then
-    ``row_columns()``; ``failed_checks`` is a list of strings."""
+    ``row_columns`` of the plan's methods; ``failed_checks`` is a list of strings."""
     import pyarrow as pa
 
     columns: dict[str, Any] = {
@@ -587,7 +643,7 @@ def results_table(plan: SweepPlan, episodes: list[Episode]):
         "bool": pa.bool_(),
         "list": pa.list_(pa.string()),
     }
-    for name in row_columns():
+    for name in row_columns(plan.methods):
         values = [e.row[name] for e in episodes]
         kind = _column_type(name)
         if kind == "float":

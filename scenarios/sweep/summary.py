@@ -2,7 +2,9 @@
 
 Per grid point, across its seeds: the pass rate, the detection rate, and per method the
 median, 90th percentile and maximum of the episodes' own median and RMS errors, plus the
-statistics of every estimate pooled (``vnav.metrics.error_stats``). Episodes are ranked worst
+statistics of every estimate pooled (``vnav.metrics.error_stats``); a user's function
+(``estimator`` in the sweep file) is a method like the others, with its ``failures``: the
+detections it failed on, summed over the episodes. Episodes are ranked worst
 first: a diverged flight, then a failed check, then a pass; within each, the largest median
 error of ``rank_by`` (an episode where it gave no estimate counts as worst); then the seed.
 Every number here is computed from the rows of ``results.parquet`` and ``estimates.parquet``
@@ -17,12 +19,12 @@ from typing import Any
 
 import numpy as np
 
-from scenarios.sweep.plan import SweepPlan
+from scenarios.sweep.plan import SweepPlan, estimator_identity
 from scenarios.sweep.rows import Episode, method_column
 from vnav import metrics
-from vnav.methods import METHOD_NAMES
+from vnav.methods import Method
 
-__all__ = ["SUMMARY_VERSION", "build", "rank_key", "replay_command", "worst"]
+__all__ = ["SUMMARY_VERSION", "build", "rank_key", "replay_command", "replay_specs", "worst"]
 
 SUMMARY_VERSION = 2
 """2: ``failed_checks`` a list, the rank figure named as its column (``depth_image__median_m``)."""
@@ -49,11 +51,23 @@ def worst(episodes: list[Episode], rank_by: str, k: int) -> list[Episode]:
     return sorted(episodes, key=lambda e: rank_key(e, rank_by))[:k]
 
 
-def replay_command(out_dir: str, point_file: str, seed: int) -> str:
+def replay_command(
+    out_dir: str, point_file: str, seed: int, estimators: tuple[str, ...] = ()
+) -> str:
     """The command that runs an episode again, with its recording: shell words, each quoted
-    where it needs to be (a space in the directory's name)."""
+    where it needs to be (a space in the directory's name), with ``--estimator SPEC`` for each
+    of the sweep's user estimators (``EstimatorSource.shown``)."""
     path = f"{out_dir.rstrip('/')}/{point_file}"
-    return shlex.join(["vnav-demo", "run", path, "--seed", str(seed)])
+    words = ["vnav-demo", "run", path, "--seed", str(seed)]
+    for spec in estimators:
+        words += ["--estimator", spec]
+    return shlex.join(words)
+
+
+def replay_specs(plan: SweepPlan) -> tuple[str, ...]:
+    """The ``--estimator`` specs that replay an episode of ``plan`` from the command's
+    directory."""
+    return tuple(e.shown for e in plan.estimators)
 
 
 def _spread(values: list[float]) -> dict[str, float | None]:
@@ -68,7 +82,8 @@ def _spread(values: list[float]) -> dict[str, float | None]:
     }
 
 
-def _method(episodes: list[Episode], method: str) -> dict[str, Any]:
+def _method(episodes: list[Episode], m: Method) -> dict[str, Any]:
+    method = m.name
     errors = np.array(
         [
             err
@@ -78,7 +93,7 @@ def _method(episodes: list[Episode], method: str) -> dict[str, Any]:
         ],
         dtype=np.float64,
     )
-    return {
+    out = {
         "episodes_with_estimates": sum(e.row[method_column(method, "count")] > 0 for e in episodes),
         "median_m": _spread([e.row[method_column(method, "median")] for e in episodes]),
         "rmse_m": _spread([e.row[method_column(method, "rmse")] for e in episodes]),
@@ -86,6 +101,9 @@ def _method(episodes: list[Episode], method: str) -> dict[str, Any]:
             k: int(v) if k == "count" else _num(v) for k, v in metrics.error_stats(errors).items()
         },
     }
+    if m.images == "user":
+        out["failures"] = sum(e.row[method_column(method, "failures")] for e in episodes)
+    return out
 
 
 def _point(
@@ -105,7 +123,7 @@ def _point(
             "mean": float(np.mean(finite_rates)) if finite_rates else None,
             "min": float(np.min(finite_rates)) if finite_rates else None,
         },
-        "methods": {m: _method(episodes, m) for m in METHOD_NAMES},
+        "methods": {m.name: _method(episodes, m) for m in plan.methods},
         "worst": None,
     }
     if episodes:
@@ -121,7 +139,7 @@ def _worst_entry(plan: SweepPlan, e: Episode, out_dir: str, point_file: str) -> 
         "status": e.row["status"],
         "failed_checks": e.row["failed_checks"],
         method_column(plan.rank_by, "median"): _num(e.row[method_column(plan.rank_by, "median")]),
-        "replay": replay_command(out_dir, point_file, e.seed),
+        "replay": replay_command(out_dir, point_file, e.seed, replay_specs(plan)),
     }
 
 
@@ -160,6 +178,7 @@ def build(
         "keys": list(plan.keys),
         "seeds": list(plan.seeds),
         "rank_by": plan.rank_by,
+        **({"estimators": estimator_identity(plan.estimators)} if plan.estimators else {}),
         "points": [_point(plan, i, eps, out_dir, point_files[i]) for i, eps in by_point.items()],
         "worst": [
             {
