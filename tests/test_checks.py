@@ -11,7 +11,14 @@ import numpy as np
 import pytest
 
 from scenarios.judge import checks
-from scenarios.run.records import CalibrationRecord, DetectionRecord, RunResult, TickRecord
+from scenarios.run.records import (
+    CalibrationRecord,
+    Contact,
+    DetectionRecord,
+    NavigationRecord,
+    RunResult,
+    TickRecord,
+)
 from scenarios.scenario import builtin, check_kinds
 from scenarios.scenario.spec import from_dict
 from vnav.detect import ConeDetection
@@ -92,8 +99,14 @@ def run() -> RunResult:
     """Two ticks, two cones: cone 0 seen twice, cone 1 once (out of the contract's domain),
     one unmatched detection."""
     return RunResult(
-        spec=None,  # the checks read the ticks (and the calibration) only
+        spec=None,  # the checks read the ticks (and the calibration, the navigation) only
         seed=0,
+        # A navigating flight that touched cone 0 at 4.2 s, 3.5 m short of its goal.
+        navigation=NavigationRecord(
+            contact=Contact(4.2, 0, np.array([10.0, 0.0, 0.5])),
+            min_clearance_m=0.25,
+            final_distance_m=3.5,
+        ),
         calibration=CalibrationRecord(
             np.eye(4),
             0.03,
@@ -174,6 +187,12 @@ FIGURES = {
     "calibration_rotation": 0.02,
     "calibration_translation": 0.004,
     "calibration_time_offset": 0.0005,
+    # the run's navigation record: its distance from the goal at the end, the one cone it
+    # touched (both kinds count it), its smallest true clearance
+    "reached_goal": 3.5,
+    "no_collision": 1.0,
+    "collision": 1.0,
+    "min_clearance": 0.25,
 }
 
 
@@ -200,6 +219,10 @@ def test_a_check_with_nothing_to_judge_has_no_data_and_fails(run: RunResult) -> 
     assert result.value is None and result.outcome is checks.Outcome.NO_DATA
     assert not result.passed and result.outcome.fails_run
     empty = RunResult(spec=None, seed=0, ticks=[_tick(0, [], [])])
+    for kind in ("reached_goal", "no_collision", "collision", "min_clearance"):
+        result = checks.judge(check_kinds.Check(kind, 1.0), empty)
+        assert result.outcome is checks.Outcome.NO_DATA, kind
+        assert result.reason == 'the flight does not navigate (flight.mode is not "navigate")'
     for kind in ("max_error", "median_error", "detection_rate", "tracking_error"):
         result = checks.judge(check_kinds.Check(kind, 1e9), empty)
         assert result.value is None and result.outcome is checks.Outcome.NO_DATA, kind

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from scenarios.run.records import DetectionRecord, RunResult
+from scenarios.run.records import DetectionRecord, NavigationRecord, RunResult
 from scenarios.scenario.check_kinds import KINDS, Check, CheckKind, Unit
 from vnav.estimators import NoEstimate
 from vnav.methods import CONTRACT_DOMAIN, NAIVE, method
@@ -526,7 +526,8 @@ def _latency_prediction(run: RunResult, check: Check) -> float | NoData:
     return NoData("no matched detection has a depth_image estimate with the newest pose")
 
 
-def _navigation(run: RunResult):
+def _navigation(run: RunResult) -> NavigationRecord | NoData:
+    """The run's navigation record, or why there is none."""
     if run.navigation is None:
         return NoData('the flight does not navigate (flight.mode is not "navigate")')
     return run.navigation
