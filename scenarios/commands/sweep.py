@@ -36,7 +36,7 @@ from scenarios.commands.console import error as _error
 from scenarios.record import outputs
 from scenarios.sweep import engine as engines
 from scenarios.sweep import plots, summary
-from scenarios.sweep.plan import SweepError, SweepPlan, draws_from_seed, load
+from scenarios.sweep.plan import SweepError, SweepPlan, draws_from_seed, load, navigates
 from scenarios.sweep.rows import method_column
 from scenarios.sweep.store import SweepStore, pyarrow_missing
 from vnav.methods import extended
@@ -318,11 +318,8 @@ def _write_summary(
     episodes = store.sorted_episodes()
     plots_dir = out_dir / "plots"
     plots_dir.mkdir(exist_ok=True)
-    for name, key in plots.plot_names(store.plan).items():
-        if key is None:
-            png = plots.error_vs_range_png(store.plan, episodes)
-        else:
-            png = plots.error_vs_key_png(store.plan, episodes, key)
+    for name in plots.plot_names(store.plan):
+        png = plots.plot_png(store.plan, episodes, name)
         outputs.write_atomic(plots_dir / name, lambda tmp, png=png: tmp.write_bytes(png))
     doc = summary.build(
         store.plan,
@@ -344,6 +341,21 @@ def _user_figure(name: str, episodes: list) -> str:
     figure = f"median {statistics.median(finite):.3f} m" if finite else "no estimate"
     failed = sum(e.row[method_column(name, "failures")] for e in episodes)
     return f"{name} {figure}, failed on {failed} detections"
+
+
+def _navigation_figure(episodes: list) -> str:
+    """A navigating grid point's outcome across its episodes (``summary.navigation_entry``):
+    the collision and goal rates and the smallest true clearance of any."""
+    nav = summary.navigation_entry(episodes)
+    flown = nav["flown"]
+    if not flown:
+        return "navigation: every flight diverged"
+    smallest = nav["min_clearance_m"]["min"]
+    clearance = f", smallest clearance {smallest:.3f} m" if smallest is not None else ""
+    return (
+        f"collided {nav['collided']}/{flown} (rate {nav['collision_rate']:.2f}), reached the "
+        f"goal {nav['reached_goal']}/{flown} (rate {nav['goal_rate']:.2f}){clearance}"
+    )
 
 
 def _final(
@@ -377,6 +389,8 @@ def _final(
             f"worst seed {w.seed}"
         )
         lines += [f"      {_user_figure(m.name, mine)}" for m in plan.user_methods]
+        if navigates(p.spec):
+            lines.append(f"      {_navigation_figure(mine)}")
     if len(plan.points) > SHOWN_POINTS:
         lines.append(f"  ... {len(plan.points) - SHOWN_POINTS} more grid points in summary.json")
     lines.append(f"wrote {out_dir}/results.parquet, estimates.parquet, summary.json, plots/")

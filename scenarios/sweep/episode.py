@@ -23,8 +23,15 @@ from scenarios import pipeline
 from scenarios.judge import checks
 from scenarios.run.records import RunResult
 from scenarios.scenario.spec import ScenarioSpec, from_dict
-from scenarios.sweep.plan import EstimatorSource
-from scenarios.sweep.rows import ESTIMATE_COLUMNS, STATS, Episode, method_column, row_columns
+from scenarios.sweep.plan import EstimatorSource, navigates
+from scenarios.sweep.rows import (
+    ESTIMATE_COLUMNS,
+    NAV_FLAGS,
+    STATS,
+    Episode,
+    method_column,
+    row_columns,
+)
 from sim.scene_cache import SceneCache
 from sim.world import SimulationError
 from vnav.methods import Method, active_methods, extended
@@ -61,6 +68,13 @@ def _row(run: RunResult, report: dict[str, Any], judged: list[checks.CheckResult
         if m.images == "user":  # the detections it failed on, every kind (the report's)
             failures = report["estimators"][m.name]["failures"].values()
             row[method_column(m.name, "failures")] = sum(f["count"] for f in failures)
+    if run.navigation is not None:
+        nav = report["navigation"]  # the report's figures: a row agrees with `vnav-demo run`'s
+        row["nav__reached_goal"] = bool(nav["reached_goal"])
+        row["nav__collided"] = bool(nav["collided"])
+        row["nav__min_clearance_m"] = _nan_if_none(nav["min_clearance_m"])
+        row["nav__time_to_goal_s"] = _nan_if_none(nav["time_to_goal_s"])
+        row["nav__path_length_m"] = _nan_if_none(nav["path_length_m"])
     row["simulated_s"] = float(report["simulated_s"])
     return row
 
@@ -84,7 +98,7 @@ def _estimates(run: RunResult) -> dict[str, list]:
 
 
 def _diverged(spec: ScenarioSpec, exc: SimulationError) -> dict[str, Any]:
-    row: dict[str, Any] = dict.fromkeys(row_columns(), math.nan)
+    row: dict[str, Any] = dict.fromkeys(row_columns(navigates=navigates(spec)), math.nan)
     row.update(
         status="diverged",
         passed=False,
@@ -99,6 +113,8 @@ def _diverged(spec: ScenarioSpec, exc: SimulationError) -> dict[str, Any]:
     methods = active_methods()
     row.update({method_column(m.name, "count"): 0 for m in methods})
     row.update({method_column(m.name, "failures"): 0 for m in methods if m.images == "user"})
+    if navigates(spec):  # whether it would have reached the goal or touched a cone is unknown
+        row.update(dict.fromkeys(NAV_FLAGS))
     return row
 
 

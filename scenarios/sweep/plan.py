@@ -71,6 +71,7 @@ __all__ = [
     "draws_from_seed",
     "label",
     "load",
+    "navigates",
     "plan",
 ]
 
@@ -214,6 +215,12 @@ class SweepPlan:
         """Every ``(point index, seed)``, point by point (a worker then mostly keeps its scene)."""
         return [(p.index, s) for p in self.points for s in self.seeds]
 
+    @property
+    def navigates(self) -> bool:
+        """Whether a grid point's flight navigates (``navigates``): the tables then have the
+        flight's outcome (``scenarios.sweep.rows.NAV_COLUMNS``), summary.json its rates."""
+        return any(navigates(p.spec) for p in self.points)
+
     @functools.cached_property
     def fingerprint(self) -> str:
         """A hash of what the sweep runs (every point's scenario, the seeds, and each user
@@ -241,6 +248,12 @@ def draws_from_seed(spec: ScenarioSpec) -> bool:
     above zero). Where none is, every seed gives the same run, number for number.
     """
     return any(spec.noise.noisy(s) for s in SENSORS) or spec.timing.jitter_s > 0.0
+
+
+def navigates(spec: ScenarioSpec) -> bool:
+    """Whether ``spec``'s flight is closed loop (``flight.mode = "navigate"``): its run has a
+    navigation outcome (``scenarios.run.records.NavigationRecord``)."""
+    return spec.flight.mode == "navigate"
 
 
 def label(values: dict[str, Any]) -> str:

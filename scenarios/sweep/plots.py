@@ -18,6 +18,12 @@ white on a recording's dark background, is one of ``USER_COLORS`` on the white p
 legend names the colours and the two line styles, drawn with the lines' own styles. A plot
 needing more than ``MAX_PANELS`` panels says so instead of drawing them (the numbers are in
 ``summary.json``).
+
+A sweep of a navigating flight has ``navigation_vs_<key>.png`` too, one per swept key: two
+panels, the collision rate and the goal rate (each grid point's fraction of its flown
+episodes, as ``summary.json`` gives them), one line per combination of the other swept keys
+(``rate_curves``), in the method's colour where that combination is a ``flight.estimate``.
+``plot_png`` draws any of the plots by its file name (``plot_names``).
 """
 
 from __future__ import annotations
@@ -33,18 +39,25 @@ import numpy as np
 
 from scenarios.sweep.plan import SweepPlan, label
 from scenarios.sweep.rows import Episode, method_column
+from vnav.methods import METHODS
 
 __all__ = [
     "LOG_SPAN",
+    "MAX_LINES",
     "MAX_PANELS",
     "MIN_PER_BIN",
     "Curve",
+    "RateCurve",
     "error_vs_key_figure",
     "error_vs_key_png",
     "error_vs_range_figure",
     "error_vs_range_png",
     "key_curves",
+    "navigation_vs_key_figure",
+    "navigation_vs_key_png",
     "plot_names",
+    "plot_png",
+    "rate_curves",
     "swept_keys",
 ]
 
@@ -53,6 +66,25 @@ LOG_SPAN = 30.0
 RANGE_BINS = 12
 MAX_PANELS = 16
 """Most panels one plot draws (a 4 x 4 grid): past that the panels are too small to read."""
+MAX_LINES = 10
+"""Most lines one panel of ``navigation_vs_<key>.png`` draws (one per combination of the other
+swept keys): past that their colours cannot be told apart."""
+LINE_COLORS = (
+    "#1f77b4",
+    "#ff7f0e",
+    "#2ca02c",
+    "#d62728",
+    "#9467bd",
+    "#8c564b",
+    "#e377c2",
+    "#7f7f7f",
+    "#bcbd22",
+    "#17becf",
+)
+"""Colours of the lines of ``navigation_vs_<key>.png`` where they are not methods (matplotlib's
+``tab10``)."""
+_ESTIMATE_KEY = "flight.estimate"
+RATE_STYLE = {"linestyle": "-", "marker": "o", "markersize": 5.0, "linewidth": 1.5}
 USER_COLORS = ("#000000", "#8c564b", "#7f7f7f", "#17becf")
 """Plot colours of a sweep's user functions, in order (black, brown, grey, cyan: none a
 built-in's), cycled past four."""
@@ -101,10 +133,32 @@ def swept_keys(plan: SweepPlan) -> list[str]:
 
 
 def plot_names(plan: SweepPlan) -> dict[str, str | None]:
-    """File name of each plot, keyed by grid key (None: the range plot)."""
+    """File name of each plot, to the grid key it plots against (None: the range plot);
+    ``navigation_vs_<key>.png`` only for a sweep of a navigating flight."""
     names: dict[str, str | None] = {f"error_vs_{key}.png": key for key in swept_keys(plan)}
     names["error_vs_range.png"] = None
+    if plan.navigates:
+        names |= {f"navigation_vs_{key}.png": key for key in swept_keys(plan)}
     return names
+
+
+def plot_png(plan: SweepPlan, episodes: list[Episode], name: str) -> bytes:
+    """The plot ``name`` (one of ``plot_names(plan)``) as PNG.
+
+    Raises
+    ------
+    ValueError
+        ``name`` is not one of ``plot_names(plan)``.
+    """
+    names = plot_names(plan)
+    if name not in names:
+        raise ValueError(f"no plot {name!r} in this sweep; its plots: {list(names)}")
+    key = names[name]
+    if key is None:
+        return error_vs_range_png(plan, episodes)
+    if name.startswith("navigation_vs_"):
+        return navigation_vs_key_png(plan, episodes, key)
+    return error_vs_key_png(plan, episodes, key)
 
 
 def _groups(plan: SweepPlan, keys: list[str]) -> list[tuple[dict[str, Any], list[int]]]:
@@ -201,9 +255,16 @@ class _Layout:
         return int(15 * (self.width - 0.3))
 
 
-def _figure(title: str, xlabel: str, panel_titles: list[str], note: list[str]):
+def _figure(
+    title: str,
+    xlabel: str,
+    panel_titles: list[str],
+    note: list[str],
+    ylabel: str = "position error (m)",
+):
     """A figure with one panel per entry of ``panel_titles`` (shared axes; no title where
-    it is empty), a legend column on the right and ``note`` (wrapped) below."""
+    it is empty), ``ylabel`` on the left column, a legend column on the right and ``note``
+    (wrapped) below."""
     from matplotlib.figure import Figure  # no pyplot: no global state, no GUI backend
 
     title_lines = max((t.count("\n") + 1 for t in panel_titles if t), default=0)
@@ -238,7 +299,7 @@ def _figure(title: str, xlabel: str, panel_titles: list[str], note: list[str]):
         else:
             ax.tick_params(labelbottom=False)
         if i % lay.ncols == 0:
-            ax.set_ylabel("position error (m)", fontsize=9)
+            ax.set_ylabel(ylabel, fontsize=9)
         else:
             ax.tick_params(labelleft=False)
         axes.append(ax)
@@ -311,6 +372,17 @@ def _positions(values: list[Any]) -> tuple[np.ndarray, list[str] | None]:
     return np.arange(len(values), dtype=np.float64), [str(v) for v in values]
 
 
+def _x_axis(ax, x: np.ndarray, labels: list[str] | None) -> None:
+    """Ticks at the swept values (``_positions``); values that are not numbers get half a
+    step of room either side, so that the labels of panels side by side do not run into each
+    other."""
+    if labels is not None:
+        ax.set_xticks(x, labels)
+        ax.set_xlim(-0.5, len(labels) - 0.5)
+    elif len(x) <= 12:
+        ax.set_xticks(x)
+
+
 def _per_point(plan: SweepPlan, episodes: list[Episode]) -> str:
     """How many episodes each grid point has: ``5 episodes (its seeds)``, or a range."""
     done = [len(v) for v in _by_point(plan, episodes).values()]
@@ -378,10 +450,7 @@ def error_vs_key_figure(plan: SweepPlan, episodes: list[Episode], key: str):
     colors = _colors(plan)
     shown: list[float] = []
     for ax, combo in zip(axes, combos, strict=True):
-        if labels is not None:
-            ax.set_xticks(x, labels)
-        elif len(x) <= 12:
-            ax.set_xticks(x)
+        _x_axis(ax, x, labels)
         for c in curves:
             if c.others == combo and np.isfinite(c.median_m).any():
                 ax.plot(
@@ -458,3 +527,140 @@ def _binned(r: np.ndarray, e: np.ndarray, edges: np.ndarray) -> tuple[np.ndarray
         if sel.size >= MIN_PER_BIN:
             median[b], p90[b] = np.median(sel), np.percentile(sel, 90.0)
     return median, p90
+
+
+# ------------------------------------------------------------------ navigation
+@dataclass(frozen=True)
+class RateCurve:
+    """A navigating flight's outcome against a swept key, the other swept keys held at
+    ``others``.
+
+    Attributes
+    ----------
+    others : dict
+        Each other swept key to its value on this curve (empty if the key is the only one).
+    x : list
+        The key's values, in the grid's order, shape (n,).
+    collision_rate, goal_rate : np.ndarray
+        Shape (n,): the fraction of the flown episodes at each ``x`` that touched a cone, and
+        that reached the goal (NaN where none flew).
+    flown : np.ndarray
+        Shape (n,), int: the flown episodes behind each point (those that did not diverge).
+    """
+
+    others: dict[str, Any]
+    x: list[Any]
+    collision_rate: np.ndarray
+    goal_rate: np.ndarray
+    flown: np.ndarray
+
+
+def rate_curves(plan: SweepPlan, episodes: list[Episode], key: str) -> list[RateCurve]:
+    """The collision and goal rates against ``key``, one curve per combination of the other
+    swept keys (grid order); each point pools the grid points with its values (one, unless a
+    grid list repeats a value), as ``summary.json``'s ``collision_rate`` and ``goal_rate``
+    count them: over the episodes whose flight did not diverge. Episodes of a grid point that
+    does not navigate count for nothing."""
+    others = [k for k in swept_keys(plan) if k != key]
+    xs = _distinct(plan, key)
+    by_point = _by_point(plan, episodes)
+    curves = []
+    for combo, points in _groups(plan, others):
+        collided, reached = np.full(len(xs), np.nan), np.full(len(xs), np.nan)
+        flown = np.zeros(len(xs), dtype=np.int64)
+        for i, x in enumerate(xs):
+            mine = [
+                e
+                for p in points
+                if repr(plan.points[p].values[key]) == repr(x)
+                for e in by_point[p]
+                if e.row.get("nav__collided") is not None
+            ]
+            flown[i] = len(mine)
+            if mine:
+                collided[i] = sum(bool(e.row["nav__collided"]) for e in mine) / len(mine)
+                reached[i] = sum(bool(e.row["nav__reached_goal"]) for e in mine) / len(mine)
+        curves.append(RateCurve(combo, xs, collided, reached, flown))
+    return curves
+
+
+def _rate_colors(curves: list[RateCurve]) -> list[Any]:
+    """Each curve's colour: its method's where the curves differ in ``flight.estimate`` only
+    (the colour it has everywhere else), else ``LINE_COLORS`` in order."""
+    own = {m.name: np.array(m.color_rgb) / 255.0 for m in METHODS}
+    if all(list(c.others) == [_ESTIMATE_KEY] and c.others[_ESTIMATE_KEY] in own for c in curves):
+        return [own[c.others[_ESTIMATE_KEY]] for c in curves]
+    return [LINE_COLORS[i % len(LINE_COLORS)] for i in range(len(curves))]
+
+
+def navigation_vs_key_figure(plan: SweepPlan, episodes: list[Episode], key: str):
+    """The figure of ``navigation_vs_key_png`` (a matplotlib ``Figure``): two panels, the
+    collision rate and the goal rate against ``key``, one line per ``rate_curves`` curve,
+    labelled with the other swept keys' values (``-`` where there are none; the legend's
+    title names the keys)."""
+    title = f"{plan.scenario}: collisions and goals against {key}"
+    others = [k for k in swept_keys(plan) if k != key]
+    curves = rate_curves(plan, episodes, key)
+    if len(curves) > MAX_LINES:
+        fig, (ax,) = _figure(title, "", [""], [])
+        ax.set_axis_off()
+        text = (
+            f"{len(curves)} combinations of {', '.join(others)}: more than {MAX_LINES} lines. "
+            "Each grid point's rates are in summary.json."
+        )
+        ax.text(
+            0.5,
+            0.5,
+            "\n".join(textwrap.wrap(text, 50)),
+            transform=ax.transAxes,
+            ha="center",
+            va="center",
+            fontsize=9,
+        )
+        return fig
+    flown = [int(n) for c in curves for n in c.flown]
+    counts = f"{min(flown)}" if min(flown) == max(flown) else f"{min(flown)} to {max(flown)}"
+    note = [
+        f"Each point: of one grid point's {counts} flown episodes (its seeds, less any whose "
+        "flight diverged), the fraction that touched a cone (MuJoCo's contact), and the "
+        "fraction that came within the goal radius of the goal.",
+        _panels_note(
+            plan, f"one line per value of {', '.join(others)}" if others else "", episodes
+        ),
+    ]
+    fig, axes = _figure(
+        title, key, ["collision rate", "goal rate"], note, ylabel="fraction of episodes"
+    )
+    x, labels = _positions(_distinct(plan, key))
+    for ax, rate in zip(axes, ("collision_rate", "goal_rate"), strict=True):
+        _x_axis(ax, x, labels)
+        ax.set_ylim(-0.05, 1.05)
+        for c, color in zip(curves, _rate_colors(curves), strict=True):
+            shown = ", ".join(_show_value(v) for v in c.others.values()) or "-"
+            ax.plot(x, getattr(c, rate), color=color, label=shown, **RATE_STYLE)
+        if not any(np.isfinite(getattr(c, rate)).any() for c in curves):
+            ax.text(0.5, 0.5, "no flown episode", transform=ax.transAxes, ha="center", fontsize=8)
+    if others:
+        x1 = max(ax.get_position().x1 for ax in axes)
+        y1 = max(ax.get_position().y1 for ax in axes)
+        fig.legend(
+            handles=axes[0].lines,
+            loc="upper left",
+            bbox_to_anchor=(x1 + 0.1 / fig.get_figwidth(), y1),
+            fontsize=8,
+            title="\n".join(others),
+            title_fontsize=8,
+            alignment="left",
+            frameon=False,
+        )
+    return fig
+
+
+def _show_value(value: Any) -> str:
+    """A grid value in a legend: a string bare, anything else as ``label`` writes it."""
+    return value if isinstance(value, str) else label({"k": value}).removeprefix("k = ")
+
+
+def navigation_vs_key_png(plan: SweepPlan, episodes: list[Episode], key: str) -> bytes:
+    """``navigation_vs_key_figure`` as PNG."""
+    return _png(navigation_vs_key_figure(plan, episodes, key))

@@ -10,8 +10,10 @@ parts joins them with ``__``, as dlt and Django do for nested names: a grid key'
 method's statistic is ``<method>__<stat>`` (``depth_image__median_m``, ``method_column``); a
 user's function ``user:my_estimate`` (``vnav.plugin``) is the part ``user_my_estimate``
 (``user_my_estimate__median_m``), with one more column, ``user_my_estimate__failures``, the
-detections it failed on. The parts themselves contain single ``_`` only, so the name reads
-back into its parts. The
+detections it failed on. A sweep of a navigating flight (``flight.mode = "navigate"``) has
+the flight's outcome too, under the part ``nav`` (``NAV_COLUMNS``: ``nav__reached_goal``,
+``nav__collided``, ``nav__min_clearance_m``, ...); a sweep of other flights has no such column.
+The parts themselves contain single ``_`` only, so the name reads back into its parts. The
 columns are flat scalars rather than struct columns: a struct reaches pandas as one dict per
 cell and needs unnesting in Polars, while scalar columns group, filter and plot the same in
 every tool.
@@ -28,6 +30,8 @@ from vnav.methods import Method, active_methods
 
 __all__ = [
     "ESTIMATE_COLUMNS",
+    "NAV_COLUMNS",
+    "NAV_FLAGS",
     "STATS",
     "STATUSES",
     "TABLES_VERSION",
@@ -51,6 +55,15 @@ STATS = ("count", "mean", "median", "rmse", "max")
 ESTIMATE_COLUMNS = ("tick", "t_s", "cone", "method", "range_m", "error_m")
 """Columns of an episode's estimates: one row per matched detection and method."""
 
+
+NAV_FLAGS = ("nav__reached_goal", "nav__collided")
+"""A navigating episode's yes-or-no outcome (``scenarios.run.records.NavigationRecord``): a
+boolean, or None where the flight diverged (what it would have done is unknown)."""
+
+NAV_COLUMNS = (*NAV_FLAGS, "nav__min_clearance_m", "nav__time_to_goal_s", "nav__path_length_m")
+"""A navigating episode's outcome: whether it reached the goal, whether it touched a cone, the
+smallest true clearance to a cone (m, negative in contact), when it reached the goal (s; NaN:
+never) and the length it flew (m); NaN figures where the flight diverged."""
 
 _KEY_PART = re.compile(r"[A-Za-z0-9]+(?:_[A-Za-z0-9]+)*")
 """A grid key's part that joins with ``__`` into an identifier and splits back."""
@@ -117,16 +130,18 @@ def grid_column(key: str) -> str:
     return column
 
 
-def row_columns(methods: Sequence[Method] | None = None) -> list[str]:
+def row_columns(methods: Sequence[Method] | None = None, navigates: bool = False) -> list[str]:
     """An episode row's columns, in order (the sweep adds the point, the seed, the grid): the
     statistics of each of ``methods`` (default: ``vnav.methods.active_methods()``, the run's),
-    and the failures of each user's function among them."""
+    the failures of each user's function among them, and ``NAV_COLUMNS`` if the flight
+    ``navigates``."""
     methods = active_methods() if methods is None else methods
     head = ["status", "passed", "failed_checks", "message", "camera_ticks", "detections"]
     head += ["matched_detections", "cones_in_view", "cones_detected", "detection_rate"]
     per_method = [method_column(m.name, s) for m in methods for s in STATS]
     failures = [method_column(m.name, "failures") for m in methods if m.images == "user"]
-    return [*head, *per_method, *failures, "simulated_s", "wall_s"]
+    nav = list(NAV_COLUMNS) if navigates else []
+    return [*head, *per_method, *failures, *nav, "simulated_s", "wall_s"]
 
 
 @dataclass
@@ -139,7 +154,8 @@ class Episode:
     row : dict
         One value per ``row_columns()``: ``status`` is ``passed``, ``failed`` (a check failed
         or had no data; ``failed_checks``, a list, names them) or ``diverged`` (the flight diverged;
-        ``message`` says when); errors are NaN where a method gave none.
+        ``message`` says when); errors are NaN where a method gave none. A navigating flight's
+        row has ``NAV_COLUMNS`` too.
     estimates : dict of str to list
         ``ESTIMATE_COLUMNS``, one entry per matched detection and method with an estimate.
     """

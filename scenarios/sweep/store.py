@@ -12,7 +12,9 @@ The tables' column names are plain identifiers (``scenarios.sweep.rows``: a grid
 become ``__``); each table's schema metadata ``vnav.sweep`` holds the sweep's fingerprint, the
 tables' version, the grid key of each grid column and each method's part of its columns' names
 (a user's function ``user:f`` is ``user_f``). A sweep with user estimators has their columns
-too (the methods of ``SweepPlan.methods``).
+too (the methods of ``SweepPlan.methods``), and a sweep of a navigating flight the flight's
+outcome (``NAV_COLUMNS``: ``nav__reached_goal`` and ``nav__collided`` booleans, null where the
+flight diverged; the figures NaN there); a sweep of other flights has none of them.
 
 Every file is written whole or not at all (``scenarios.record.outputs.write_atomic``). The journal
 is the record: an episode is finished once its file is there, so an interrupted sweep loses
@@ -35,6 +37,7 @@ without blocking and read only if it is a regular file: a FIFO would wait for ev
 from __future__ import annotations
 
 import json
+import math
 import os
 import re
 import stat
@@ -44,10 +47,12 @@ from typing import Any
 
 from scenarios.record import outputs
 from scenarios.record.outputs import OutputError, write_atomic
-from scenarios.sweep.plan import SweepError, SweepPlan, estimator_identity, label
+from scenarios.sweep.plan import SweepError, SweepPlan, estimator_identity, label, navigates
 from scenarios.sweep.plots import plot_names
 from scenarios.sweep.rows import (
     ESTIMATE_COLUMNS,
+    NAV_COLUMNS,
+    NAV_FLAGS,
     STATUSES,
     TABLES_VERSION,
     Episode,
@@ -328,7 +333,8 @@ class SweepStore:
         if differs:
             raise _BadEntryError(differs)
         methods = self.plan.methods
-        row = _row(entry["row"], row_columns(methods))
+        columns = row_columns(methods, navigates(self.plan.points[point].spec))
+        row = _row(entry["row"], columns)
         return Episode(point, seed, row, _estimates(entry["estimates"], [m.name for m in methods]))
 
     def _difference(self, entry: dict[str, Any]) -> tuple[str, bool]:
@@ -545,6 +551,9 @@ def _row(row: Any, columns: list[str]) -> dict[str, Any]:
         if kind == "float":
             if isinstance(value, bool) or not isinstance(value, int | float):
                 raise _BadEntryError(f"row.{name}: {_kind(value)}, expected a number")
+        elif kind == "flag":  # a navigating flight's outcome: None where it diverged
+            if value is not None:
+                _expect(value, bool, f"row.{name}")
         elif kind == "list":
             _expect(value, list, f"row.{name}")
             if not all(isinstance(v, str) for v in value):
@@ -592,10 +601,13 @@ def _estimates(estimates: Any, methods: list[str]) -> dict[str, list]:
 
 
 def _column_type(name: str) -> str:
-    """The type of a row's column: ``int``, ``text``, ``list`` (of strings), ``bool`` or
-    ``float``: the journal's check and the table's types both read it."""
+    """The type of a row's column: ``int``, ``text``, ``list`` (of strings), ``bool``,
+    ``flag`` (a boolean or None) or ``float``: the journal's check and the table's types both
+    read it."""
     if name.endswith(("__count", "__failures")) or name in _INT_COLUMNS:
         return "int"
+    if name in NAV_FLAGS:
+        return "flag"
     if name in _TEXT_COLUMNS:
         return "text"
     if name in _LIST_COLUMNS:
@@ -628,7 +640,9 @@ def table_metadata(plan: SweepPlan) -> dict[str, Any]:
 
 def results_table(plan: SweepPlan, episodes: list[Episode]):
     """One row per episode: ``point``, ``seed``, each grid key's column (``grid_column``), then
-    ``row_columns`` of the plan's methods; ``failed_checks`` is a list of strings."""
+    ``row_columns`` of the plan's methods (with ``NAV_COLUMNS`` if ``plan.navigates``: null
+    and NaN for an episode of a grid point that does not); ``failed_checks`` is a list of
+    strings."""
     import pyarrow as pa
 
     columns: dict[str, Any] = {
@@ -641,10 +655,12 @@ def results_table(plan: SweepPlan, episodes: list[Episode]):
         "int": pa.int64(),
         "text": pa.string(),
         "bool": pa.bool_(),
+        "flag": pa.bool_(),
         "list": pa.list_(pa.string()),
     }
-    for name in row_columns(plan.methods):
-        values = [e.row[name] for e in episodes]
+    absent = dict.fromkeys(NAV_COLUMNS, math.nan) | dict.fromkeys(NAV_FLAGS)
+    for name in row_columns(plan.methods, plan.navigates):
+        values = [e.row[name] if name in e.row else absent[name] for e in episodes]
         kind = _column_type(name)
         if kind == "float":
             columns[name] = pa.array([float(v) for v in values], pa.float64())

@@ -4,7 +4,11 @@ Per grid point, across its seeds: the pass rate, the detection rate, and per met
 median, 90th percentile and maximum of the episodes' own median and RMS errors, plus the
 statistics of every estimate pooled (``vnav.metrics.error_stats``); a user's function
 (``estimator`` in the sweep file) is a method like the others, with its ``failures``: the
-detections it failed on, summed over the episodes. Episodes are ranked worst
+detections it failed on, summed over the episodes. A sweep of a navigating flight has, per
+grid point, ``goal_rate`` and ``collision_rate``: the fractions of its flown episodes (those
+whose flight did not diverge) that reached the goal and that touched a cone, and
+``navigation``: those counts, and the spread across seeds of the smallest true clearance, of
+the time to the goal and of the path flown (``navigation_entry``). Episodes are ranked worst
 first: a diverged flight, then a failed check, then a pass; within each, the largest median
 error of ``rank_by`` (an episode where it gave no estimate counts as worst); then the seed.
 Every number here is computed from the rows of ``results.parquet`` and ``estimates.parquet``
@@ -19,12 +23,20 @@ from typing import Any
 
 import numpy as np
 
-from scenarios.sweep.plan import SweepPlan, estimator_identity
+from scenarios.sweep.plan import SweepPlan, estimator_identity, navigates
 from scenarios.sweep.rows import Episode, method_column
 from vnav import metrics
 from vnav.methods import Method
 
-__all__ = ["SUMMARY_VERSION", "build", "rank_key", "replay_command", "replay_specs", "worst"]
+__all__ = [
+    "SUMMARY_VERSION",
+    "build",
+    "navigation_entry",
+    "rank_key",
+    "replay_command",
+    "replay_specs",
+    "worst",
+]
 
 SUMMARY_VERSION = 2
 """2: ``failed_checks`` a list, the rank figure named as its column (``depth_image__median_m``)."""
@@ -82,6 +94,48 @@ def _spread(values: list[float]) -> dict[str, float | None]:
     }
 
 
+def _finite(values: list[float]) -> np.ndarray:
+    return np.array([v for v in values if math.isfinite(v)], dtype=np.float64)
+
+
+def navigation_entry(episodes: list[Episode]) -> dict[str, Any]:
+    """A navigating grid point's outcome across ``episodes`` (its seeds).
+
+    ``flown``: the episodes whose flight has an outcome (not diverged); ``reached_goal`` and
+    ``collided``: how many of them reached the goal and touched a cone, and ``goal_rate`` and
+    ``collision_rate`` those counts over ``flown`` (None if none flew); ``min_clearance_m``:
+    the minimum, 10th percentile and median across the flown episodes of each one's smallest
+    true clearance (metres; negative in contact); ``time_to_goal_s`` (of those that reached
+    it) and ``path_length_m``: median and maximum. A statistic with no episode is None.
+    """
+    flown = [e for e in episodes if e.row["nav__collided"] is not None]
+    reached = sum(bool(e.row["nav__reached_goal"]) for e in flown)
+    collided = sum(bool(e.row["nav__collided"]) for e in flown)
+    clearance = _finite([e.row["nav__min_clearance_m"] for e in flown])
+    times = _finite([e.row["nav__time_to_goal_s"] for e in flown])
+    paths = _finite([e.row["nav__path_length_m"] for e in flown])
+    return {
+        "flown": len(flown),
+        "reached_goal": reached,
+        "collided": collided,
+        "goal_rate": reached / len(flown) if flown else None,
+        "collision_rate": collided / len(flown) if flown else None,
+        "min_clearance_m": {
+            "min": float(clearance.min()) if clearance.size else None,
+            "p10": float(np.percentile(clearance, 10.0)) if clearance.size else None,
+            "median": float(np.median(clearance)) if clearance.size else None,
+        },
+        "time_to_goal_s": {
+            "median": float(np.median(times)) if times.size else None,
+            "max": float(times.max()) if times.size else None,
+        },
+        "path_length_m": {
+            "median": float(np.median(paths)) if paths.size else None,
+            "max": float(paths.max()) if paths.size else None,
+        },
+    }
+
+
 def _method(episodes: list[Episode], m: Method) -> dict[str, Any]:
     method = m.name
     errors = np.array(
@@ -111,6 +165,14 @@ def _point(
 ) -> dict[str, Any]:
     rates = [e.row["detection_rate"] for e in episodes]
     finite_rates = [r for r in rates if math.isfinite(r)]
+    flight: dict[str, Any] = {}  # a sweep of other flights: the entries it always had
+    if plan.navigates:
+        nav = navigation_entry(episodes) if navigates(plan.points[index].spec) else None
+        flight = {
+            "goal_rate": nav["goal_rate"] if nav else None,
+            "collision_rate": nav["collision_rate"] if nav else None,
+            "navigation": nav,
+        }
     entry: dict[str, Any] = {
         "index": index,
         "values": plan.points[index].values,
@@ -119,6 +181,7 @@ def _point(
         "passed": sum(e.row["passed"] for e in episodes),
         "diverged": sum(e.row["status"] == "diverged" for e in episodes),
         "pass_rate": (sum(e.row["passed"] for e in episodes) / len(episodes)) if episodes else None,
+        **flight,
         "detection_rate": {
             "mean": float(np.mean(finite_rates)) if finite_rates else None,
             "min": float(np.min(finite_rates)) if finite_rates else None,
