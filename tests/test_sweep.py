@@ -433,24 +433,53 @@ def test_ray_client_server_failing_to_start_is_tried_once_more(monkeypatch):
         assert ray.calls == len(errors)
 
 
+NAV_SWEEP = {
+    "scenario": "avoid",
+    "seeds": [1, 2],
+    "grid": {"flight.estimate": ["depth_image", "naive"], "noise.extrinsic_std_deg": [5.0]},
+}
+"""A navigating flight on its estimate's map, with an uncalibrated mount drawn from the seed."""
+NAV_EPISODES = [(0, 1), (1, 2)]
+"""Its episodes run on Ray and here: depth_image's flight at seed 1 reaches the goal, naive's
+at seed 2 flies into the cone."""
+
+
 def test_ray_engine_reuses_each_workers_scene(work, serial):
     """One actor runs all 6 episodes and builds the scene once: the two grid points differ in
-    noise only, so they share a scene (``SceneConfig``)."""
-    from scenarios.sweep.plan import load
+    noise only, so they share a scene (``SceneConfig``). The same actor then flies navigating
+    episodes (``NAV_SWEEP``): the rows, the flight's outcome with them, are the ones this
+    process gives (the closed loop depends on the seed and the point only)."""
+    from scenarios.sweep.episode import EpisodeRunner
+    from scenarios.sweep.plan import load, plan
 
-    plan = load(work / "small.toml")
+    small = load(work / "small.toml")
+    nav = plan(NAV_SWEEP, "nav.toml")
+    nav_tasks = [engines.Task(p, s, nav.points[p].scenario_toml) for p, s in NAV_EPISODES]
     engine = engines.RayEngine(workers=1)
     try:
-        tasks = [engines.Task(p, s, plan.points[p].scenario_toml) for p, s in plan.episodes]
+        tasks = [engines.Task(p, s, small.points[p].scenario_toml) for p, s in small.episodes]
         results = list(engine.run(tasks))
         (actor,) = engine._actors
         import ray
 
         built = ray.get(actor.scenes_built.remote())
+        on_ray = {(e.point, e.seed): e.row for e in engine.run(nav_tasks)}
     finally:
         engine.close()
-    assert len({p.spec.scene for p in plan.points}) == 1
+    assert len({p.spec.scene for p in small.points}) == 1
     assert len(results) == 6 and built == 1
+    runner = EpisodeRunner()
+    try:
+        here = {
+            (t.point, t.seed): runner.run(t.scenario_toml, t.point, t.seed).row for t in nav_tasks
+        }
+    finally:
+        runner.close()
+    assert sorted(on_ray) == sorted(here) == NAV_EPISODES
+    for key, row in here.items():
+        assert [k for k in row if k != "wall_s" and not same(row[k], on_ray[key][k])] == []
+    outcomes = {k: (r["nav__reached_goal"], r["nav__collided"]) for k, r in here.items()}
+    assert outcomes == {(0, 1): (True, False), (1, 2): (False, True)}
 
 
 def test_on_ray_an_episode_that_raises_or_kills_its_worker_costs_itself_only(

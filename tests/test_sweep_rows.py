@@ -18,9 +18,11 @@ import pytest
 from scenarios import pipeline
 from scenarios.scenario import schema
 from scenarios.sweep import episode, plots, summary
-from scenarios.sweep.plan import plan
+from scenarios.sweep.plan import SweepError, plan
 from scenarios.sweep.rows import (
     ESTIMATE_COLUMNS,
+    NAV_COLUMNS,
+    NAV_FLAGS,
     STATS,
     TABLES_VERSION,
     Episode,
@@ -28,10 +30,10 @@ from scenarios.sweep.rows import (
     method_column,
     row_columns,
 )
-from scenarios.sweep.store import estimates_table, results_table, table_metadata
+from scenarios.sweep.store import SweepStore, estimates_table, results_table, table_metadata
 from sim.world import SimulationError
 from vnav import metrics
-from vnav.methods import METHOD_NAMES
+from vnav.methods import METHOD_NAMES, METHODS
 
 
 def test_diverged_flight_is_a_row(monkeypatch):
@@ -390,3 +392,230 @@ def test_a_users_function_has_plain_columns(tmp_path, rng, figures):
     lines = {line.get_label(): line for ax in fig.axes for line in ax.lines}
     assert lines["user:ref median"].get_color() == plots.USER_COLORS[0] == "#000000"
     assert list(lines["user:ref median"].get_ydata()) == [1.5, 1.5, 1.5]
+
+
+# ------------------------------------------------------------------ a navigating flight
+# The avoid built-in swept over whose map the drone flies on (strings in the grid) and an
+# uncalibrated mount, with made-up outcomes (nothing runs): a seed's flight collides, reaches
+# the goal, or neither (out of time), and one episode diverges.
+NAV_SWEEP = {
+    "scenario": "avoid",
+    "seeds": 4,
+    "grid": {
+        "flight.estimate": ["depth_image", "naive"],
+        "noise.extrinsic_std_deg": [0.0, 2.0, 5.0],
+    },
+}
+
+
+def _nav_episodes(sweep, rng: np.random.Generator, diverged=(5, 3)) -> list[Episode]:
+    """``_episodes`` with a made-up flight outcome in each row; the episode ``diverged``
+    (point, seed) diverged, as ``run_episode`` writes such a row."""
+    out = _episodes(sweep, rng)
+    for e in out:
+        e.row = {k: v for k, v in e.row.items() if k not in ("simulated_s", "wall_s")}
+        outcome = rng.choice(["collided", "reached", "neither"], p=[0.4, 0.4, 0.2])
+        e.row.update(
+            nav__reached_goal=bool(outcome == "reached"),
+            nav__collided=bool(outcome == "collided"),
+            nav__min_clearance_m=-0.006 if outcome == "collided" else float(rng.uniform(0, 1)),
+            nav__time_to_goal_s=float(rng.uniform(9, 11)) if outcome == "reached" else math.nan,
+            nav__path_length_m=float(rng.uniform(5, 21)),
+            simulated_s=8.0,
+            wall_s=0.1,
+        )
+        if (e.point, e.seed) == diverged:
+            e.row.update(dict.fromkeys(NAV_FLAGS), status="diverged", passed=False)
+            e.row.update(dict.fromkeys(NAV_COLUMNS[2:], math.nan))
+        assert list(e.row) == row_columns(navigates=True)
+    return out
+
+
+def test_navigate_flights_keys_sweep_with_strings_and_vectors():
+    """Every key of a navigating flight sweeps as any other: a string choice, numbers and a
+    vector; each grid point's scenario has the values (read back from its parsed flight),
+    and the tables keep a string column as strings and a vector column as lists."""
+    sweep = plan(
+        {
+            "scenario": "avoid",
+            "grid": {
+                "flight.estimate": ["depth_image", "naive"],
+                "flight.clearance_m": [1.0, 1.5],
+                "flight.speed_mps": [1.5],
+                "flight.goal_w": [[20.0, 0.0, 0.5], [18.0, 2.0, 0.5]],
+            },
+        },
+        "s.toml",
+    )
+    assert len(sweep.points) == 8 and sweep.navigates
+    for p in sweep.points:
+        flight = p.spec.flight
+        assert flight.mode == "navigate"
+        assert flight.estimate == p.values["flight.estimate"]
+        assert flight.clearance_m == p.values["flight.clearance_m"]
+        assert flight.speed_mps == 1.5
+        assert list(flight.goal_w) == p.values["flight.goal_w"]
+    assert [p.values["flight.estimate"] for p in sweep.points] == ["depth_image"] * 4 + [
+        "naive"
+    ] * 4
+    episodes = [
+        Episode(p.index, 1, dict.fromkeys(row_columns(navigates=True), 0.0)) for p in sweep.points
+    ]
+    for e in episodes:
+        e.row.update(status="passed", passed=True, failed_checks=[], message="")
+        e.row.update(nav__reached_goal=True, nav__collided=False)
+        e.row.update({c: 0 for c in e.row if c.endswith("__count")})
+        e.row.update(dict.fromkeys(["camera_ticks", "detections", "matched_detections"], 0))
+        e.row.update(cones_in_view=0, cones_detected=0)
+    table = results_table(sweep, episodes)
+    assert table.schema.field("flight__estimate").type == pa.string()
+    assert table["flight__estimate"].to_pylist() == [
+        p.values["flight.estimate"] for p in sweep.points
+    ]
+    assert table["flight__goal_w"].to_pylist() == [p.values["flight.goal_w"] for p in sweep.points]
+    with pytest.raises(SweepError, match=r"flight.estimate: must be one of .*'naive'"):
+        plan({"scenario": "avoid", "grid": {"flight.estimate": ["nave"]}}, "s.toml")
+
+
+def test_navigation_columns_rates_and_plot(tmp_path, rng, figures):
+    """A navigating sweep's rows carry the flight's outcome (booleans, null where the flight
+    diverged); summary.json's collision and goal rates per grid point are the fractions
+    counted by hand from results.parquet (read back), over the episodes that did not diverge;
+    navigation_vs_<key>.png draws them, one line per value of the other key, in the methods'
+    colours."""
+    sweep = plan(NAV_SWEEP, "avoid-sweep.toml")
+    episodes = _nav_episodes(sweep, rng)
+    pq.write_table(results_table(sweep, episodes), tmp_path / "r.parquet")
+    table = pq.read_table(tmp_path / "r.parquet")
+    assert table.column_names[-7:] == [*NAV_COLUMNS, "simulated_s", "wall_s"]
+    for flag in NAV_FLAGS:
+        assert table.schema.field(flag).type == pa.bool_()
+    got = table.to_pylist()
+    (diverged,) = [r for r in got if r["status"] == "diverged"]
+    assert diverged["nav__collided"] is None and diverged["nav__reached_goal"] is None
+    assert math.isnan(diverged["nav__min_clearance_m"])
+
+    doc = summary.build(sweep, episodes, out_dir="d", point_files=["f"] * 6, complete=True)
+    assert [p["index"] for p in doc["points"]] == list(range(6))
+    for point in doc["points"]:
+        mine = [r for r in got if r["point"] == point["index"]]
+        flown = [r for r in mine if r["status"] != "diverged"]
+        collided = [r for r in flown if r["nav__collided"]]
+        reached = [r for r in flown if r["nav__reached_goal"]]
+        assert point["collision_rate"] == len(collided) / len(flown)
+        assert point["goal_rate"] == len(reached) / len(flown)
+        nav = point["navigation"]
+        assert (nav["flown"], nav["collided"], nav["reached_goal"]) == (
+            len(flown),
+            len(collided),
+            len(reached),
+        )
+        clearances = [r["nav__min_clearance_m"] for r in flown]
+        assert nav["min_clearance_m"]["min"] == min(clearances)
+        assert nav["min_clearance_m"]["median"] == np.median(clearances)
+        times = [r["nav__time_to_goal_s"] for r in reached]
+        assert nav["time_to_goal_s"]["median"] == (np.median(times) if times else None)
+    assert doc["points"][5]["navigation"]["flown"] == 3  # its seed 3 diverged
+    json.dumps(doc, allow_nan=False)  # summary.json holds no NaN
+
+    key = "noise.extrinsic_std_deg"
+    names = plots.plot_names(sweep)
+    assert f"navigation_vs_{key}.png" in names and "navigation_vs_flight.estimate.png" in names
+    png = plots.plot_png(sweep, episodes, f"navigation_vs_{key}.png")
+    assert png[:4] == b"\x89PNG"
+    (fig,) = figures
+    collision, goal = [ax for ax in fig.axes if ax.lines]
+    assert (collision.get_title(), goal.get_title()) == ("collision rate", "goal rate")
+    colors = {m.name: tuple(np.array(m.color_rgb) / 255.0) for m in METHODS}
+    for ax, rate in ((collision, "collision_rate"), (goal, "goal_rate")):
+        assert sorted(line.get_label() for line in ax.lines) == ["depth_image", "naive"]
+        for line in ax.lines:
+            assert tuple(line.get_color()) == colors[line.get_label()]
+            for x, y in zip(line.get_xdata(), line.get_ydata(), strict=True):
+                (point,) = [
+                    p
+                    for p in doc["points"]
+                    if p["values"] == {"flight.estimate": line.get_label(), key: x}
+                ]
+                assert y == point[rate]
+    (legend,) = fig.legends
+    assert legend.get_title().get_text() == "flight.estimate"
+    with pytest.raises(ValueError, match="no plot"):
+        plots.plot_png(sweep, episodes, "navigation_vs_nothing.png")
+
+
+def test_a_sweep_of_other_flights_has_no_navigation_columns(rng):
+    """A sweep whose flight does not navigate has the columns, summary entries and plots it
+    had before navigation existed."""
+    sweep = plan(README_SWEEP, "my-sweep.toml")
+    assert not sweep.navigates
+    episodes = _episodes(sweep, rng)
+    table = results_table(sweep, episodes)
+    assert table.column_names == ["point", "seed", *map(grid_column, sweep.keys), *row_columns()]
+    assert not any(c.startswith("nav__") for c in table.column_names)
+    doc = summary.build(sweep, episodes, out_dir="d", point_files=["f"] * 6, complete=True)
+    for point in doc["points"]:
+        assert not {"goal_rate", "collision_rate", "navigation"} & set(point)
+    assert not any(n.startswith("navigation_vs_") for n in plots.plot_names(sweep))
+
+
+def test_navigating_rows_round_trip_through_the_journal(tmp_path, rng):
+    """A navigating episode's row, diverged or not, is journalled and read back as it was
+    (``--resume``); a flag of the wrong type sets the entry aside."""
+    sweep = plan({**NAV_SWEEP, "seeds": 1, "grid": {"flight.estimate": ["naive"]}}, "s.toml")
+    (flown,) = _nav_episodes(sweep, rng, diverged=())
+    (diverged,) = _nav_episodes(sweep, rng, diverged=(0, 1))
+    store = SweepStore.open(tmp_path, sweep, resume=False)
+    store.begin()
+    store.add(flown)
+    again = SweepStore.open(tmp_path, sweep, resume=True)
+    held = again.episodes[0, 1].row
+    assert list(held) == list(flown.row)
+    assert all(
+        held[k] == v or (isinstance(v, float) and math.isnan(v) and math.isnan(held[k]))
+        for k, v in flown.row.items()
+    )
+    store.add(diverged)
+    again = SweepStore.open(tmp_path, sweep, resume=True)
+    assert again.episodes[0, 1].row["nav__collided"] is None and not again.bad_entries
+    entry = json.loads((tmp_path / "episodes" / "p0-s1.json").read_text())
+    entry["row"]["nav__collided"] = "no"
+    (tmp_path / "episodes" / "p0-s1.json").write_text(json.dumps(entry))
+    again = SweepStore.open(tmp_path, sweep, resume=True)
+    assert (
+        not again.episodes
+        and "row.nav__collided: str 'no', expected a boolean" in (again.bad_entries[0])
+    )
+
+
+def test_a_navigating_episodes_row_is_its_runs_outcome(monkeypatch):
+    """run_episode of avoid-naive (its flight ends at the contact, seconds in): the row's
+    outcome is the run's own navigation record (MuJoCo's contact and clearances); a flight
+    that diverges has a row with the outcome unknown."""
+    spec = plan({"scenario": "avoid-naive"}, "s.toml").points[0].spec
+    outcomes = []
+    run = pipeline.run
+
+    def run_and_keep(*args, **kwargs):
+        outcomes.append(run(*args, **kwargs))
+        return outcomes[-1]
+
+    monkeypatch.setattr(pipeline, "run", run_and_keep)
+    row = episode.run_episode(spec, 0, 1).row
+    nav = outcomes[0].result.navigation
+    assert list(row) == row_columns(navigates=True)
+    assert row["nav__collided"] is nav.collided is True
+    assert row["nav__reached_goal"] is nav.reached_goal is False
+    assert row["nav__min_clearance_m"] == pytest.approx(nav.min_clearance_m, abs=1e-9)
+    assert row["nav__min_clearance_m"] < 0.0  # in contact
+    assert row["nav__path_length_m"] == pytest.approx(nav.path_length_m, abs=1e-9)
+    assert math.isnan(row["nav__time_to_goal_s"])
+
+    def diverge(spec, **kwargs):
+        raise SimulationError("t = 0.7000 s: the state exploded")
+
+    monkeypatch.setattr(pipeline, "run", diverge)
+    row = episode.run_episode(spec, 0, 1).row
+    assert list(row) == row_columns(navigates=True) and row["status"] == "diverged"
+    assert row["nav__collided"] is None and row["nav__reached_goal"] is None
+    assert math.isnan(row["nav__min_clearance_m"])
