@@ -131,6 +131,7 @@ LONGEST_FIRST = (
     "builtin-runs",
     "tests/test_plugin_mistakes.py",
     "tests/test_readme.py::test_sweep_commands_run",
+    "tests/test_readme.py::test_avoid_sweep_shows_what_the_readme_says",
     "tests/test_sweep.py::test_resume_after_an_interruption_runs_only_the_missing_episodes",
     "tests/test_sweep.py::test_a_killed_worker_costs_no_episode",
     "tests/test_sweep.py::test_on_ray_an_episode_that_raises_or_kills_its_worker_costs_",

@@ -25,6 +25,7 @@ import urllib.request
 from pathlib import Path
 
 import numpy as np
+import pyarrow.parquet as pq
 import pytest
 from helpers import plugin_args
 
@@ -76,7 +77,7 @@ def test_every_block_of_the_readme_is_tested() -> None:
     assert languages == {"bash", "toml", "python"}
     kinds = {_kind(c) for c in COMMANDS}
     assert kinds == {"setup", "serve", "viewer", "run", "sweep", "example"}
-    assert len(_blocks("toml")) == 2  # a scenario, a sweep: each has its test
+    assert len(_blocks("toml")) == 3  # a scenario, two sweeps: each has its test
 
 
 def _shell(command: str, cwd: Path, timeout_s: float = 300.0) -> subprocess.CompletedProcess:
@@ -270,8 +271,13 @@ def _no_cache(directory: str, names: list[str]) -> list[str]:
 
 
 def _toml_block(kind: str) -> str:
-    """The README's scenario example (``kind="scenario"``) or sweep example (``"sweep"``)."""
-    (block,) = [b for b in _blocks("toml") if ("[grid]" in b) == (kind == "sweep")]
+    """The README's scenario example (``kind="scenario"``), or the sweep file it says to save
+    as ``kind`` (``"my-sweep.toml"``: the text after the block says ``Saved as `NAME```)."""
+    if kind == "scenario":
+        (block,) = [b for b in _blocks("toml") if "[grid]" not in b]
+        return block
+    saved = re.findall(r"```toml\n(.*?)```\s+Saved as `(\S+\.toml)`", README, re.S)
+    (block,) = [b for b, name in saved if name == kind and "[grid]" in b]
     return block
 
 
@@ -310,8 +316,8 @@ def test_sweep_commands_run(tmp_path: Path) -> None:
     """The README's sweep file saved as it says, then its sweep commands in order: the first
     runs every episode on Ray (exit 1: the noisy points fail, as the README says), the second
     finds nothing left to run and writes the same tables."""
-    (tmp_path / "my-sweep.toml").write_text(_toml_block("sweep"))
-    commands = [c for c in COMMANDS if _kind(c) == "sweep"]
+    (tmp_path / "my-sweep.toml").write_text(_toml_block("my-sweep.toml"))
+    commands = [c for c in COMMANDS if _kind(c) == "sweep" and " my-sweep.toml " in c]
     assert len(commands) == 2 and "--resume" in commands[1]
     outs = []
     for command in commands:
@@ -328,6 +334,45 @@ def test_sweep_commands_run(tmp_path: Path) -> None:
         assert point["pass_rate"] == (0.0 if noisy else 1.0)
         median = point["methods"]["depth_image"]["median_m"]["median"]
         assert (0.12 < median < 0.2) if noisy else (median < 0.03)  # "about 2 cm to 16 cm"
+
+
+def test_avoid_sweep_shows_what_the_readme_says(tmp_path: Path) -> None:
+    """The README's sweep of a navigating flight, saved as it says and run by its command: it
+    exits 1, prints each grid point's collision and goal counts as the README quotes them, and
+    writes the rates' plot it names; summary.json's rates are those counts."""
+    (tmp_path / "avoid-sweep.toml").write_text(_toml_block("avoid-sweep.toml"))
+    (command,) = [c for c in COMMANDS if _kind(c) == "sweep" and " avoid-sweep.toml " in c]
+    proc = _shell(command, tmp_path, timeout_s=600.0)
+    assert proc.returncode == 1, f"{command}\n{proc.stdout}\n{proc.stderr}"
+    assert proc.stderr == "", proc.stderr
+    said = " ".join(README.split())
+    quoted = re.search(r"prints, per grid point, `([^`]+)` for `depth_image` with the true", said)
+    assert quoted and quoted[1] in " ".join(proc.stdout.split())
+    out = tmp_path / re.search(r"--out (\S+)", command)[1]
+    summary = json.loads((out / "summary.json").read_text())
+    rates = {
+        (p["values"]["flight.estimate"], p["values"]["noise.extrinsic_std_deg"]): (
+            p["navigation"]["collided"],
+            p["navigation"]["reached_goal"],
+            p["navigation"]["flown"],
+        )
+        for p in summary["points"]
+    }
+    # "one of its 3 flights touches the cone"; "the naive map ... flies into it every time"
+    assert rates == {
+        ("depth_image", 0.0): (0, 3, 3),
+        ("depth_image", 5.0): (1, 2, 3),
+        ("naive", 0.0): (3, 0, 3),
+        ("naive", 5.0): (3, 0, 3),
+    }
+    assert "one of its 3 flights touches the cone (seed 2:" in said
+    touched = pq.read_table(out / "results.parquet").to_pylist()
+    assert [r["seed"] for r in touched if r["point"] == 1 and r["nav__collided"]] == [2]
+    for p in summary["points"]:
+        collided, reached, flown = p["navigation"]["collided"], p["navigation"]["reached_goal"], 3
+        assert (p["collision_rate"], p["goal_rate"]) == (collided / flown, reached / flown)
+    plot = re.search(r"`plots/(navigation_vs_\S+\.png)` draws the two rates", said)[1]
+    assert (out / "plots" / plot).read_bytes()[:4] == b"\x89PNG"
 
 
 # --------------------------------------------------------------- the Python example
