@@ -174,8 +174,9 @@ def _add_sweep_parser(sub) -> None:
         description="Run a scenario over every combination of the sweep file's grid values, "
         "each with every seed, on Ray workers (or in this process with --workers 0). Writes "
         "DIR/results.parquet (one row per episode), DIR/estimates.parquet (one row per "
-        "estimate), DIR/summary.json (per grid point: statistics across seeds, pass rate, the "
-        "worst seed and the command that replays it) and DIR/plots/*.png. An interrupted sweep "
+        "estimate), DIR/summary.json (per grid point: statistics across seeds, pass rate, a "
+        "navigating flight's collision and goal rates, the worst seed and the command that "
+        "replays it) and DIR/plots/*.png. An interrupted sweep "
         "keeps its finished episodes; --resume runs the rest. Needs the sweep extra: "
         "pip install 'vnav-sim[sweep]'. Exit status 0 if every episode passed, 1 if one "
         "failed or diverged, 2 for bad input, 3 if one could not run, 128+N on signal N.",
