@@ -648,7 +648,7 @@ def navigation_vs_key_figure(plan: SweepPlan, episodes: list[Episode], key: str)
             loc="upper left",
             bbox_to_anchor=(x1 + 0.1 / fig.get_figwidth(), y1),
             fontsize=8,
-            title="\n".join(others),
+            title=", ".join(others),
             title_fontsize=8,
             alignment="left",
             frameon=False,
