@@ -7,7 +7,7 @@ scenario is run, judged and written the same way everywhere::
     calibrate  scenarios.judge.calibration.calibrate_run  (only if a check asks for it; then
                the run's images estimated again with the recovered mount)
     judge      scenarios.judge.checks.judge             (the spec's checks, else the default ones;
-               and each user function's bound, ``vnav.plugin``)
+               and each user function's, ``check_kinds.user_checks``)
     finish     scenarios.record.recording.Recording.finish  (with the verdicts and calibration)
     report     scenarios.judge.report.build              (JSON)
     commit     scenarios.record.outputs.OutputPair.commit  (both files in place, or neither)
