@@ -455,6 +455,7 @@ def _chain_run(user: str, offsets_m: list[float], ranges_m: list[float]) -> RunR
         (0.02, 2.0, 0.02 / 0.05, True, "worst 0.02 m"),
         (0.2, 2.0, 0.2 / 0.05, False, "worst 0.2 m"),
     ],
+    ids=["2cm-at-10m", "20cm-at-10m", "2cm-at-2m", "20cm-at-2m"],
 )
 def test_chain_agreement_of_a_function_off_the_chain(
     offset_m, range_m, figure, passed, worst
