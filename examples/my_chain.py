@@ -6,7 +6,7 @@ it with vnav-sim rather than by reading (README.md, "Check your own frame chain"
     .venv/bin/vnav-demo run frame-problem --estimator examples/my_chain.py:my_estimate
     .venv/bin/python -m pytest examples/
 
-The run fails its check and the frame-bug doctor names the mistake and the chapter; fix it
+The run fails its checks and the frame-bug doctor names the mistake and the chapter; fix it
 here, and ``pytest examples/`` passes.
 """
 

@@ -145,7 +145,8 @@ def _add_run_parser(sub) -> None:
         default=None,
         metavar="SPEC",
         help="also run your function fn(obs) -> p_w at every detection, as method "
-        "user:<function>, judged with depth_image's bound; SPEC is package.module:function or "
+        "user:<function>, judged within depth_image's bound of the correct chain (and of the "
+        "truth where depth_image is held to it); SPEC is package.module:function or "
         "path/to/file.py:function (repeatable; docs/CONVENTIONS.md, 'Your own estimator')",
     )
     p.add_argument(

@@ -7,7 +7,7 @@ scenario is run, judged and written the same way everywhere::
     calibrate  scenarios.judge.calibration.calibrate_run  (only if a check asks for it; then
                the run's images estimated again with the recovered mount)
     judge      scenarios.judge.checks.judge             (the spec's checks, else the default ones;
-               and each user function's bound, ``vnav.plugin``)
+               and each user function's, ``check_kinds.user_checks``)
     finish     scenarios.record.recording.Recording.finish  (with the verdicts and calibration)
     report     scenarios.judge.report.build              (JSON)
     commit     scenarios.record.outputs.OutputPair.commit  (both files in place, or neither)
@@ -159,10 +159,11 @@ def _calibrate_and_judge(spec: ScenarioSpec, result: RunResult) -> list[checks.C
 
 def judge(spec: ScenarioSpec, result: RunResult) -> list[checks.CheckResult]:
     """Every check of ``spec`` (or ``check_kinds.default_checks()``) on ``result``, then each
-    active user function's bound (``check_kinds.user_checks``): what ``run`` judges, for a run
-    already calibrated if its checks ask for it."""
+    active user function's (``check_kinds.user_checks``: its agreement with the correct chain,
+    and the truth's bound where the scenario holds ``depth_image`` to it): what ``run``
+    judges, for a run already calibrated if its checks ask for it."""
     own = spec.checks or check_kinds.default_checks()
-    return [checks.judge(c, result) for c in (*own, *check_kinds.user_checks())]
+    return [checks.judge(c, result) for c in (*own, *check_kinds.user_checks(spec.checks))]
 
 
 class _Clock:

@@ -23,7 +23,8 @@ from scenarios.scenario import builtin, check_kinds
 from scenarios.scenario.spec import from_dict
 from vnav.detect import ConeDetection
 from vnav.estimators import NoEstimate, known_height_max_elevation_rad
-from vnav.methods import METHODS
+from vnav.methods import METHODS, extended
+from vnav.plugin import function_method, reference_estimate
 
 
 @pytest.mark.parametrize("kind", sorted(check_kinds.KINDS))
@@ -170,6 +171,10 @@ FIGURES = {
     "median_error": 0.03,  # of 0.02, 0.03, 0.5
     # max(0.02 / max(5 cm, 1% of 2 m), 0.03 / max(5 cm, 1% of 10 m)): in the contract only
     "error_bound": 0.4,
+    # naive (``METHOD_OF``) against depth_image on the same detection, over depth_image's
+    # bound there: cone 0 at 3 m apart at 2 m range (bound 5 cm), 4.98 m apart at 10 m (bound
+    # 10 cm); max(60, 49.8). Cone 1 has no naive estimate, the unmatched detection no range.
+    "chain_agreement": 3.0 / 0.05,
     "detection_rate": 0.75,  # cone 0 in tick 0; cones 0 and 1 in tick 1; of 2 + 2 in view
     "world_estimate_spread": 0.01,  # cone 0 at x = 1.0 and 1.02 (cone 1 seen once)
     "camera_coords_span": 1.0,  # cone 0's p_c moved 1 m in y
@@ -196,6 +201,11 @@ FIGURES = {
 }
 
 
+METHOD_OF = {"chain_agreement": "naive"}
+"""The method a kind's figure is computed for, where the default (depth_image) would judge
+nothing: depth_image agrees with itself."""
+
+
 def test_every_kind_has_a_figure_by_hand() -> None:
     assert set(FIGURES) == set(check_kinds.KINDS)
 
@@ -203,14 +213,18 @@ def test_every_kind_has_a_figure_by_hand() -> None:
 @pytest.mark.parametrize("kind", sorted(FIGURES))
 def test_figure_and_verdict(run: RunResult, kind: str) -> None:
     figure = FIGURES[kind]
-    result = checks.judge(check_kinds.Check(kind, figure), run)
+
+    def check(limit: float) -> check_kinds.Check:
+        return check_kinds.Check(kind, limit, METHOD_OF.get(kind, "depth_image"))
+
+    result = checks.judge(check(figure), run)
     assert result.value == pytest.approx(figure, rel=1e-12)
-    assert checks.judge(check_kinds.Check(kind, result.value), run).passed  # at the limit: passes
+    assert checks.judge(check(result.value), run).passed  # at the limit: passes
     le = check_kinds.KINDS[kind].at_most
     stricter = figure * (0.99 if le else 1.01)
-    assert not checks.judge(check_kinds.Check(kind, stricter), run).passed
+    assert not checks.judge(check(stricter), run).passed
     looser = figure * (1.01 if le else 0.99)
-    assert checks.judge(check_kinds.Check(kind, looser), run).passed
+    assert checks.judge(check(looser), run).passed
 
 
 def test_a_check_with_nothing_to_judge_has_no_data_and_fails(run: RunResult) -> None:
@@ -407,3 +421,141 @@ def test_calibration_checks_without_a_calibration_have_no_data() -> None:
         ),
     ).shown
     assert shown == "0.5 ms (must be <= 1 ms)"
+
+
+# ------------------------------------------------------- a user's function and the chain
+
+
+def _user_method(name: str):
+    """A user's method ``user:<name>`` (``vnav.plugin``) whose function is never called: the
+    records below hold its estimates already."""
+    return function_method(reference_estimate, f"tests:{name}", name)
+
+
+def _chain_run(user: str, offsets_m: list[float], ranges_m: list[float]) -> RunResult:
+    """One matched detection per tick at each range: depth_image's estimate 1 cm from the
+    cone, the user's that estimate moved by the offset (perpendicular to the first)."""
+    ticks = []
+    for k, (offset_m, range_m) in enumerate(zip(offsets_m, ranges_m, strict=True)):
+        p_w_depth = np.array([range_m, 0.0, 0.01])  # the cone at (range_m, 0, 0)
+        p_w_user = p_w_depth + np.array([0.0, offset_m, 0.0])
+        errors = {"depth_image": 0.01, user: float(np.hypot(0.01, offset_m))}
+        estimates = {"depth_image": p_w_depth, user: p_w_user}
+        ticks.append(_tick(k, [0], [_detection(0, errors, range_m, True, estimates, None)]))
+    return RunResult(spec=None, seed=0, ticks=ticks)
+
+
+@pytest.mark.parametrize(
+    ("offset_m", "range_m", "figure", "passed", "worst"),
+    [
+        # depth_image's bound, max(5 cm, 1% of range): 10 cm at 10 m, where the distance is
+        # shown in % of range; the 5 cm floor at 2 m, where it is shown in metres.
+        (0.02, 10.0, 0.02 / 0.1, True, "worst 0.2% of range"),
+        (0.2, 10.0, 0.2 / 0.1, False, "worst 2% of range"),
+        (0.02, 2.0, 0.02 / 0.05, True, "worst 0.02 m"),
+        (0.2, 2.0, 0.2 / 0.05, False, "worst 0.2 m"),
+    ],
+    ids=["2cm-at-10m", "20cm-at-10m", "2cm-at-2m", "20cm-at-2m"],
+)
+def test_chain_agreement_of_a_function_off_the_chain(
+    offset_m, range_m, figure, passed, worst
+) -> None:
+    """A function adding 2 cm to the correct chain's estimate is within depth_image's bound
+    of it at 10 m (10 cm) and at 2 m (the 5 cm floor); one adding 20 cm is not."""
+    user = _user_method("shifted")
+    with extended([user]):
+        check = next(c for c in check_kinds.user_checks() if c.kind == "chain_agreement")
+        result = checks.judge(check, _chain_run(user.name, [offset_m], [range_m]))
+    assert result.value == pytest.approx(figure, rel=1e-12)
+    assert result.passed is passed
+    assert result.name == (
+        "user:shifted every estimate within max(5 cm, 1% of range) of the correct chain's"
+    )
+    assert result.shown.startswith(f"{worst} from depth_image's estimate (must be <= ")
+
+
+def test_chain_agreement_is_the_worst_ratio_over_every_matched_detection() -> None:
+    """Over the detections, in the contract's domain or not: the largest distance over the
+    bound at its range, by hand."""
+    user = _user_method("mixed")
+    run = _chain_run(user.name, [0.04, 0.09, 0.3], [3.0, 12.0, 40.0])
+    ticks = [*run.ticks[:2], dataclasses.replace(run.ticks[2])]
+    outside = dataclasses.replace(ticks[2].detections[0], in_contract=False)  # 40 m: beyond it
+    ticks[2] = dataclasses.replace(ticks[2], detections=[outside])
+    run = RunResult(spec=None, seed=0, ticks=ticks)
+    with extended([user]):
+        result = checks.judge(check_kinds.Check("chain_agreement", 1.0, user.name), run)
+    assert result.value == pytest.approx(max(0.04 / 0.05, 0.09 / 0.12, 0.3 / 0.4), rel=1e-12)
+    assert result.passed  # 0.8, 0.75, 0.75 of the bound
+    assert (
+        result.shown
+        == "worst 80% of the bound from depth_image's estimate (must be <= 100% of the bound)"
+    )
+
+
+def test_chain_agreement_of_a_function_that_failed_or_gave_nothing() -> None:
+    """A function that failed on a detection agrees with nothing (infinite, failed); one that
+    gave no estimate anywhere leaves nothing to judge (no data, which fails the run)."""
+    user = _user_method("broken")
+    run = _chain_run(user.name, [0.0, 0.0], [10.0, 10.0])
+    failed = dataclasses.replace(
+        run.ticks[1].detections[0],
+        estimates_w={"depth_image": run.ticks[1].detections[0].estimates_w["depth_image"]},
+        errors_m={"depth_image": 0.01},
+        no_estimate={user.name: NoEstimate.FUNCTION_ERROR},
+    )
+    broken = RunResult(
+        spec=None,
+        seed=0,
+        ticks=[run.ticks[0], dataclasses.replace(run.ticks[1], detections=[failed])],
+    )
+    none = RunResult(
+        spec=None,
+        seed=0,
+        ticks=[
+            dataclasses.replace(
+                t,
+                detections=[
+                    dataclasses.replace(
+                        d,
+                        estimates_w={"depth_image": d.estimates_w["depth_image"]},
+                        errors_m={"depth_image": 0.01},
+                        no_estimate={user.name: NoEstimate.FUNCTION_NONE},
+                    )
+                    for d in t.detections
+                ],
+            )
+            for t in run.ticks
+        ],
+    )
+    with extended([user]):
+        check = check_kinds.Check("chain_agreement", 1.0, user.name, default=True)
+        result = checks.judge(check, broken)
+        assert result.value == math.inf and result.outcome is checks.Outcome.FAILED
+        assert result.shown.startswith("the function failed on 1 of 2 detections")
+        result = checks.judge(check, none)
+    assert result.outcome is checks.Outcome.NO_DATA and result.outcome.fails_run
+
+
+def test_a_users_checks_follow_what_the_scenario_holds_depth_image_to() -> None:
+    """The chain always; the truth's bound, with depth_image's limit, only where the scenario
+    holds depth_image to it (its own error_bound, or the default checks)."""
+    user = _user_method("mine")
+
+    def kinds(own: tuple[check_kinds.Check, ...]) -> list[tuple[str, float]]:
+        with extended([user]):
+            out = check_kinds.user_checks(own)
+        assert all(c.method == user.name and c.default for c in out)
+        return [(c.kind, c.limit) for c in out]
+
+    both = [("chain_agreement", 1.0), ("error_bound", 1.0)]
+    assert kinds(()) == both  # the default checks hold depth_image to its bound
+    assert kinds(builtin.load("frame-problem").checks) == both
+    assert kinds(builtin.load("uncertainty").checks) == [("chain_agreement", 1.0)]
+    assert kinds(builtin.load("calibration").checks) == [("chain_agreement", 1.0)]
+    looser = (
+        check_kinds.Check("error_bound", 2.0, "depth_image"),
+        check_kinds.Check("error_bound", 1.0, "ground_plane"),
+    )
+    assert kinds(looser) == [("chain_agreement", 1.0), ("error_bound", 2.0)]
+    assert check_kinds.user_checks(()) == ()  # no user's function, no check

@@ -146,6 +146,11 @@ def test_the_reference_as_a_users_function_gives_depth_images_numbers(serial):
         bound = "every error <= max(5 cm, 1% of range)"  # depth_image's, judging both
         failed = r["failed_checks"]
         assert (f"user:ref {bound}" in failed) == (f"depth_image {bound}" in failed)
+        # Noisy or not, it is the correct chain on its inputs.
+        assert (
+            "user:ref every estimate within max(5 cm, 1% of range) of the correct chain's"
+            not in failed
+        )
     estimates = pq.read_table(serial / "estimates.parquet").to_pylist()
     by = {"depth_image": {}, "user:ref": {}}
     for e in estimates:
@@ -995,6 +1000,8 @@ def test_a_raising_function_fails_and_resume_refuses_its_changed_file(tmp_path):
         assert r["user_raises__failures"] == r["detections"] > 0
         assert r["user_raises__count"] == 0 and math.isnan(r["user_raises__median_m"])
         assert "user:raises every error <= max(5 cm, 1% of range)" in r["failed_checks"]
+        chain = "user:raises every estimate within max(5 cm, 1% of range) of the correct chain's"
+        assert chain in r["failed_checks"]
     failed = sum(r["user_raises__failures"] for r in got if r["point"] == 0)
     assert f"user:raises no estimate, failed on {failed} detections" in proc.stdout
     (tmp_path / "est" / "funcs.py").write_text(USER_FUNCTIONS.replace("yet", "yet!"))

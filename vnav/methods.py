@@ -95,11 +95,16 @@ class AccuracyBound:
         return np.maximum(self.floor_m, self.fraction_of_range * np.asarray(range_m))
 
     @property
+    def allowed_text(self) -> str:
+        """The allowed error in words, e.g. ``max(5 cm, 1% of range)``."""
+        percent = f"{100.0 * self.fraction_of_range:g}% of range"
+        return f"max({100.0 * self.floor_m:g} cm, {percent})" if self.floor_m > 0.0 else percent
+
+    @property
     def text(self) -> str:
         """The bound in words, e.g. ``every error <= max(5 cm, 1% of range)``."""
-        percent = f"{100.0 * self.fraction_of_range:g}% of range"
-        allowed = f"max({100.0 * self.floor_m:g} cm, {percent})" if self.floor_m > 0.0 else percent
-        return f"{'every error' if self.statistic == 'max' else 'median'} <= {allowed}"
+        statistic = "every error" if self.statistic == "max" else "median"
+        return f"{statistic} <= {self.allowed_text}"
 
 
 @dataclass(frozen=True)

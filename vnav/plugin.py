@@ -9,8 +9,9 @@ lecture's chain (MIT 16.485 VNAV, lecture 1, chapter 0)::
 
 (``reference_estimate``). ``load_estimator`` finds a function from a spec,
 ``package.module:function`` or ``path/to/file.py:function``; ``plugin_method`` makes it a
-``vnav.methods.Method`` named ``user:function``, judged with the ``depth_image`` accuracy
-bound, which a run adds to the built-ins with ``vnav.methods.extended``. A function that
+``vnav.methods.Method`` named ``user:function`` with the ``depth_image`` accuracy bound,
+which a run adds to the built-ins with ``vnav.methods.extended`` (and judges against the
+correct chain on the same inputs, ``scenarios.scenario.check_kinds.user_checks``). A function that
 raises, returns something other than a finite array of shape (3,), never stops the run: each
 failure is tallied by kind (``Failures``) and the detection gets no estimate
 (``NoEstimate.FUNCTION_ERROR``). Each call is timed (``CallTimes``); with a time limit

@@ -31,7 +31,7 @@ import numpy as np
 
 from scenarios import pipeline
 from scenarios.judge import report
-from scenarios.judge.checks import CheckResult
+from scenarios.judge.checks import CHAIN, CheckResult
 from scenarios.run.evaluate import with_method
 from scenarios.run.records import RunResult, TickRecord
 from scenarios.run.runner import run_scenario
@@ -182,7 +182,8 @@ def store_run(spec: ScenarioSpec, seed: int) -> StoredRun:
 
 @dataclass(frozen=True)
 class ErrorAt:
-    """The function's estimate of one matched detection against the truth.
+    """The function's estimate of one matched detection, against the truth and against the
+    correct chain on the inputs the function was given.
 
     Attributes
     ----------
@@ -199,7 +200,12 @@ class ErrorAt:
     allowed_m : float
         The accuracy bound at that range (``depth_image``'s, ``vnav.methods``), metres.
     in_contract : bool
-        Whether the detection is in the contract's domain, where the bound is judged.
+        Whether the detection is in the contract's domain, where the bound is judged against
+        the truth.
+    chain_m : float
+        Distance of the estimate from the correct chain's on the same inputs (the
+        ``depth_image`` estimate, ``vnav.plugin.reference_estimate``), metres: what the
+        ``chain_agreement`` check judges, at every matched detection.
     """
 
     tick: int
@@ -209,11 +215,17 @@ class ErrorAt:
     range_m: float
     allowed_m: float
     in_contract: bool
+    chain_m: float
 
     @property
     def ratio(self) -> float:
         """The error over the bound (1: at the bound)."""
         return self.error_m / self.allowed_m
+
+    @property
+    def chain_ratio(self) -> float:
+        """The distance from the correct chain's estimate over the bound (1: at the bound)."""
+        return self.chain_m / self.allowed_m
 
 
 @dataclass(frozen=True)
@@ -250,8 +262,8 @@ class Verdict:
     passed : bool
         Whether every check passed (the run's exit status 0).
     checks : tuple of CheckResult
-        Every check, the scenario's then the function's bound (``CheckResult.shown`` gives the
-        figure against its limit).
+        Every check, the scenario's then the function's own (``own_checks``;
+        ``CheckResult.shown`` gives the figure against its limit).
     errors : tuple of ErrorAt
         The function's estimate at each matched detection, in the run's order.
     calls, returned_none : int
@@ -279,9 +291,21 @@ class Verdict:
     report: dict[str, Any] = field(repr=False, compare=False)
 
     @property
+    def own_checks(self) -> tuple[CheckResult, ...]:
+        """The function's own checks (``scenarios.scenario.check_kinds.user_checks``): its
+        agreement with the correct chain (``chain_agreement``), then, where the scenario holds
+        ``depth_image`` to it, the accuracy bound against the truth (``error_bound``)."""
+        return tuple(c for c in self.checks if c.name.startswith(f"{self.function} "))
+
+    @property
     def check(self) -> CheckResult:
-        """The function's own check: its bound."""
-        return next(c for c in self.checks if c.name.startswith(f"{self.function} "))
+        """The function's check every scenario has: its agreement with the correct chain."""
+        return next(c for c in self.own_checks if c.kind == "chain_agreement")
+
+    @property
+    def farthest_from_chain(self) -> ErrorAt | None:
+        """The estimate farthest from the correct chain's for its bound; None without any."""
+        return max(self.errors, key=lambda e: e.chain_ratio, default=None)
 
     @property
     def max_error_m(self) -> float | None:
@@ -298,21 +322,31 @@ class Verdict:
         return max(self.errors, key=lambda e: e.error_m, default=None)
 
     def explain(self) -> str:
-        """What a student needs: the checks that failed and by how much, the worst error and
-        when, what the frame-bug doctor found, how the function failed."""
+        """What a student needs: the checks that failed and by how much, the estimate farthest
+        from the correct chain and the worst error and when, what the frame-bug doctor found,
+        how the function failed."""
         status = "PASSED" if self.passed else "FAILED"
         lines = [
             f"{self.function} on {self.scenario} (seed {self.seed}, {self.duration_s:g} s): "
             f"{status}"
         ]
         lines += [_check_line(c, c.name.startswith(f"{self.function} ")) for c in self.checks]
-        worst = self.worst
-        if worst is not None:
+        worst, farthest = self.worst, self.farthest_from_chain
+        if worst is not None and farthest is not None:
             lines.append(
-                f"worst error: {_m(worst.error_m)} at t = {worst.t_s:.3f} s (tick {worst.tick}, "
-                f"cone {worst.cone}, range {_m(worst.range_m)}), bound {_m(worst.allowed_m)}: "
-                f"{worst.ratio:.3g}x the bound"
+                f"farthest from the correct chain: {_m(farthest.chain_m)} at t = "
+                f"{farthest.t_s:.3f} s ({_where(farthest)}): {farthest.chain_ratio:.3g}x the bound"
+            )
+            judged = any(c.kind == "error_bound" for c in self.own_checks)
+            lines.append(
+                f"worst error against the truth: {_m(worst.error_m)} at t = {worst.t_s:.3f} s "
+                f"({_where(worst)}): {worst.ratio:.3g}x the bound"
                 + ("" if worst.in_contract else " (outside the contract's domain)")
+                + (
+                    ""
+                    if judged
+                    else " (not a check here: the scenario does not hold depth_image to it)"
+                )
             )
             lines.append(
                 f"  {len(self.errors)} estimates of matched cones, "
@@ -344,6 +378,10 @@ class Verdict:
 
 def _m(x: float) -> str:
     return f"{x:.3g} m"
+
+
+def _where(e: ErrorAt) -> str:
+    return f"tick {e.tick}, cone {e.cone}, range {_m(e.range_m)}, bound {_m(e.allowed_m)}"
 
 
 def _check_line(c: CheckResult, yours: bool) -> str:
@@ -415,6 +453,7 @@ def _verdict(
             d.range_m,
             float(bound.allowed_m(d.range_m)),
             d.in_contract,
+            float(np.linalg.norm(d.estimates_w[user.name] - d.estimates_w[CHAIN])),
         )
         for t, given_t in zip(result.ticks, stored.given, strict=True)
         for d, g in zip(t.detections, given_t, strict=True)
@@ -474,7 +513,7 @@ def scenario_spec(scenario: str | Path, duration_s: float | None = None) -> Scen
 
 def judged_builtins() -> list[str]:
     """The built-ins a user's function can be judged on, in teaching order: those with a cone
-    to detect (a run adds the function's bound to any scenario's checks,
+    to detect (a run adds the function's checks to any scenario's,
     ``check_kinds.user_checks``). Read from the specs; nothing is run."""
     return [name for name in builtin.names() if builtin.load(name).scene.cones_w]
 

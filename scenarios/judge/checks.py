@@ -212,15 +212,14 @@ def _function_failures(run: RunResult, method_name: str) -> int:
 
 
 def _shown_bound(check: Check, value: float, op: str, run: RunResult) -> str:
-    """An ``error_bound`` figure (error / bound) in the bound's own unit where it has one.
+    """An ``error_bound`` or ``chain_agreement`` figure (distance / bound) in the bound's own
+    unit where it has one.
 
     The bound is ``max(floor, fraction x range)``: where every judged detection lies beyond
     the crossover range (``floor / fraction``) it is ``fraction x range`` and the figure is the
     error in % of range; where every one lies within, it is the floor and the figure is the
     error in metres; for a mix, the error in % of the bound.
     """
-    bound = method(check.method).bound
-    assert bound is not None  # the parser refuses error_bound on a method without one
     failed = _function_failures(run, check.method)
     if failed:
         stopped = sum(
@@ -231,8 +230,15 @@ def _shown_bound(check: Check, value: float, op: str, run: RunResult) -> str:
             f"the function failed on {failed} of {len(_detections(run))} detections{after} "
             "(the report's estimators say where and how)"
         )
-    statistic = "worst" if bound.statistic == "max" else "median"
-    ranges_m = run.ranges_for(check.method, contract_only=True)
+    chain = check.kind == "chain_agreement"
+    bound = method(CHAIN if chain else check.method).bound
+    assert bound is not None  # the parser refuses error_bound on a method without one
+    if chain:  # every distance, over every matched detection
+        statistic, ranges_m = "worst", _chain_distances(run, check.method)[1]
+        what = f" from {CHAIN}'s estimate"
+    else:
+        statistic = "worst" if bound.statistic == "max" else "median"
+        ranges_m, what = run.ranges_for(check.method, contract_only=True), ""
     if bound.fraction_of_range > 0.0 and np.all(
         bound.fraction_of_range * ranges_m >= bound.floor_m
     ):
@@ -242,7 +248,7 @@ def _shown_bound(check: Check, value: float, op: str, run: RunResult) -> str:
     else:
         scale, unit = 100.0, "% of the bound"
     return (
-        f"{statistic} {_number(value * scale)}{unit} "
+        f"{statistic} {_number(value * scale)}{unit}{what} "
         f"(must be {op} {_number(check.limit * scale)}{unit})"
     )
 
@@ -349,6 +355,43 @@ def _error_bound(run: RunResult, check: Check) -> float | NoData:
         return _no_estimates(run, check.method, contract_only=True)
     ratio = errors / bound.allowed_m(run.ranges_for(check.method, contract_only=True))
     return _max(ratio) if bound.statistic == "max" else _median(ratio)
+
+
+CHAIN = "depth_image"
+"""The method whose estimate is the correct chain's on the inputs a user's function is given
+(``vnav.plugin.PluginObservation``: its ``p_c`` is this estimate in the camera frame)."""
+
+
+def _chain_distances(run: RunResult, method_name: str) -> tuple[np.ndarray, np.ndarray]:
+    """Over the matched detections with estimates by both ``method_name`` and ``CHAIN``: the
+    distance between the two, and the range, metres, shapes (K,) and (K,)."""
+    pairs = [
+        (float(np.linalg.norm(d.estimates_w[method_name] - d.estimates_w[CHAIN])), d.range_m)
+        for d in _detections(run)
+        if d.range_m is not None and method_name in d.estimates_w and CHAIN in d.estimates_w
+    ]
+    a = np.array(pairs, dtype=np.float64).reshape(-1, 2)
+    return a[:, 0], a[:, 1]
+
+
+@figure("chain_agreement")
+def _chain_agreement(run: RunResult, check: Check) -> float | NoData:
+    """largest distance of ``method``'s estimate from depth_image's / depth_image's bound <= limit
+
+    Each distance over depth_image's bound at that detection's range (docs/ACCURACY.md), over
+    every matched detection (in the contract's domain or not) where both gave one. A
+    user's function (``vnav.plugin``) is given depth_image's estimate in the camera frame with
+    the estimator's pose and mount, so the correct chain gives depth_image's estimate back
+    (to about 1e-15 m) whatever the sensors' noise or the mount's error: this judges the
+    function's frame chain on the inputs it was given, not the inputs."""
+    bound = method(CHAIN).bound
+    assert bound is not None  # the perception contract bounds depth_image
+    if _function_failures(run, check.method):
+        return math.inf  # a user's function that failed agrees with nothing
+    distances_m, ranges_m = _chain_distances(run, check.method)
+    if not distances_m.size:
+        return _no_estimates(run, check.method, contract_only=False)
+    return _max(distances_m / bound.allowed_m(ranges_m))
 
 
 @figure("consistent")

@@ -114,6 +114,14 @@ KINDS: dict[str, CheckKind] = _kinds(
         "error / accuracy bound of ``method`` (worst or median, as the bound says) <= limit",
     ),
     CheckKind(
+        "chain_agreement",
+        _AT_MOST,
+        Unit.BOUND,
+        True,
+        "largest distance of ``method``'s estimate from depth_image's / depth_image's "
+        "bound <= limit",
+    ),
+    CheckKind(
         "consistent",
         _AT_LEAST,
         Unit.FRACTION,
@@ -278,11 +286,40 @@ def default_checks() -> tuple[Check, ...]:
     )
 
 
-def user_checks() -> tuple[Check, ...]:
-    """The bound of each user function the run judges (``vnav.plugin``, within
-    ``vnav.methods.extended``): ``depth_image``'s, a ``default`` check like the built-ins'."""
-    return tuple(
-        Check("error_bound", 1.0, m.name, f"{m.name} {m.promise}", default=True)
-        for m in active_methods()
-        if m.images == "user"
-    )
+def user_checks(own: tuple[Check, ...] = ()) -> tuple[Check, ...]:
+    """The checks of each user function the run judges (``vnav.plugin``, within
+    ``vnav.methods.extended``), for a scenario whose own checks are ``own`` (empty: the
+    default ones, ``default_checks``).
+
+    A user's function is given the ``depth_image`` estimate in the camera frame, with the
+    estimator's pose and mount: the correct chain on those inputs gives that estimate back. So
+    it is held, always, to agree with it within ``depth_image``'s accuracy bound at each range
+    (``chain_agreement``, limit 1: its frame chain, on the inputs it was given); and to that
+    bound against the truth (``error_bound``) only where ``depth_image`` itself is held to it,
+    with the same limit (the tightest if several): where the inputs are off (pose noise, a
+    declared mount that is wrong) and the scenario does not hold ``depth_image`` to its bound,
+    the function is not held to it either. Both are ``default`` checks, as the built-ins'.
+    """
+    held = [
+        c.limit
+        for c in (own or default_checks())
+        if c.kind == "error_bound" and c.method == "depth_image"
+    ]
+    out: list[Check] = []
+    for m in active_methods():
+        if m.images != "user" or m.bound is None:
+            continue
+        out.append(
+            Check(
+                "chain_agreement",
+                1.0,
+                m.name,
+                f"{m.name} every estimate within {m.bound.allowed_text} of the correct chain's",
+                default=True,
+            )
+        )
+        if held:
+            out.append(
+                Check("error_bound", min(held), m.name, f"{m.name} {m.promise}", default=True)
+            )
+    return tuple(out)
