@@ -75,6 +75,11 @@ def mount_rotation_dropped(obs):
     return (obs.T_w_b @ _h(obs.p_c + obs.T_b_c[:3, 3]))[:3]
 
 
+def body_rotation_dropped(obs):
+    # Body axes taken for world axes: the body-frame point added to the drone's position.
+    return obs.T_w_b[:3, 3] + (obs.T_b_c @ _h(obs.p_c))[:3]
+
+
 def body_translation_dropped(obs):
     return obs.T_w_b[:3, :3] @ (obs.T_b_c @ _h(obs.p_c))[:3]
 
