@@ -144,12 +144,13 @@ MISTAKES = [name for name in hypothesis_names() if name != "correct"]
 
 SHOWN_ONLY_ON = {
     # Rx Ry Rz and Rz Ry Rx differ only for a rotation about more than one axis: the banked
-    # orbit, and the pose noise of uncertainty and calibration; the other flights yaw only.
-    "Euler order reversed": ("orbit", "uncertainty", "calibration"),
-    # Swapping roll and yaw changes nothing where both are zero (approach flies straight,
-    # pitching) or where roll is set to 0 (gimbal-lock, at pitch 90 deg).
+    # orbit, the pose noise of uncertainty and calibration, and avoid-yawed's pitch while it
+    # heads north (yaw 90 deg); the other flights yaw only, or pitch only along x.
+    "Euler order reversed": ("orbit", "uncertainty", "calibration", "avoid-yawed"),
+    # Swapping roll and yaw changes nothing where both are zero (approach and avoid-naive fly
+    # straight along x, pitching) or where roll is set to 0 (gimbal-lock, at pitch 90 deg).
     "roll and yaw swapped": tuple(
-        n for n in builtin.names() if n not in ("approach", "gimbal-lock")
+        n for n in builtin.names() if n not in ("approach", "gimbal-lock", "avoid-naive")
     ),
     # Only images that arrive late have a newest pose other than their exposure's.
     "pose at the wrong time": ("latency",),
@@ -157,6 +158,15 @@ SHOWN_ONLY_ON = {
 """The built-ins where a mistake changes the estimates; the others change them on every
 built-in (a yawed body, the optical mount, a mount offset of 0.15-0.2 m: metres at tens of
 metres, beyond max(5 cm, 1% of range))."""
+
+NAMED_WITHIN_BOUND = {
+    # avoid's drone banks a little as it turns round the cone: the two Euler orders differ
+    # by centimetres there, which the exact doctor sees and the accuracy bound does not.
+    "Euler order reversed": ("avoid",),
+}
+"""Built-ins where a mistake changes the estimates too little to fail the accuracy check
+(the check judges them as it judges the correct chain's) while the doctor, on exact data,
+still names it."""
 
 NOISY = ("uncertainty", "calibration")
 """Built-ins that do not hold depth_image to its bound (pose noise; a mount error): there the
@@ -190,6 +200,8 @@ def _shown(mistake: str, scenario: str) -> bool:
 def test_every_mistake_of_the_doctor_is_a_function():
     assert set(FUNCTION_OF) == set(hypothesis_names())
     assert set(NOISY) <= set(builtin.names())
+    for where in (*SHOWN_ONLY_ON.values(), *NAMED_WITHIN_BOUND.values()):
+        assert set(where) <= set(builtin.names())
 
 
 @pytest.mark.parametrize("scenario", builtin.names())
@@ -217,7 +229,11 @@ def test_each_mistake_is_named_where_it_shows(scenario, mistakes_file):
         entry, check = estimators[name], checks[name]
         assert entry["failures"] == {} and entry["calls"] == correct["calls"], name
         d = entry["diagnosis"]
-        if _shown(mistake, scenario):
+        if scenario in NAMED_WITHIN_BOUND.get(mistake, ()):
+            assert (d["verdict"], d["mistake"]) == ("mistake", mistake), (name, d["message"])
+            assert d["residual_m"] < 1e-9 < d["correct_residual_m"]
+            assert check["outcome"] == checks["user:correct"]["outcome"], name
+        elif _shown(mistake, scenario):
             assert check["outcome"] == "failed", (name, check)
             assert (d["verdict"], d["mistake"]) == ("mistake", mistake), (name, d["message"])
             assert d["candidates"] == [mistake] and d["residual_m"] < 1e-9
