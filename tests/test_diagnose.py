@@ -311,7 +311,7 @@ def test_predict_gives_each_users_points(rng):
 def test_predict_refuses_what_it_cannot_compute(rng):
     scene = _scene(rng, n=3)
     args = (scene["p_c"], scene["T_w_b"], scene["T_b_c"])
-    with pytest.raises(ValueError, match="name must be one of .*body rotation dropped"):
+    with pytest.raises(ValueError, match=r"name must be one of .*body rotation dropped"):
         predict("body-rotation-dropped", *args)
     with pytest.raises(ValueError, match="T_w_b_newest"):
         predict("pose at the wrong time", *args)

@@ -29,8 +29,8 @@ a mistake's map with it). The forms are those a student writes:
 Degenerate geometry. A mistake that changes nothing on the data cannot be seen in it: with an
 identity mount rotation "mount rotation dropped" equals the correct chain, on a yaw-only flight
 "Euler order reversed" does too, on a level flight heading along the world's x (an identity
-body rotation) "body rotation dropped" and "rotation transposed" do, and with a zero mount translation "mount inverted" equals
-"mount rotation transposed". The verdict is then:
+body rotation) "body rotation dropped" and "rotation transposed" do, and with a zero mount
+translation "mount inverted" equals "mount rotation transposed". The verdict is then:
 
 - ``correct`` when the correct chain explains the estimates, whatever else also does (the
   estimates are right; ``candidates`` lists the mistakes this data could not exclude);

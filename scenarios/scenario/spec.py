@@ -136,10 +136,11 @@ class NavigateFlight:
 
     At every camera tick the cones estimated by ``estimate`` (a method of ``vnav.methods``, or
     ``"mistake:<name>"``: depth_image's estimates as a classic mistake of ``vnav.diagnose``
-    makes them, ``scenarios.scenario.schema.ESTIMATE_MISTAKES``) update the map, and the path from the drone's estimated position to the goal is planned
-    again to keep ``clearance_m`` from each mapped cone (``vnav.navigate``); the controller
-    flies it at ``speed_mps``. The flight ends at the goal (within ``GOAL_RADIUS_M``), at the
-    first contact with a cone, or at the run's end.
+    makes them, ``scenarios.scenario.schema.ESTIMATE_MISTAKES``) update the map, and the path
+    from the drone's estimated position to the goal is planned again to keep ``clearance_m``
+    from each mapped cone (``vnav.navigate``); the controller flies it at ``speed_mps``. The
+    flight ends at the goal (within ``GOAL_RADIUS_M``), at the first contact with a cone, or at
+    the run's end.
     """
 
     start_w: tuple[float, float, float]
