@@ -5,8 +5,12 @@ directory) and prints, per scenario and in total: ticks, ticks per second, milli
 tick of each stage (physics, render, detect, localize, log), the overhead ratio
 (detect + localize + log) / render (target <= 0.5), the share of the tick spent on time
 (``streams``: the pose and image streams, the estimator's ``FrameBuffer`` and its lookups;
-target <= 10%: keeping the chain honest about time must not slow the pipeline by more), and
-the average bytes of the .rrd per tick (target <= 60 KB). The total wall time of all
+target <= 10%: keeping the chain honest about time must not slow the pipeline by more), the
+share of a navigating built-in's tick spent on its map and planner (``navigate``: the
+``Navigator``'s ``on_tick``, the map's update, the replanning and the carrot; target <= 10%)
+and on reading MuJoCo's truth for it (``clearance``: contacts and clearances after each pose
+sample's physics, the judge's measure, not the drone's), and the average bytes of the .rrd per
+tick (target <= 60 KB). The total wall time of all
 built-ins is the figure behind "``vnav-demo run --all`` finishes within 2 minutes" (target
 <= 120 s).
 
@@ -47,6 +51,7 @@ TARGETS = {
     "rrd_bytes_per_tick": 60_000,
     "all_wall_s": 120.0,
     "streams_share": 0.10,
+    "navigate_share": 0.10,
 }
 
 
@@ -80,6 +85,7 @@ def _run_one(name: str, out: Path) -> dict:
     ticks = len(result.ticks)
     ms = {k: 1e3 * result.timing_s[k] / ticks for k in STAGES}
     return {
+        "navigates": result.navigation is not None,
         "ticks": ticks,
         "wall_s": wall_s,
         "ticks_per_s": ticks / wall_s,
@@ -118,6 +124,7 @@ def run(args: argparse.Namespace) -> dict:
             "streams_share": total_ms["streams"] / sum(total_ms.values()),
             "rrd_bytes_per_tick": sum(p["rrd_bytes"] for p in per.values()) / ticks,
             "setup_s": sum(p["setup_s"] for p in per.values()),
+            "navigate": _navigate_shares(per),
         },
         "targets": TARGETS,
     }
@@ -152,11 +159,42 @@ def run(args: argparse.Namespace) -> dict:
             f"time (streams, FrameBuffer, lookups): {t['streams_share']:.1%} of the tick "
             f"(target <= {TARGETS['streams_share']:.0%})"
         )
+        nav = t["navigate"]
+        for name, share in nav["scenarios"].items():
+            print(
+                f"{name}: map and planner {share['navigate']:.1%} of the tick, MuJoCo's truth "
+                f"(contacts, clearances) {share['clearance']:.1%}"
+            )
+        if nav["scenarios"]:
+            print(
+                f"map and planner, navigating built-ins: {nav['navigate_share']:.1%} of the tick "
+                f"(target <= {TARGETS['navigate_share']:.0%}); MuJoCo's truth "
+                f"{nav['clearance_share']:.1%}"
+            )
         print(
             f".rrd bytes per tick: {t['rrd_bytes_per_tick'] / 1e3:.1f} KB (target <= "
             f"{TARGETS['rrd_bytes_per_tick'] / 1e3:.0f} KB)"
         )
     return figures
+
+
+def _navigate_shares(per: dict[str, dict]) -> dict:
+    """The navigating scenarios' ``navigate`` and ``clearance`` shares of their ticks' time,
+    each and over all of them (weighted by ticks; None without one)."""
+    navigating = {n: p for n, p in per.items() if p["navigates"]}
+
+    def share(stage: str, ps: list[dict]) -> float | None:
+        total = sum(sum(p["ms_per_tick"].values()) * p["ticks"] for p in ps)
+        return sum(p["ms_per_tick"][stage] * p["ticks"] for p in ps) / total if ps else None
+
+    return {
+        "scenarios": {
+            n: {"navigate": share("navigate", [p]), "clearance": share("clearance", [p])}
+            for n, p in navigating.items()
+        },
+        "navigate_share": share("navigate", list(navigating.values())),
+        "clearance_share": share("clearance", list(navigating.values())),
+    }
 
 
 _ROOT = Path(__file__).resolve().parent.parent

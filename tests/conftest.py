@@ -102,6 +102,7 @@ SHARED = {
             "tests/test_calibrate_command.py::test_calibrate_refuses_what_it_cannot_use",
             "tests/test_covariance.py::test_uncertainty_builtin_covariance_grows_",
             "tests/test_diagnose.py::test_builtin_",
+            "tests/test_navigation.py::test_builtin_",
             "tests/test_grading.py::test_vnav_estimator_adds_one_test_per_builtin_with_",
         ),
     ),

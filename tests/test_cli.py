@@ -285,7 +285,8 @@ def test_bad_usage_exit_2_one_line(tmp_path, capsys, args, message):
         ),
         (
             PITCH_90_TOML.replace('mode = "kinematic"', 'mode = "teleport"'),
-            r"bad\.toml: flight\.mode: must be \"kinematic\", \"controlled\" or \"orbit\"",
+            r"bad\.toml: flight\.mode: must be \"kinematic\", \"controlled\", \"orbit\" or "
+            r"\"navigate\"",
         ),
         (
             PITCH_90_TOML.replace("camera_rate_hz", "camera_rate"),
@@ -766,7 +767,7 @@ DEEP = "[" * 3000 + "]" * 3000
         (
             'mode = "kinematic"',
             'mode = ["kinematic"]',
-            r"flight\.mode: must be \"kinematic\", .* or \"orbit\", got \['kinematic'\]",
+            r"flight\.mode: must be \"kinematic\", .* or \"navigate\", got \['kinematic'\]",
         ),
         ('mode = "kinematic"', "mode = { a = 1 }", r"flight\.mode: must be .*, got \{'a': 1\}"),
         (

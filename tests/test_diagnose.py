@@ -27,6 +27,7 @@ from vnav.diagnose import (
     Verdict,
     diagnose,
     hypothesis_names,
+    predict,
 )
 
 
@@ -73,6 +74,8 @@ USER: dict[str, Callable[[Obs], np.ndarray]] = {
     "mount inverted": lambda o: (o.T_w_b @ np.linalg.inv(o.T_b_c) @ _h(o.p_c))[:3],
     "composition order swapped": lambda o: (o.T_b_c @ o.T_w_b @ _h(o.p_c))[:3],
     "mount rotation dropped": lambda o: (o.T_w_b @ _h(o.p_c + o.T_b_c[:3, 3]))[:3],
+    # Body axes taken for world axes: the body-frame point added to the drone's position.
+    "body rotation dropped": lambda o: o.T_w_b[:3, 3] + (o.T_b_c @ _h(o.p_c))[:3],
     "body translation dropped": lambda o: o.T_w_b[:3, :3] @ (o.T_b_c @ _h(o.p_c))[:3],
     "mount translation dropped": lambda o: (o.T_w_b @ _h(o.T_b_c[:3, :3] @ o.p_c))[:3],
     "translations dropped": lambda o: o.T_w_b[:3, :3] @ o.T_b_c[:3, :3] @ o.p_c,
@@ -268,6 +271,53 @@ def test_yaw_only_flight(rng):
     # One elementary rotation: the Euler order does not matter, the estimates are right.
     d = _diagnose(scene, _estimates("Euler order reversed", scene))
     assert d.verdict == "correct" and "Euler order reversed" in d.candidates
+
+
+def test_level_unyawed_flight_cannot_show_a_dropped_body_rotation(rng):
+    """An identity body rotation: "body rotation dropped" (and "rotation transposed") give the
+    right points; yawed 90 deg, the lecture's case, the mistake is named."""
+    scene = _scene(rng)
+    scene["T_w_b"][:, :3, :3] = np.eye(3)
+    d = _diagnose(scene, _estimates("body rotation dropped", scene))
+    assert d.verdict == "correct" and "body rotation dropped" in d.candidates
+    scene["T_w_b"][:, :3, :3] = Rotation.from_euler("z", 90, degrees=True).as_matrix()
+    d = _diagnose(scene, _estimates("body rotation dropped", scene))
+    assert (d.verdict, d.mistake) == ("mistake", "body rotation dropped"), d.explain()
+    assert d.chapter == "chapter 0"
+
+
+def test_the_lectures_cone_after_a_90_deg_yaw_lands_off_to_the_side():
+    """MIT 16.485 VNAV, lecture 1: a cone 2 m in front and 1 m to the left of the drone; the
+    drone yawed 90 deg (facing world +y). The body numbers taken as world numbers put it 2 m
+    along world x, i.e. 2 m to the drone's right and 1 m behind it in the body frame."""
+    T_w_b = se3.make(Rotation.from_euler("z", 90, degrees=True).as_matrix(), [5.0, 3.0, 1.0])
+    T_b_c = np.eye(4)  # camera axes = body axes, so p_c is the body-frame point
+    p_b = np.array([2.0, 1.0, 0.0])
+    truth = predict("correct", [p_b], [T_w_b], T_b_c)[0]
+    wrong = predict("body rotation dropped", [p_b], [T_w_b], T_b_c)[0]
+    assert np.allclose(truth, [5.0 - 1.0, 3.0 + 2.0, 1.0])  # left of a +y heading is -x
+    assert np.allclose(wrong, [5.0 + 2.0, 3.0 + 1.0, 1.0])
+    assert np.allclose(se3.apply(se3.invert(T_w_b), wrong), [1.0, -2.0, 0.0])
+
+
+def test_predict_gives_each_users_points(rng):
+    scene = _scene(rng, n=12)
+    for name in hypothesis_names():
+        got = predict(name, scene["p_c"], scene["T_w_b"], scene["T_b_c"], scene["T_w_b_newest"])
+        assert got.shape == (12, 3)
+        assert np.allclose(got, _estimates(name, scene), atol=1e-9), name
+
+
+def test_predict_refuses_what_it_cannot_compute(rng):
+    scene = _scene(rng, n=3)
+    args = (scene["p_c"], scene["T_w_b"], scene["T_b_c"])
+    with pytest.raises(ValueError, match=r"name must be one of .*body rotation dropped"):
+        predict("body-rotation-dropped", *args)
+    with pytest.raises(ValueError, match="T_w_b_newest"):
+        predict("pose at the wrong time", *args)
+    with pytest.raises(ValueError, match="T_w_b"):
+        predict("correct", scene["p_c"], scene["T_w_b"][:2], scene["T_b_c"])
+    assert predict("correct", np.zeros((0, 3)), np.zeros((0, 4, 4)), np.eye(4)).shape == (0, 3)
 
 
 @pytest.mark.filterwarnings("ignore:Gimbal lock detected")

@@ -10,7 +10,8 @@ and Kalibr say how large an error is; this says why.
 The hypotheses are data: ``HYPOTHESES``, a tuple of ``Hypothesis`` (a name, the lecture
 chapter, what the student did, the fix, and a function of the prepared observations
 ``Chain`` that returns the (N, 3) points that mistake gives). Adding a mistake is one entry
-there. The forms are those a student writes:
+there, and ``predict`` gives the points of one of them by name (a navigating scenario flies on
+a mistake's map with it). The forms are those a student writes:
 
 - the Euler hypotheses rebuild ``R_w_b`` from the pose's roll, pitch, yaw as
   ``vnav.so3.to_rpy`` reads them (the angles a plug-in is handed, in degrees as
@@ -27,8 +28,9 @@ there. The forms are those a student writes:
 
 Degenerate geometry. A mistake that changes nothing on the data cannot be seen in it: with an
 identity mount rotation "mount rotation dropped" equals the correct chain, on a yaw-only flight
-"Euler order reversed" does too, and with a zero mount translation "mount inverted" equals
-"mount rotation transposed". The verdict is then:
+"Euler order reversed" does too, on a level flight heading along the world's x (an identity
+body rotation) "body rotation dropped" and "rotation transposed" do, and with a zero mount
+translation "mount inverted" equals "mount rotation transposed". The verdict is then:
 
 - ``correct`` when the correct chain explains the estimates, whatever else also does (the
   estimates are right; ``candidates`` lists the mistakes this data could not exclude);
@@ -66,6 +68,7 @@ __all__ = [
     "Verdict",
     "diagnose",
     "hypothesis_names",
+    "predict",
 ]
 
 DEFAULT_TOLERANCE_M = 1e-6
@@ -169,6 +172,10 @@ def _order_swapped(c: Chain) -> FloatArray:
 
 def _mount_rotation_dropped(c: Chain) -> FloatArray:
     return _rot(c.R_w_b, c.p_c + c.t_b_c) + c.t_w_b
+
+
+def _body_rotation_dropped(c: Chain) -> FloatArray:
+    return c.t_w_b + _p_b(c)
 
 
 def _body_translation_dropped(c: Chain) -> FloatArray:
@@ -301,6 +308,14 @@ HYPOTHESES: tuple[Hypothesis, ...] = (
         "p_b = R_b_c @ p_c + t_b_c: the camera's x right, y down, z forward are not the "
         "body's x forward, y left, z up",
         _mount_rotation_dropped,
+    ),
+    Hypothesis(
+        "body rotation dropped",
+        "chapter 0",
+        "body axes taken for world axes: p_w = t_w_b + T_b_c @ p_c",
+        f"{_FIX_CHAIN}: the body's x forward, y left turn with the drone; after a 90 deg yaw "
+        "the cone 2 m in front is 2 m along the world's y, not its x",
+        _body_rotation_dropped,
     ),
     Hypothesis(
         "body translation dropped",
@@ -526,6 +541,76 @@ def _tolerance(tolerance_m: object) -> float:
     return tol
 
 
+def _chain(
+    p_c: FloatArray, T_w_b: FloatArray, T_b_c: FloatArray, newest: FloatArray | None
+) -> Chain:
+    """The validated observations split for the hypotheses (every row used)."""
+    R_w_b = T_w_b[:, :3, :3]
+    return Chain(
+        p_c=p_c,
+        R_w_b=R_w_b,
+        t_w_b=T_w_b[:, :3, 3],
+        R_b_c=T_b_c[:, :3, :3],
+        t_b_c=T_b_c[:, :3, 3],
+        rpy_w_b=so3.to_rpy(R_w_b, warn=False),
+        quat_w_b_xyzw=quat.from_matrix(R_w_b, assume_valid=True),
+        T_w_b_newest=newest,
+    )
+
+
+def predict(
+    name: str,
+    p_c: ArrayLike,
+    T_w_b: ArrayLike,
+    T_b_c: ArrayLike,
+    T_w_b_newest: ArrayLike | None = None,
+) -> FloatArray:
+    """The world points hypothesis ``name`` computes from the observations: what a student
+    who makes that mistake gets (``"correct"``: the lecture's chain).
+
+    Parameters
+    ----------
+    name : str
+        A name of ``HYPOTHESES`` (``hypothesis_names()``), e.g. ``"body rotation dropped"``.
+    p_c : array_like, shape (N, 3)
+        The point in the camera (optical) frame, metres.
+    T_w_b : array_like, shape (N, 4, 4)
+        The body pose at each image's exposure.
+    T_b_c : array_like, shape (4, 4) or (N, 4, 4)
+        The declared camera mount.
+    T_w_b_newest : array_like, shape (N, 4, 4), optional
+        The newest pose received when each image arrived; needed by "pose at the wrong time"
+        only (a row of NaN gives a row of NaN there).
+
+    Returns
+    -------
+    ndarray, shape (N, 3)
+        The world points, metres.
+
+    Raises
+    ------
+    ValueError
+        ``name`` not a hypothesis (the message lists them), "pose at the wrong time" without
+        ``T_w_b_newest``, or an argument of the wrong shape, not finite or not rigid (as for
+        ``diagnose``).
+    """
+    if not isinstance(name, str) or name not in _BY_NAME:
+        raise ValueError(f"name must be one of {list(_BY_NAME)}; got {name!r}")
+    p_c = _points(p_c, "p_c", None, nan_rows=False)
+    n = p_c.shape[0]
+    T_w_b = _poses(T_w_b, "T_w_b", n, single=False)
+    T_b_c = _poses(T_b_c, "T_b_c", n, single=True)
+    newest = None
+    if T_w_b_newest is not None:
+        newest = _poses(T_w_b_newest, "T_w_b_newest", n, single=False, nan_rows=True)
+    if n == 0:
+        return np.zeros((0, 3))
+    predicted = _BY_NAME[name].predict(_chain(p_c, T_w_b, T_b_c, newest))
+    if predicted is None:
+        raise ValueError(f"{name!r} needs T_w_b_newest, the newest pose at each image's arrival")
+    return predicted
+
+
 # ------------------------------------------------------------------ the doctor
 
 
@@ -590,17 +675,7 @@ def diagnose(
     if n_est == 0:
         return _no_estimates(tol)
     # Only the observations with an estimate are tested (and paid for).
-    R_w_b = T_w_b[has, :3, :3]
-    chain = Chain(
-        p_c=p_c[has],
-        R_w_b=R_w_b,
-        t_w_b=T_w_b[has, :3, 3],
-        R_b_c=T_b_c[has, :3, :3],
-        t_b_c=T_b_c[has, :3, 3],
-        rpy_w_b=so3.to_rpy(R_w_b, warn=False),
-        quat_w_b_xyzw=quat.from_matrix(R_w_b, assume_valid=True),
-        T_w_b_newest=None if newest is None else newest[has],
-    )
+    chain = _chain(p_c[has], T_w_b[has], T_b_c[has], None if newest is None else newest[has])
     user = p_w_user[has]
     residuals: dict[str, float] = {}
     for h in HYPOTHESES:

@@ -5,6 +5,10 @@ At every evaluated camera tick ``Navigator.on_tick``
 
 1. puts the tick's cone estimates by the flight's ``estimate`` method into the obstacle map
    (``vnav.obstacle_map.ObstacleMap``: fused, or dropped when off the flight's height band);
+   an ``estimate`` naming a classic mistake (``"mistake:body-rotation-dropped"``,
+   ``scenarios.scenario.schema.ESTIMATE_MISTAKES``) maps the depth image's estimates as that
+   mistake makes them: each brought back to the camera frame, ``p_c = (T_w_b T_b_c)^-1 p_w``
+   with the tick's estimated pose and mount, then ``vnav.diagnose.predict``;
 2. plans the shortest path from the drone's *estimated* position (the newest pose the
    estimator has received) to the goal keeping ``clearance_m`` from every mapped cone
    (``vnav.navigate.plan_path``), keeping the previous plan when no path exists (a noisy cone
@@ -26,10 +30,13 @@ import math
 import numpy as np
 
 from scenarios.run.records import Contact, NavigationRecord, NavigationTick, TickRecord
+from scenarios.scenario.schema import ESTIMATE_MISTAKES
 from scenarios.scenario.spec import GOAL_RADIUS_M, NavigateFlight
 from sim.contact import cone_clearance
 from sim.flight import Reference, ReferenceFollower
 from sim.world import World
+from vnav import se3
+from vnav.diagnose import predict
 from vnav.navigate import follow_path, path_length_m, plan_path
 from vnav.obstacle_map import ObstacleMap
 
@@ -96,6 +103,25 @@ class Navigator:
                 self.record.reached_goal_s = w.time_s
         self.record.final_distance_m = float(np.linalg.norm(p_w - self.goal_w))
 
+    def _estimates_w(self, record: TickRecord, T_w_b_newest: np.ndarray) -> np.ndarray:
+        """The tick's cone estimates the map takes, (K, 3): the flight's method's, or the
+        depth image's remade by the classic mistake it names."""
+        mistake = ESTIMATE_MISTAKES.get(self.flight.estimate)
+        if mistake is None:
+            return record.estimates_w(self.flight.estimate)
+        p_w = record.estimates_w("depth_image")
+        # The point in the camera frame the estimate came from, with the pose and mount the
+        # estimator was given; then the same chain done wrong.
+        p_c = se3.apply(se3.invert(record.T_w_b_est @ record.T_b_c_est), p_w)
+        n = len(p_c)
+        return predict(
+            mistake,
+            p_c,
+            np.broadcast_to(record.T_w_b_est, (n, 4, 4)),
+            record.T_b_c_est,
+            np.broadcast_to(T_w_b_newest, (n, 4, 4)),
+        )
+
     def on_tick(self, record: TickRecord, T_w_b_newest: np.ndarray) -> None:
         """Map the tick's estimates, replan from the newest estimated pose, steer.
 
@@ -107,7 +133,7 @@ class Navigator:
             The newest body pose the estimator has received: where it thinks the drone is.
         """
         f = self.flight
-        self.map.update(record.estimates_w(f.estimate), f.estimate)
+        self.map.update(self._estimates_w(record, T_w_b_newest), f.estimate)
         p_w_est = T_w_b_newest[:3, 3]
         try:
             self._plan_xy_w = plan_path(

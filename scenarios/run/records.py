@@ -386,8 +386,9 @@ class RunResult:
     ticks : list of TickRecord
     timing_s : dict of str to float
         Seconds spent per stage (``physics``, ``streams``, ``render``, ``detect``,
-        ``localize``, ``log``) and once per run (``setup``: the world, the GL context and the
-        recording's start and finish, ``scenarios.run.runner.STAGES``); ``scenarios.pipeline``
+        ``localize``, ``navigate``, ``clearance``, ``log``) and once per run (``setup``: the
+        world, the GL context and the recording's start and finish,
+        ``scenarios.run.runner.STAGES``); ``scenarios.pipeline``
         adds ``calibrate`` (the calibration and the second estimate with its mount, 0 when
         none), ``judge`` (the checks), ``total`` (wall seconds from the run's start to its
         report) and ``total_cpu`` (the process's user and system seconds over the same span,

@@ -67,9 +67,13 @@ __all__ = ["STAGES", "TickObserver", "run_scenario"]
 
 logger = logging.getLogger(__name__)
 
-STAGES = ("physics", "streams", "render", "detect", "localize", "log")
+STAGES = ("physics", "streams", "render", "detect", "localize", "navigate", "clearance", "log")
 """The per-tick stages timed in ``RunResult.timing_s``: ``streams`` is the sensor streams' and
-the pose buffers' share (sampling, sending, delivering, looking up). ``setup`` is once per run:
+the pose buffers' share (sampling, sending, delivering, looking up); ``navigate`` and
+``clearance`` the closed loop's (``scenarios.run.navigation.Navigator``): its map, planner and
+steering at each camera tick (``on_tick``), and the truth it reads from MuJoCo after each
+pose sample's physics (``after_physics``: contact, clearance, goal), both 0 for a flight that
+does not navigate. ``setup`` is once per run:
 here the world, the GL context and the observer's ``start``; ``scenarios.pipeline`` adds the
 observer's finish (the recording's end: its plots, layout and file footer)."""
 
@@ -188,14 +192,16 @@ def _run_ticks(
             image: _Image = d.payload
             record = flow.evaluate(d)
             result.ticks.append(record)
+            t1 = time.perf_counter()
             if flow.navigator is not None:  # the closed loop: what was seen steers
                 newest = d.T_w_b_latest if d.T_w_b_latest is not None else d.T_w_b_at_exposure
                 flow.navigator.on_tick(record, newest)
-            t1 = time.perf_counter()
+            t2 = time.perf_counter()
             if observer:
                 observer.on_tick(record, image.rgb, image.depth)
             timing["localize"] += t1 - t0
-            timing["log"] += time.perf_counter() - t1
+            timing["navigate"] += t2 - t1
+            timing["log"] += time.perf_counter() - t2
             done += 1
             if progress:
                 progress(done, n_ticks)
@@ -219,6 +225,7 @@ def _run_ticks(
         evaluate(flow.expose(_Image(truth, detections, rgb, depth)))
     evaluate(flow.drain())
     timing["physics"] += flow.physics_s
+    timing["clearance"] += flow.clearance_s
     timing["streams"] += flow.streams_s
     result.poses = flow.pose_stream()
     if flow.navigator is not None:
@@ -285,6 +292,7 @@ class _Flow:
         self.truth = FrameBuffer(cache_s=spec.end_s + wait_s + 10.0)  # the whole run
         self._wait_s = wait_s + 1.0
         self.physics_s = 0.0  # seconds in the driver's steps
+        self.clearance_s = 0.0  # seconds in the navigator's truth after them
         self.streams_s = 0.0  # seconds in everything else here
         self._step = 0
         self._j = 0  # the next pose sample
@@ -322,23 +330,27 @@ class _Flow:
     def _drive(self, n: int) -> None:
         t0 = time.perf_counter()
         nav = self.navigator
+        nav_s = 0.0
         if nav is None:
             self.driver.step(n)
         else:
             t_end_s = self.world.time_s + n * self.dt
             if not nav.ended:
                 self.driver.step(n)  # stops at the first contact with a cone
+                t1 = time.perf_counter()
                 nav.after_physics()
+                nav_s = time.perf_counter() - t1
             if nav.ended:
                 # The flight is over (a cone or the goal): the drone is held where it ended
                 # while time runs on, so that the images in flight still arrive.
                 self.world.data.time = t_end_s
-        self.physics_s += time.perf_counter() - t0
+        self.clearance_s += nav_s
+        self.physics_s += time.perf_counter() - t0 - nav_s
 
     def advance_to(self, step: int) -> list[Delivered]:
         """Step the physics to ``step``, sampling poses on the way; the images delivered."""
         t0 = time.perf_counter()
-        physics0 = self.physics_s
+        driven0 = self.physics_s + self.clearance_s
         if isinstance(self.driver, KeyframePlayer):
             out = self._advance_keyframes(step)
         else:
@@ -350,7 +362,8 @@ class _Flow:
                 if self._step == self._next_sample_step():
                     self._sample()
                     out += self._deliver()
-        self.streams_s += time.perf_counter() - t0 - (self.physics_s - physics0)
+        driven_s = self.physics_s + self.clearance_s - driven0
+        self.streams_s += time.perf_counter() - t0 - driven_s
         return out
 
     def _advance_keyframes(self, step: int) -> list[Delivered]:

@@ -468,17 +468,19 @@ def calibration() -> Scenario:
     }
 
 
-def _avoid_world(estimate: str) -> Scenario:
-    """A cone on the straight line from start to goal, 10 m ahead; the drone flies on
-    ``estimate``'s map of it (``flight.mode = "navigate"``)."""
+def _avoid_world(estimate: str, *, heading_deg: float = 0.0) -> Scenario:
+    """A cone on the straight line from start to goal, 10 m ahead, the line ``heading_deg``
+    from the world's x axis (counter-clockwise); the drone flies on ``estimate``'s map of it
+    (``flight.mode = "navigate"``)."""
+    c, s = math.cos(math.radians(heading_deg)), math.sin(math.radians(heading_deg))
     return {
         "camera_rate_hz": 10.0,
         "camera": {"pitch_down_deg": 15.0},
-        "cones": [{"position_w": [10.0, 0.0, 0.0]}],
+        "cones": [{"position_w": [round(10.0 * c, 12), round(10.0 * s, 12), 0.0]}],
         "flight": {
             "mode": "navigate",
             "start_w": [0.0, 0.0, 0.5],
-            "goal_w": [20.0, 0.0, 0.5],
+            "goal_w": [round(20.0 * c, 12), round(20.0 * s, 12), 0.5],
             "speed_mps": 2.0,
             "clearance_m": 1.0,
             "estimate": estimate,
@@ -521,6 +523,24 @@ def avoid_naive() -> Scenario:
     }
 
 
+def avoid_yawed() -> Scenario:
+    return {
+        "name": "avoid-yawed",
+        "description": "Chapter 0's other case, flown: the drone heads north (yawed 90 deg), "
+        "its map takes body axes for world axes; the cone lands off to the side and the drone "
+        "flies into the real one.",
+        "lesson": "'A cone 2 m in front, 1 m to the left': after a 90-degree yaw those body "
+        "numbers are not world numbers. The body's x (forward) now points along the world's "
+        "y; writing p_w = t_w_b + T_b_c p_c, the body rotation R_w_b dropped, puts the cone "
+        "along the world's x instead, off to the drone's right, as far to the side as it "
+        "really is ahead. The planner dodges that phantom, which is never on its way, flies "
+        "the straight line, and MuJoCo reports the contact with the real cone. Heading along "
+        "the world's x (yaw 0) the same mistake would be invisible: R_w_b = I there.",
+        **_avoid_world("mistake:body-rotation-dropped", heading_deg=90.0),
+        "checks": [_check("collision", 1.0, name="the body-axes map flies into the cone")],
+    }
+
+
 REGISTRY: dict[str, Callable[[], Scenario]] = {
     "frame-problem": frame_problem,
     "yaw-sweep": yaw_sweep,
@@ -534,6 +554,7 @@ REGISTRY: dict[str, Callable[[], Scenario]] = {
     "calibration": calibration,
     "avoid": avoid,
     "avoid-naive": avoid_naive,
+    "avoid-yawed": avoid_yawed,
 }
 
 

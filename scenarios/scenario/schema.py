@@ -19,6 +19,7 @@ from typing import Any
 
 from scenarios.scenario.check_kinds import KINDS
 from sim.config import MAX_FOVY_DEG, MIN_FOVY_DEG, CameraConfig
+from vnav.diagnose import hypothesis_names
 from vnav.methods import METHOD_NAMES, PREFERENCE
 from vnav.noise_model import FIGURES, NOISELESS
 
@@ -26,6 +27,7 @@ __all__ = [
     "CAMERA",
     "CHECK",
     "CONE",
+    "ESTIMATE_MISTAKES",
     "FLIGHT_MODES",
     "KEYFRAME",
     "NOISE",
@@ -309,6 +311,16 @@ WAYPOINT: tuple[Key, ...] = (
     Key("yaw_deg", "number", "heading, deg", 0.0, -MAX_DEG, MAX_DEG),
 )
 _PERIOD_DOC = "one turn, s; < 0: clockwise; |period| >= 1"
+MISTAKE_PREFIX = "mistake:"
+ESTIMATE_MISTAKES: dict[str, str] = {
+    MISTAKE_PREFIX + name.lower().replace(" ", "-"): name
+    for name in hypothesis_names()
+    if name != "correct"  # the chain itself is no mistake
+}
+"""A navigating flight's ``estimate`` that names a classic mistake of the frame chain
+(``"mistake:body-rotation-dropped"``: the doctor's name, lower case, spaces as hyphens) -> that
+name in ``vnav.diagnose.HYPOTHESES``: the depth image's estimates recomputed as that mistake
+makes them (``scenarios.run.navigation``)."""
 FLIGHT_MODES: dict[str, tuple[Key, ...]] = {
     "kinematic": (Key("keyframes", "tables", "timed poses: position linear, attitude slerp"),),
     "controlled": (
@@ -339,9 +351,10 @@ FLIGHT_MODES: dict[str, tuple[Key, ...]] = {
         Key(
             "estimate",
             "choice",
-            "whose cone estimates the planner avoids: a method of vnav.methods",
+            "whose cone estimates the planner avoids: a method of vnav.methods, or "
+            '"mistake:<name>", depth_image\'s as a classic mistake (vnav.diagnose) makes them',
             PREFERENCE[0],
-            choices=METHOD_NAMES,
+            choices=(*METHOD_NAMES, *ESTIMATE_MISTAKES),
         ),
     ),
 }

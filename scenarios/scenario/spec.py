@@ -134,11 +134,13 @@ GOAL_RADIUS_M = 0.3
 class NavigateFlight:
     """Closed loop: the drone flies to a goal around the cones its estimator has mapped.
 
-    At every camera tick the cones estimated by ``estimate`` (a method of ``vnav.methods``)
-    update the map, and the path from the drone's estimated position to the goal is planned
-    again to keep ``clearance_m`` from each mapped cone (``vnav.navigate``); the controller
-    flies it at ``speed_mps``. The flight ends at the goal (within ``GOAL_RADIUS_M``), at the
-    first contact with a cone, or at the run's end.
+    At every camera tick the cones estimated by ``estimate`` (a method of ``vnav.methods``, or
+    ``"mistake:<name>"``: depth_image's estimates as a classic mistake of ``vnav.diagnose``
+    makes them, ``scenarios.scenario.schema.ESTIMATE_MISTAKES``) update the map, and the path
+    from the drone's estimated position to the goal is planned again to keep ``clearance_m``
+    from each mapped cone (``vnav.navigate``); the controller flies it at ``speed_mps``. The
+    flight ends at the goal (within ``GOAL_RADIUS_M``), at the first contact with a cone, or at
+    the run's end.
     """
 
     start_w: tuple[float, float, float]
