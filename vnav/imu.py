@@ -397,9 +397,7 @@ def allan_deviation(samples: ArrayLike, dt_s: float, taus: ArrayLike) -> np.ndar
     """
     y = _v.scalar_or_array(samples, "samples")
     if y.ndim not in (1, 2) or y.shape[0] < 3:
-        raise ValueError(
-            f"samples must have shape (N,) or (N, C) with N >= 3; got shape {y.shape}"
-        )
+        raise ValueError(f"samples must have shape (N,) or (N, C) with N >= 3; got shape {y.shape}")
     dt_s = _positive(dt_s, "dt_s")
     tau_arr = _v.scalar_or_array(taus, "taus")
     if tau_arr.ndim != 1:
