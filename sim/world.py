@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Callable
 from importlib import resources
 from pathlib import Path
 
@@ -225,11 +226,16 @@ class World:
     config : SceneConfig
     spec : mujoco.MjSpec
         The spec the model was compiled from (add elements and call ``recompile``).
+    on_step : callable(World) or None
+        Called at the end of every ``step`` call, with the world in its new state (a sensor
+        that reads every physics step: ``sim.imu``; the controllers step one physics step per
+        call). ``reset`` clears it.
     """
 
     def __init__(self, spec: mujoco.MjSpec, config: SceneConfig) -> None:
         self.spec = spec
         self.config = config
+        self.on_step: Callable[[World], None] | None = None
         self.model = spec.compile()
         self.data = mujoco.MjData(self.model)
         self._index()
@@ -442,14 +448,16 @@ class World:
         (undoing ``set_camera_position_b``): the state of a world just built from its config."""
         self.model.cam_pos[self.camera_id] = self._cam_pos0
         self._T_b_c = self.config.camera.T_b_c
+        self.on_step = None
         mujoco.mj_resetData(self.model, self.data)
         mujoco.mj_forward(self.model, self.data)
 
     def step(self, n: int = 1) -> None:
         """Advance the physics by ``n`` time steps.
 
-        Afterwards every derived quantity (``T_w_b``, camera poses, what is rendered) is that
-        of the new state at ``time_s``.
+        Afterwards every derived quantity (``T_w_b``, camera poses, what is rendered, the
+        sensors and accelerations under the current controls) is that of the new state at
+        ``time_s``; then ``on_step`` is called, if set.
 
         Raises
         ------
@@ -478,6 +486,8 @@ class World:
         # mj_step leaves xpos/xmat/cam_xpos (what T_w_b reports and the renderer draws) at the
         # state before its integration; recompute them for the current qpos and time.
         mujoco.mj_forward(m, d)
+        if self.on_step is not None:
+            self.on_step(self)
 
     def _check_state(self) -> None:
         """Raise SimulationError naming the time and cause on a NaN/inf or exploding state."""

@@ -147,10 +147,32 @@ def build(
     }
     if run.navigation is not None:  # only a navigating flight: other reports are unchanged
         out["navigation"] = navigation(run)
+    if run.imu is not None:  # only with an [imu]: other reports are unchanged
+        out["imu"] = imu_summary(run)
     users = [m for m in active_methods() if m.images == "user"]
     if users:  # only with a user's function: a built-in run's report is unchanged
         out["estimators"] = {m.name: estimator_summary(run, m) for m in users}
     return out
+
+
+def imu_summary(run: RunResult) -> dict[str, Any]:
+    """The scenario's IMU (``[imu]``): its declared and true mounts, clock offset, rate and
+    noise figures, the readings taken, and how closely MuJoCo's noise-free sensors followed
+    ``vnav.imu``'s chain (``max_discrepancy``, relative, over ``steps_checked`` physics
+    states)."""
+    imu, record = run.spec.scene.imu, run.imu
+    assert imu is not None and record is not None
+    return {
+        "rate_hz": imu.rate_hz,
+        "readings": len(record.t_s),
+        "time_offset_s": imu.time_offset_s,
+        "noise": dataclasses.asdict(imu.noise),
+        "mount_error": dataclasses.asdict(imu.mount_error),
+        "T_b_i_declared": imu.T_b_i_declared.tolist(),
+        "T_b_i": imu.T_b_i.tolist(),
+        "max_discrepancy": record.max_discrepancy,
+        "steps_checked": record.steps_checked,
+    }
 
 
 def _names() -> list[str]:
