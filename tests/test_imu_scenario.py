@@ -141,6 +141,8 @@ def test_a_run_reads_the_imu_and_checks_it_against_the_chain(tmp_path):
     assert check["kind"] == "imu_consistent" and check["passed"], check
     imu = report["imu"]
     assert imu["max_discrepancy"] < 1e-6
+    # The check's value is the figure itself, not rounded away (it is about 1e-15).
+    assert 0.0 < check["value"] == pytest.approx(imu["max_discrepancy"], rel=1e-8)
     # Every physics state of the 4 s flight (the start and 800 steps of 5 ms).
     assert imu["steps_checked"] == 801
     # 100 Hz over 4 s: readings 0 to 400, stamped on the IMU's clock: t_sim - 0.02 + 0.012.

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from scenarios.judge.checks import CheckResult
+from scenarios.scenario.check_kinds import Unit
 from scenarios.run.records import RunResult
 from vnav import metrics
 from vnav.methods import NEWEST_POSE_METHOD, Method, active_methods
@@ -91,6 +92,16 @@ def _finite_or_none(value: float) -> float | int | None:
     return None if not math.isfinite(value) else round(float(value), 9)
 
 
+def _check_value(c: CheckResult) -> float | int | None:
+    """A check's figure for the report: to 9 decimals, or to 9 significant digits for a
+    relative error, whose meaning is its exponent (1e-15 would round to 0)."""
+    if c.value is None:
+        return None
+    if c.unit is Unit.RELATIVE and math.isfinite(c.value):
+        return float(f"{c.value:.9g}")
+    return _finite_or_none(c.value)
+
+
 RANGE_BINS_M = (0.0, 5.0, 10.0, 15.0, 20.0, 25.0, 30.0, math.inf)
 """Edges of the range bins of the error-against-range statistics, metres."""
 
@@ -138,10 +149,7 @@ def build(
         "camera_mount_error": dataclasses.asdict(spec.scene.camera.mount_error),
         "pose_lookup": pose_lookup(run),
         "calibration": _calibration(run),
-        "checks": [
-            {**c.as_dict(), "value": None if c.value is None else _finite_or_none(c.value)}
-            for c in checks
-        ],
+        "checks": [{**c.as_dict(), "value": _check_value(c)} for c in checks],
         "recording": recording,
         "timing_s": {k: round(v, 4) for k, v in run.timing_s.items()},
     }
