@@ -23,8 +23,8 @@ from typing import Any
 import numpy as np
 
 from scenarios.judge.checks import CheckResult
-from scenarios.scenario.check_kinds import Unit
 from scenarios.run.records import RunResult
+from scenarios.scenario.check_kinds import Unit
 from vnav import metrics
 from vnav.methods import NEWEST_POSE_METHOD, Method, active_methods
 from vnav.uncertainty import nees_band
