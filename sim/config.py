@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from vnav import frames, se3, so3
+from vnav.imu import ImuNoise
 
 
 @dataclass(frozen=True)
@@ -109,16 +110,17 @@ MAX_MOUNT_ERROR_DEG = 45.0
 
 @dataclass(frozen=True)
 class MountError:
-    """How the camera's true mount differs from the declared one: the true mount is the
-    declared mount, then this transform in the (declared) camera frame,
-    ``T_b_c_true = T_b_c_declared @ E``.
+    """How a sensor's true mount differs from the declared one: the true mount is the
+    declared mount, then this transform in the (declared) sensor frame: the camera's
+    ``T_b_c_true = T_b_c_declared @ E``, the IMU's ``T_b_i_true = T_b_i_declared @ E``.
 
     Attributes
     ----------
     position_m : tuple of 3 float
-        ``E``'s translation in the camera (optical) frame, metres, each within 1 m.
+        ``E``'s translation in the sensor's frame (the camera's optical frame, the IMU's
+        frame), metres, each within 1 m.
     rpy_deg : tuple of 3 float
-        ``E``'s rotation ``Rz(yaw) Ry(pitch) Rx(roll)`` about the camera's axes, degrees, each
+        ``E``'s rotation ``Rz(yaw) Ry(pitch) Rx(roll)`` about the sensor's axes, degrees, each
         within 45.
     """
 
@@ -226,6 +228,110 @@ class CameraConfig:
         return cls(**values)
 
 
+MAX_IMU_RATE_HZ = 10000.0
+"""Largest IMU sampling rate accepted here; a scene also keeps it at most its physics rate."""
+MAX_IMU_TIME_OFFSET_S = 5.0
+"""Largest camera-IMU clock offset, seconds (as the ``[timing]`` offsets)."""
+MAX_IMU_POSITION_M = 10.0
+"""Farthest an IMU sits from the body origin along each axis, metres (as the camera)."""
+
+
+@dataclass(frozen=True)
+class ImuConfig:
+    """An IMU on its own mount: where it sits on the body, its clock, rate and noise.
+
+    Attributes
+    ----------
+    rate_hz : float
+        Readings per second, in (0, ``MAX_IMU_RATE_HZ``]; a scene keeps it at most its physics
+        rate (a reading is the state after a physics step).
+    position_b : tuple of 3 float
+        The declared IMU origin in the body frame (FLU), metres, each within 10 m.
+    rpy_deg : tuple of 3 float
+        The declared IMU axes in the body frame, ``R_b_i = Rz(yaw) Ry(pitch) Rx(roll)``,
+        degrees, ``[roll, pitch, yaw]``.
+    mount_error : MountError
+        The true mount's error from the declared one, in the IMU frame:
+        ``T_b_i = T_b_i_declared @ E``. The simulator's IMU sits at the true mount; an
+        estimator is told the declared one.
+    time_offset_s : float
+        The camera-IMU clock offset, Kalibr's ``timeshift_cam_imu``:
+        ``t_imu = t_cam + time_offset_s``, seconds, within 5 s.
+    accelerometer_noise_density, accelerometer_random_walk, gyroscope_noise_density,
+    gyroscope_random_walk : float
+        Kalibr's noise figures in Kalibr's units (``vnav.imu.ImuNoise``): m/s^2/sqrt(Hz),
+        m/s^3/sqrt(Hz), rad/s/sqrt(Hz), rad/s^2/sqrt(Hz).
+    """
+
+    rate_hz: float = 200.0
+    position_b: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    rpy_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    mount_error: MountError = field(default_factory=MountError)
+    time_offset_s: float = 0.0
+    accelerometer_noise_density: float = 0.0
+    accelerometer_random_walk: float = 0.0
+    gyroscope_noise_density: float = 0.0
+    gyroscope_random_walk: float = 0.0
+
+    def __post_init__(self) -> None:
+        set_ = object.__setattr__
+        rate = _finite(self.rate_hz, "ImuConfig.rate_hz")
+        if not 0.0 < rate <= MAX_IMU_RATE_HZ:
+            raise ValueError(f"ImuConfig.rate_hz must be in (0, {MAX_IMU_RATE_HZ:g}], got {rate}")
+        set_(self, "rate_hz", rate)
+        position_b = _vector(self.position_b, 3, "ImuConfig.position_b")
+        if not all(abs(v) <= MAX_IMU_POSITION_M for v in position_b):
+            raise ValueError(
+                f"ImuConfig.position_b must be within +-{MAX_IMU_POSITION_M:g} m, got {position_b}"
+            )
+        set_(self, "position_b", position_b)
+        set_(self, "rpy_deg", _vector(self.rpy_deg, 3, "ImuConfig.rpy_deg"))
+        if isinstance(self.mount_error, dict):
+            _check_names(MountError, self.mount_error)
+            set_(self, "mount_error", MountError(**self.mount_error))
+        elif not isinstance(self.mount_error, MountError):
+            raise ValueError(f"ImuConfig.mount_error must be a table, got {self.mount_error!r}")
+        offset = _finite(self.time_offset_s, "ImuConfig.time_offset_s")
+        if abs(offset) > MAX_IMU_TIME_OFFSET_S:
+            raise ValueError(
+                f"ImuConfig.time_offset_s must be within +-{MAX_IMU_TIME_OFFSET_S:g} s, "
+                f"got {offset}"
+            )
+        set_(self, "time_offset_s", offset)
+        self.noise  # noqa: B018 -- validates the four figures (ImuNoise's messages)
+
+    @property
+    def noise(self) -> ImuNoise:
+        """The four noise figures as ``vnav.imu.ImuNoise``."""
+        return ImuNoise(
+            accelerometer_noise_density=self.accelerometer_noise_density,
+            accelerometer_random_walk=self.accelerometer_random_walk,
+            gyroscope_noise_density=self.gyroscope_noise_density,
+            gyroscope_random_walk=self.gyroscope_random_walk,
+        )
+
+    @property
+    def T_b_i_declared(self) -> np.ndarray:
+        """(4, 4) the declared mount: the IMU frame in the body frame."""
+        roll, pitch, yaw = (math.radians(a) for a in self.rpy_deg)
+        return se3.make(so3.from_rpy(roll, pitch, yaw), np.asarray(self.position_b))
+
+    @property
+    def T_b_i(self) -> np.ndarray:
+        """(4, 4) the true mount, ``T_b_i_declared @ mount_error.T``: where the simulator's
+        IMU site is."""
+        if self.mount_error.is_zero:
+            return self.T_b_i_declared
+        return self.T_b_i_declared @ self.mount_error.T
+
+    @classmethod
+    def from_dict(cls, values: dict[str, Any]) -> ImuConfig:
+        """Build from a mapping (``mount_error`` a mapping too), rejecting unknown keys with a
+        ValueError."""
+        _check_names(cls, values)
+        return cls(**values)
+
+
 @dataclass(frozen=True)
 class SceneConfig:
     """A scene: the drone's start pose, its camera and the cones.
@@ -250,6 +356,10 @@ class SceneConfig:
     znear_m, zfar_m : float
         Near and far clipping distances of every camera, metres; ``zfar_m`` must be at least
         ``SKY_MARGIN * ground_size_m`` (depth reads ``zfar_m`` on the sky).
+    imu : ImuConfig or None
+        The IMU, if the scene has one declared: its site sits at the true mount
+        ``imu.T_b_i``, and ``imu.rate_hz`` is at most the physics rate. None: the model's IMU
+        site stays at the body origin, axes along the body's (nothing reads it).
     """
 
     camera: CameraConfig = field(default_factory=CameraConfig)
@@ -261,6 +371,7 @@ class SceneConfig:
     ground_size_m: float = 200.0
     znear_m: float = 0.05
     zfar_m: float = 1000.0
+    imu: ImuConfig | None = None
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
@@ -291,12 +402,23 @@ class SceneConfig:
         znear, zfar = _clip_planes(self.znear_m, self.zfar_m, ground)
         set_(self, "znear_m", znear)
         set_(self, "zfar_m", zfar)
+        if isinstance(self.imu, dict):
+            set_(self, "imu", ImuConfig.from_dict(self.imu))
+        elif self.imu is not None and not isinstance(self.imu, ImuConfig):
+            raise ValueError(
+                f"SceneConfig.imu must be an ImuConfig or None, got {type(self.imu).__name__}"
+            )
+        if self.imu is not None and self.imu.rate_hz > 1.0 / dt + 1e-9:
+            raise ValueError(
+                f"SceneConfig.imu.rate_hz must be at most the physics rate, {1.0 / dt:g} Hz "
+                f"(one reading per physics step), got {self.imu.rate_hz:g}"
+            )
 
     @classmethod
     def from_dict(cls, values: dict[str, Any]) -> SceneConfig:
         """Build from a nested mapping (e.g. parsed TOML), rejecting unknown keys.
 
-        ``camera`` may be a mapping of ``CameraConfig`` fields.
+        ``camera`` may be a mapping of ``CameraConfig`` fields, ``imu`` of ``ImuConfig``'s.
         """
         _check_names(cls, values)
         values = dict(values)

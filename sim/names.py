@@ -10,6 +10,12 @@ DRONE_BODY = "drone"
 DRONE_JOINT = "drone_root"
 """The free joint of the quadrotor."""
 IMU_SITE = "imu"
+"""The IMU's site on the drone body: at the true mount of a declared ``[imu]``
+(``sim.world.build_spec``), else at the body origin."""
+IMU_ACCEL = "imu_accel"
+"""MuJoCo's accelerometer at ``IMU_SITE``: specific force in the site frame, m/s^2."""
+IMU_GYRO = "imu_gyro"
+"""MuJoCo's gyro at ``IMU_SITE``: angular velocity in the site frame, rad/s."""
 THRUST_SITES: tuple[str, ...] = ("thrust_fl", "thrust_rl", "thrust_rr", "thrust_fr")
 """Rotor sites: front-left, rear-left, rear-right, front-right (thrust along site +z)."""
 MOTORS: tuple[str, ...] = ("motor_fl", "motor_rl", "motor_rr", "motor_fr")

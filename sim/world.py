@@ -6,7 +6,8 @@ external chase camera and the cones (a mesh built from ``vnav.cone.TRAFFIC_CONE`
 
 Ground truth comes out in vnav's conventions (docs/CONVENTIONS.md): ``T_w_b`` (body FLU in the
 world ENU), ``T_b_c`` (the mount, optical frame RDF), ``T_w_c`` and the pinhole intrinsics that
-describe MuJoCo's rendering exactly.
+describe MuJoCo's rendering exactly, ``T_b_i`` (the IMU's true mount, where its site sits) and
+the body's accelerations (``acceleration_w``, ``angular_acceleration_b``).
 
 MuJoCo's camera frame (``glc``: x right, y up, looking along -z) never leaves this module:
 ``R_b_glc = R_b_c @ R_GLC_RDF`` where ``R_GLC_RDF = diag(1, -1, -1)``.
@@ -16,6 +17,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Callable
 from importlib import resources
 from pathlib import Path
 
@@ -165,6 +167,14 @@ def build_spec(cfg: SceneConfig, cone: ConeModel = TRAFFIC_CONE) -> mujoco.MjSpe
     )
     chase.mode = mujoco.mjtCamLight.mjCAMLIGHT_TRACK
 
+    # The IMU site (MuJoCo's accelerometer and gyro read there) at the true mount: the
+    # model's site stays at the body origin when the scene declares no IMU.
+    if cfg.imu is not None:
+        T_b_i = cfg.imu.T_b_i
+        imu = spec.site(names.IMU_SITE)
+        imu.pos = list(T_b_i[:3, 3])
+        imu.quat = list(_mat_to_quat_wxyz(T_b_i[:3, :3]))
+
     add_cones(spec, cfg.cones_w, cone)
     return spec
 
@@ -216,11 +226,16 @@ class World:
     config : SceneConfig
     spec : mujoco.MjSpec
         The spec the model was compiled from (add elements and call ``recompile``).
+    on_step : callable(World) or None
+        Called at the end of every ``step`` call, with the world in its new state (a sensor
+        that reads every physics step: ``sim.imu``; the controllers step one physics step per
+        call). ``reset`` clears it.
     """
 
     def __init__(self, spec: mujoco.MjSpec, config: SceneConfig) -> None:
         self.spec = spec
         self.config = config
+        self.on_step: Callable[[World], None] | None = None
         self.model = spec.compile()
         self.data = mujoco.MjData(self.model)
         self._index()
@@ -265,6 +280,9 @@ class World:
         """(ngeom,) the cone index a geom belongs to, -1 for geoms that are no cone's."""
         for i, ids in enumerate(self.cone_geom_ids):
             self.cone_index_of_geom[ids] = i
+        self.imu_site_id = m.site(names.IMU_SITE).id
+        self.imu_accel_adr = int(m.sensor(names.IMU_ACCEL).adr[0])
+        self.imu_gyro_adr = int(m.sensor(names.IMU_GYRO).adr[0])
         cam_cfg = self.config.camera
         self._T_b_c = cam_cfg.T_b_c
         self._cam_pos0 = m.cam_pos[self.camera_id].copy()
@@ -307,6 +325,18 @@ class World:
         self.model.cam_pos[self.camera_id] = true[:3, 3]
         self._T_b_c = true
         mujoco.mj_forward(self.model, self.data)
+
+    @property
+    def T_b_i(self) -> np.ndarray:
+        """(4, 4) the IMU site's pose in the body frame: the IMU's true mount (the identity
+        when the scene declares no IMU), read from the compiled model."""
+        m = self.model
+        R_b_i = np.empty(9)
+        mujoco.mju_quat2Mat(R_b_i, m.site_quat[self.imu_site_id])
+        T = np.eye(4)
+        T[:3, :3] = R_b_i.reshape(3, 3)
+        T[:3, 3] = m.site_pos[self.imu_site_id]
+        return T
 
     @property
     def camera(self) -> PinholeCamera:
@@ -359,6 +389,19 @@ class World:
         """(3,) angular velocity in the body frame, rad/s (MuJoCo free joint)."""
         return self.data.qvel[self._qvel_adr + 3 : self._qvel_adr + 6].copy()
 
+    @property
+    def acceleration_w(self) -> np.ndarray:
+        """(3,) linear acceleration of the body origin in the world, m/s^2: the free joint's
+        ``qacc[0:3]``, of the current state under the current controls (``step`` and the
+        ``set_*`` methods recompute it)."""
+        return self.data.qacc[self._qvel_adr : self._qvel_adr + 3].copy()
+
+    @property
+    def angular_acceleration_b(self) -> np.ndarray:
+        """(3,) time derivative of ``angular_velocity_b``, body axes, rad/s^2 (the free
+        joint's ``qacc[3:6]``)."""
+        return self.data.qacc[self._qvel_adr + 3 : self._qvel_adr + 6].copy()
+
     # ------------------------------------------------------------------ state
     def set_pose(self, T_w_b: np.ndarray) -> None:
         """Place the body kinematically: write the free joint, zero its velocity, forward.
@@ -405,14 +448,16 @@ class World:
         (undoing ``set_camera_position_b``): the state of a world just built from its config."""
         self.model.cam_pos[self.camera_id] = self._cam_pos0
         self._T_b_c = self.config.camera.T_b_c
+        self.on_step = None
         mujoco.mj_resetData(self.model, self.data)
         mujoco.mj_forward(self.model, self.data)
 
     def step(self, n: int = 1) -> None:
         """Advance the physics by ``n`` time steps.
 
-        Afterwards every derived quantity (``T_w_b``, camera poses, what is rendered) is that
-        of the new state at ``time_s``.
+        Afterwards every derived quantity (``T_w_b``, camera poses, what is rendered, the
+        sensors and accelerations under the current controls) is that of the new state at
+        ``time_s``; then ``on_step`` is called, if set.
 
         Raises
         ------
@@ -441,6 +486,8 @@ class World:
         # mj_step leaves xpos/xmat/cam_xpos (what T_w_b reports and the renderer draws) at the
         # state before its integration; recompute them for the current qpos and time.
         mujoco.mj_forward(m, d)
+        if self.on_step is not None:
+            self.on_step(self)
 
     def _check_state(self) -> None:
         """Raise SimulationError naming the time and cause on a NaN/inf or exploding state."""

@@ -15,6 +15,7 @@ from scenarios.run.records import (
     CalibrationRecord,
     Contact,
     DetectionRecord,
+    ImuRecord,
     NavigationRecord,
     RunResult,
     TickRecord,
@@ -108,6 +109,8 @@ def run() -> RunResult:
             min_clearance_m=0.25,
             final_distance_m=3.5,
         ),
+        # An IMU whose sensors were at most 3e-15 (relative) from vnav.imu's chain.
+        imu=ImuRecord(np.zeros(2), np.zeros((2, 3)), np.zeros((2, 3)), 3e-15, 2),
         calibration=CalibrationRecord(
             np.eye(4),
             0.03,
@@ -198,6 +201,8 @@ FIGURES = {
     "no_collision": 1.0,
     "collision": 1.0,
     "min_clearance": 0.25,
+    # the run's IMU record, as given
+    "imu_consistent": 3e-15,
 }
 
 
@@ -237,6 +242,9 @@ def test_a_check_with_nothing_to_judge_has_no_data_and_fails(run: RunResult) -> 
         result = checks.judge(check_kinds.Check(kind, 1.0), empty)
         assert result.outcome is checks.Outcome.NO_DATA, kind
         assert result.reason == 'the flight does not navigate (flight.mode is not "navigate")'
+    result = checks.judge(check_kinds.Check("imu_consistent", 1e-6), empty)
+    assert result.outcome is checks.Outcome.NO_DATA
+    assert result.reason == "the scenario declares no [imu]"
     for kind in ("max_error", "median_error", "detection_rate", "tracking_error"):
         result = checks.judge(check_kinds.Check(kind, 1e9), empty)
         assert result.value is None and result.outcome is checks.Outcome.NO_DATA, kind
@@ -323,7 +331,7 @@ def test_world_spread_without_motion_in_the_camera_has_no_data() -> None:
 
 
 def _numbers(text: str) -> list[float]:
-    return [float(x) for x in re.findall(r"-?\d+(?:\.\d+)?", text)]
+    return [float(x) for x in re.findall(r"-?\d+(?:\.\d+)?(?:e[-+]?\d+)?", text)]
 
 
 @pytest.mark.parametrize(
@@ -334,6 +342,7 @@ def _numbers(text: str) -> list[float]:
         ("naive_worse", "x (must be >= "),
         ("gimbal_lock_seen", " (must be >= "),
         ("matched_cones", " (must be >= "),
+        ("imu_consistent", "e-15 (must be <= "),
     ],
 )
 def test_shown_values_carry_units_next_to_the_limit(run: RunResult, kind: str, unit_text: str):

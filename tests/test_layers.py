@@ -140,6 +140,8 @@ def test_no_import_circle():
         # Replanned at every camera tick: pure geometry, numpy only.
         ("vnav.obstacle_map", ("mujoco", "rerun", "cv2", "scipy")),
         ("vnav.navigate", ("mujoco", "rerun", "cv2", "scipy")),
+        # The IMU's chain, noise and Allan deviation: numpy only (MuJoCo's sensors are sim's).
+        ("vnav.imu", ("mujoco", "rerun", "cv2", "scipy")),
         ("scenarios.scenario.spec", ("mujoco", "rerun")),
         ("scenarios.scenario.builtin", ("mujoco", "rerun")),
         ("scenarios.run.records", ("mujoco", "rerun")),

@@ -192,6 +192,8 @@ def _in_unit(x: float, unit: Unit) -> str:
         return f"{_number(x)} deg"
     if unit is Unit.SECONDS:
         return f"{_number(1e3 * x)} ms"
+    if unit is Unit.RELATIVE:
+        return f"{x:.2g}"  # 4.2e-15: the decimals of _number would show 0
     return _number(x)  # counts (integers print as integers)
 
 
@@ -602,3 +604,12 @@ def _min_clearance(run: RunResult, check: Check) -> float | NoData:
     """smallest true distance between the drone's and a cone's geometry >= limit_m"""
     nav = _navigation(run)
     return nav if isinstance(nav, NoData) else nav.min_clearance_m
+
+
+@figure("imu_consistent")
+def _imu_consistent(run: RunResult, check: Check) -> float | NoData:
+    """largest relative difference, over every physics step, between MuJoCo's noise-free IMU
+    sensors and vnav.imu's specific force and rate from the body's motion <= limit"""
+    if run.imu is None:
+        return NoData("the scenario declares no [imu]")
+    return run.imu.max_discrepancy

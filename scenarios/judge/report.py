@@ -24,6 +24,7 @@ import numpy as np
 
 from scenarios.judge.checks import CheckResult
 from scenarios.run.records import RunResult
+from scenarios.scenario.check_kinds import Unit
 from vnav import metrics
 from vnav.methods import NEWEST_POSE_METHOD, Method, active_methods
 from vnav.uncertainty import nees_band
@@ -91,6 +92,16 @@ def _finite_or_none(value: float) -> float | int | None:
     return None if not math.isfinite(value) else round(float(value), 9)
 
 
+def _check_value(c: CheckResult) -> float | int | None:
+    """A check's figure for the report: to 9 decimals, or to 9 significant digits for a
+    relative error, whose meaning is its exponent (1e-15 would round to 0)."""
+    if c.value is None:
+        return None
+    if c.unit is Unit.RELATIVE and math.isfinite(c.value):
+        return float(f"{c.value:.9g}")
+    return _finite_or_none(c.value)
+
+
 RANGE_BINS_M = (0.0, 5.0, 10.0, 15.0, 20.0, 25.0, 30.0, math.inf)
 """Edges of the range bins of the error-against-range statistics, metres."""
 
@@ -138,19 +149,38 @@ def build(
         "camera_mount_error": dataclasses.asdict(spec.scene.camera.mount_error),
         "pose_lookup": pose_lookup(run),
         "calibration": _calibration(run),
-        "checks": [
-            {**c.as_dict(), "value": None if c.value is None else _finite_or_none(c.value)}
-            for c in checks
-        ],
+        "checks": [{**c.as_dict(), "value": _check_value(c)} for c in checks],
         "recording": recording,
         "timing_s": {k: round(v, 4) for k, v in run.timing_s.items()},
     }
     if run.navigation is not None:  # only a navigating flight: other reports are unchanged
         out["navigation"] = navigation(run)
+    if run.imu is not None:  # only with an [imu]: other reports are unchanged
+        out["imu"] = imu_summary(run)
     users = [m for m in active_methods() if m.images == "user"]
     if users:  # only with a user's function: a built-in run's report is unchanged
         out["estimators"] = {m.name: estimator_summary(run, m) for m in users}
     return out
+
+
+def imu_summary(run: RunResult) -> dict[str, Any]:
+    """The scenario's IMU (``[imu]``): its declared and true mounts, clock offset, rate and
+    noise figures, the readings taken, and how closely MuJoCo's noise-free sensors followed
+    ``vnav.imu``'s chain (``max_discrepancy``, relative, over ``steps_checked`` physics
+    states)."""
+    imu, record = run.spec.scene.imu, run.imu
+    assert imu is not None and record is not None
+    return {
+        "rate_hz": imu.rate_hz,
+        "readings": len(record.t_s),
+        "time_offset_s": imu.time_offset_s,
+        "noise": dataclasses.asdict(imu.noise),
+        "mount_error": dataclasses.asdict(imu.mount_error),
+        "T_b_i_declared": imu.T_b_i_declared.tolist(),
+        "T_b_i": imu.T_b_i.tolist(),
+        "max_discrepancy": record.max_discrepancy,
+        "steps_checked": record.steps_checked,
+    }
 
 
 def _names() -> list[str]:

@@ -26,6 +26,7 @@ __all__ = [
     "Contact",
     "DetectionRecord",
     "ImageTiming",
+    "ImuRecord",
     "NavigationRecord",
     "NavigationTick",
     "PoseStream",
@@ -375,6 +376,34 @@ class NavigationRecord:
         return self.contact is not None
 
 
+@dataclass(frozen=True)
+class ImuRecord:
+    """What a scenario's IMU read over the run (``[imu]``; ``sim.imu.ImuSampler``), and how
+    closely MuJoCo's noise-free sensors followed ``vnav.imu``'s chain.
+
+    Attributes
+    ----------
+    t_s : ndarray, shape (N,)
+        Each reading's stamp on the IMU's clock, seconds (``t_imu = t_cam + time_offset_s``).
+    accel_i : ndarray, shape (N, 3)
+        Specific force in the IMU frame, m/s^2, noise and bias included.
+    gyro_i : ndarray, shape (N, 3)
+        Angular rate in the IMU frame, rad/s, noise and bias included.
+    max_discrepancy : float
+        The largest relative difference between MuJoCo's noise-free sensors and
+        ``vnav.imu.specific_force_i`` / ``angular_rate_i`` fed the body's true motion
+        (``sim.imu.imu_discrepancy``), over every physics step of the run.
+    steps_checked : int
+        The physics states compared (the start and every step after it).
+    """
+
+    t_s: np.ndarray
+    accel_i: np.ndarray
+    gyro_i: np.ndarray
+    max_discrepancy: float
+    steps_checked: int
+
+
 @dataclass
 class RunResult:
     """Everything a finished run produced, before it is judged and written.
@@ -400,6 +429,8 @@ class RunResult:
         (``scenarios.pipeline``).
     navigation : NavigationRecord or None
         A navigating flight's plans and outcome (None for any other flight).
+    imu : ImuRecord or None
+        The IMU's readings, for a scenario that declares ``[imu]`` (None otherwise).
     """
 
     spec: ScenarioSpec
@@ -409,6 +440,7 @@ class RunResult:
     poses: PoseStream | None = None
     calibration: CalibrationRecord | None = None
     navigation: NavigationRecord | None = None
+    imu: ImuRecord | None = None
 
     @property
     def cones_w(self) -> np.ndarray:

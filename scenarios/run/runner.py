@@ -34,7 +34,7 @@ import numpy as np
 
 from scenarios.run.evaluate import TickTruth, evaluate_tick
 from scenarios.run.navigation import Navigator
-from scenarios.run.records import ImageTiming, PoseStream, RunResult, TickRecord
+from scenarios.run.records import ImageTiming, ImuRecord, PoseStream, RunResult, TickRecord
 from scenarios.run.streams import BODY, WORLD, Delivered, Receiver, Streams
 from scenarios.scenario.spec import (
     ControlledFlight,
@@ -51,6 +51,7 @@ from sim.flight import (
     OrbitTrajectory,
     ReferenceFollower,
 )
+from sim.imu import ImuReading, ImuSampler, imu_discrepancy
 from sim.mesh import Scenery, scenery
 from sim.noise import mount_error, noisy_depth, noisy_pose, noisy_rgb
 from sim.render import Renderer
@@ -228,8 +229,47 @@ def _run_ticks(
     timing["clearance"] += flow.clearance_s
     timing["streams"] += flow.streams_s
     result.poses = flow.pose_stream()
+    if flow.imu is not None:
+        world.on_step = None
+        result.imu = flow.imu.record()
     if flow.navigator is not None:
         result.navigation = flow.navigator.record
+
+
+class _Imu:
+    """The scenario's IMU (``[imu]``), read at the start and after every physics step
+    (``World.on_step``): a reading when one is due, and the noise-free sensors compared with
+    ``vnav.imu``'s chain at every step."""
+
+    def __init__(self, spec: ScenarioSpec, world: World, seq: np.random.SeedSequence) -> None:
+        imu = spec.scene.imu
+        assert imu is not None
+        # t_imu = t_cam + time_offset_s (Kalibr) and t_sim = t_pose = t_cam + camera offset.
+        clock_offset_s = imu.time_offset_s - spec.timing.camera_clock_offset_s
+        self.sampler = ImuSampler(
+            imu, float(world.model.opt.timestep), np.random.default_rng(seq), clock_offset_s
+        )
+        self.readings: list[ImuReading] = []
+        self.max_discrepancy = 0.0
+        self.steps_checked = 0
+        self(world)  # the start, t = 0
+        world.on_step = self
+
+    def __call__(self, world: World) -> None:
+        self.max_discrepancy = max(self.max_discrepancy, imu_discrepancy(world))
+        self.steps_checked += 1
+        if self.sampler.due(world):
+            self.readings.append(self.sampler.sample(world))
+
+    def record(self) -> ImuRecord:
+        r = self.readings
+        return ImuRecord(
+            t_s=np.array([x.t_s for x in r]),
+            accel_i=np.array([x.accel_i for x in r]).reshape(-1, 3),
+            gyro_i=np.array([x.gyro_i for x in r]).reshape(-1, 3),
+            max_discrepancy=self.max_discrepancy,
+            steps_checked=self.steps_checked,
+        )
 
 
 @dataclass(frozen=True)
@@ -262,10 +302,11 @@ class _Flow:
         self.dt = float(world.model.opt.timestep)
         t = spec.timing
         # Independent streams of randomness: pose noise, arrival jitter, image and depth noise,
-        # the mount's error (children 0 and 1 are those of runs before the others existed).
-        noise_seq, jitter_seq, image_seq, depth_seq, mount_seq = np.random.SeedSequence(seed).spawn(
-            5
-        )
+        # the mount's error, the IMU's noise (children 0 and 1 are those of runs before the
+        # others existed; a SeedSequence's first children do not depend on how many it spawns).
+        noise_seq, jitter_seq, image_seq, depth_seq, mount_seq, imu_seq = np.random.SeedSequence(
+            seed
+        ).spawn(6)
         self._noise_rng = np.random.default_rng(noise_seq)
         self.image_rng = np.random.default_rng(image_seq)
         self.depth_rng = np.random.default_rng(depth_seq)
@@ -301,6 +342,7 @@ class _Flow:
         self._sent: list[np.ndarray] = []
         self._arrivals: list[float] = []
         self._sample()  # the first pose, at t = 0
+        self.imu = None if spec.scene.imu is None else _Imu(spec, world, imu_seq)
 
     def step_of(self, t_s: float) -> int:
         """The physics step nearest ``t_s``."""

@@ -32,6 +32,8 @@ class Unit(enum.Enum):
     """An error over the method's accuracy bound at its range (1: at the bound)."""
     DEGREES = "deg"
     SECONDS = "s"
+    RELATIVE = "relative error"
+    """A difference over the magnitude it is measured against (1e-6: a millionth)."""
 
 
 _LIMIT_UNIT_DOC = {
@@ -42,6 +44,7 @@ _LIMIT_UNIT_DOC = {
     Unit.BOUND: "times the method's accuracy bound (1: the bound)",
     Unit.DEGREES: "degrees",
     Unit.SECONDS: "seconds",
+    Unit.RELATIVE: "a relative error (1e-6: a millionth)",
 }
 
 
@@ -233,6 +236,14 @@ KINDS: dict[str, CheckKind] = _kinds(
         Unit.METRES,
         False,
         "smallest true distance between the drone's and a cone's geometry >= limit_m",
+    ),
+    CheckKind(
+        "imu_consistent",
+        _AT_MOST,
+        Unit.RELATIVE,
+        False,
+        "largest relative difference, over every physics step, between MuJoCo's noise-free "
+        "IMU sensors and vnav.imu's specific force and rate from the body's motion <= limit",
     ),
 )
 """Every check kind, by name. Its figure is ``scenarios.judge.checks.FIGURES[name]``."""

@@ -7,8 +7,8 @@ identical). Units are in the key's name where it could be misread (``_m``, ``_de
 ``_hz``, ``_grey``); degrees become radians once, in ``scenarios.scenario.spec`` (the noise
 figures' in ``vnav.noise_model.NoiseModel``). Where a typed declaration already exists, its
 keys are derived from it: ``[camera]`` from ``sim.config.CameraConfig``, ``[noise]`` from
-``vnav.noise_model.NoiseModel``. A key renamed since an earlier version (``RENAMED``) is
-refused with its new name.
+``vnav.noise_model.NoiseModel``, ``[imu]``'s defaults from ``sim.config.ImuConfig``. A key
+renamed since an earlier version (``RENAMED``) is refused with its new name.
 """
 
 from __future__ import annotations
@@ -18,8 +18,17 @@ from dataclasses import dataclass, fields
 from typing import Any
 
 from scenarios.scenario.check_kinds import KINDS
-from sim.config import MAX_FOVY_DEG, MIN_FOVY_DEG, CameraConfig
+from sim.config import (
+    MAX_FOVY_DEG,
+    MAX_IMU_POSITION_M,
+    MAX_IMU_RATE_HZ,
+    MAX_IMU_TIME_OFFSET_S,
+    MIN_FOVY_DEG,
+    CameraConfig,
+    ImuConfig,
+)
 from vnav.diagnose import hypothesis_names
+from vnav.imu import MAX_NOISE_DENSITY
 from vnav.methods import METHOD_NAMES, PREFERENCE
 from vnav.noise_model import FIGURES, NOISELESS
 
@@ -29,6 +38,8 @@ __all__ = [
     "CONE",
     "ESTIMATE_MISTAKES",
     "FLIGHT_MODES",
+    "IMU",
+    "IMU_MOUNT_ERROR",
     "KEYFRAME",
     "NOISE",
     "RENAMED",
@@ -236,6 +247,7 @@ TOP: tuple[Key, ...] = (
         MAX_S,
     ),
     Key("camera", "table", "table: the onboard camera", None),
+    Key("imu", "table", "table: an IMU on its own mount, its clock and noise (optional)", None),
     Key("cones", "tables", "array of tables: the cones", REQUIRED),
     Key("flight", "table", "table: how the drone flies", REQUIRED),
     Key("noise", "table", "table: sensor noise (pose, image, depth, camera mount)", None),
@@ -293,6 +305,82 @@ MOUNT_ERROR: tuple[Key, ...] = (
     ),
 )
 """``[camera.mount_error]``: ``sim.config.MountError``."""
+
+_IMU_DEFAULT = ImuConfig()
+_IMU_NOISE_DOCS = {
+    "accelerometer_noise_density": "accelerometer white noise density, m/s^2/sqrt(Hz)",
+    "accelerometer_random_walk": "accelerometer bias random walk, m/s^3/sqrt(Hz)",
+    "gyroscope_noise_density": "gyroscope white noise density, rad/s/sqrt(Hz)",
+    "gyroscope_random_walk": "gyroscope bias random walk, rad/s^2/sqrt(Hz)",
+}
+IMU: tuple[Key, ...] = (
+    Key(
+        "rate_hz",
+        "number",
+        "readings per second, at most the physics rate, Hz",
+        _IMU_DEFAULT.rate_hz,
+        0.0,
+        MAX_IMU_RATE_HZ,
+        True,
+    ),
+    Key(
+        "position_b",
+        "vector3",
+        "declared IMU origin on the body (x forward, y left, z up), m",
+        _IMU_DEFAULT.position_b,
+        -MAX_IMU_POSITION_M,
+        MAX_IMU_POSITION_M,
+    ),
+    Key(
+        "rpy_deg",
+        "vector3",
+        "declared IMU axes on the body, R_b_i = Rz(yaw) Ry(pitch) Rx(roll), "
+        "[roll, pitch, yaw], deg",
+        _IMU_DEFAULT.rpy_deg,
+        -360.0,
+        360.0,
+    ),
+    Key(
+        "mount_error",
+        "table",
+        "table: the true mount = the declared one above, then this error (IMU frame)",
+        None,
+    ),
+    Key(
+        "time_offset_s",
+        "number",
+        "camera-IMU clock offset (Kalibr's timeshift_cam_imu): t_imu = t_cam + offset, s",
+        _IMU_DEFAULT.time_offset_s,
+        -MAX_IMU_TIME_OFFSET_S,
+        MAX_IMU_TIME_OFFSET_S,
+    ),
+    *(
+        Key(name, "number", doc, getattr(_IMU_DEFAULT, name), 0.0, MAX_NOISE_DENSITY)
+        for name, doc in _IMU_NOISE_DOCS.items()
+    ),
+)
+"""``[imu]``: ``sim.config.ImuConfig``, whose defaults these are (a perfect IMU at the body
+origin, along the body's axes, at 200 Hz); the noise figures are Kalibr's, in its units."""
+
+IMU_MOUNT_ERROR: tuple[Key, ...] = (
+    Key(
+        "position_m",
+        "vector3",
+        "translation in the IMU frame, m",
+        (0.0, 0.0, 0.0),
+        -1.0,
+        1.0,
+    ),
+    Key(
+        "rpy_deg",
+        "vector3",
+        "rotation about the IMU's axes, [roll, pitch, yaw], deg",
+        (0.0, 0.0, 0.0),
+        -45.0,
+        45.0,
+    ),
+)
+"""``[imu.mount_error]``: ``sim.config.MountError``, in the IMU's frame."""
 
 CONE: tuple[Key, ...] = (
     Key("position_w", "vector3", "base centre in the world, z = 0, m", REQUIRED, -MAX_M, MAX_M),
@@ -441,6 +529,8 @@ def comment(path: str, table: dict[str, Any] | None = None) -> str | None:
         "": TOP,
         "camera": CAMERA,
         "camera.mount_error": MOUNT_ERROR,
+        "imu": IMU,
+        "imu.mount_error": IMU_MOUNT_ERROR,
         "noise": NOISE,
         "timing": TIMING,
         "flight": tuple(k for mode in FLIGHT_MODES.values() for k in mode),

@@ -25,7 +25,7 @@ import numpy as np
 
 from scenarios.scenario import schema
 from scenarios.scenario.check_kinds import KINDS, Check, Unit
-from sim.config import CameraConfig, SceneConfig
+from sim.config import CameraConfig, ImuConfig, SceneConfig
 from vnav import quat, so3
 from vnav.methods import METHODS, method
 from vnav.noise_model import NOISELESS, NoiseModel
@@ -425,6 +425,41 @@ def _camera(table: Any, where: str) -> CameraConfig:
         raise _err(where, "camera", str(exc)) from None
 
 
+def _imu(table: Any, flight: Any, where: str) -> ImuConfig | None:
+    """``[imu]`` and its optional ``[imu.mount_error]``; None without ``[imu]``.
+
+    A kinematic flight is refused: it places the body pose by pose, with no accelerations for
+    an accelerometer to read."""
+    if table is None:
+        return None
+    imu_table = _read(table, schema.IMU, where, "imu")
+    if imu_table["mount_error"] is None:
+        del imu_table["mount_error"]
+    else:
+        imu_table["mount_error"] = _read(
+            imu_table["mount_error"], schema.IMU_MOUNT_ERROR, where, "imu.mount_error"
+        )
+    if isinstance(flight, KinematicFlight):
+        raise _err(
+            where,
+            "imu",
+            'needs a flight with dynamics ("controlled", "orbit" or "navigate"): a kinematic '
+            "flight is placed pose by pose, with no accelerations to read",
+        )
+    physics_hz = 1.0 / SceneConfig.timestep_s
+    if imu_table["rate_hz"] > physics_hz + 1e-9:
+        raise _err(
+            where,
+            "imu.rate_hz",
+            f"must be at most the physics rate, {physics_hz:g} Hz (one reading per physics "
+            f"step), got {imu_table['rate_hz']:g}",
+        )
+    try:
+        return ImuConfig.from_dict(imu_table)
+    except ValueError as exc:
+        raise _err(where, "imu", str(exc)) from None
+
+
 def _at_most_physics_rate(
     physics_hz: float, camera_rate_hz: float, timing: Timing, where: str
 ) -> None:
@@ -472,6 +507,7 @@ def from_dict(data: dict[str, Any], where: str = "<scenario>") -> ScenarioSpec:
     camera = _camera(top["camera"], where)
     cones_w = _cones(top["cones"], where)
     flight = _flight(top["flight"], where)
+    imu = _imu(top["imu"], flight, where)
     start_position_w, start_quat_xyzw = _start_pose(flight)
     try:
         scene = SceneConfig(
@@ -479,6 +515,7 @@ def from_dict(data: dict[str, Any], where: str = "<scenario>") -> ScenarioSpec:
             cones_w=tuple(cones_w),
             start_position_w=start_position_w,
             start_quat_xyzw=start_quat_xyzw,
+            imu=imu,
         )
     except ValueError as exc:
         raise _err(where, "cones", str(exc)) from None

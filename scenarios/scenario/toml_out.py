@@ -106,7 +106,8 @@ def complete(data: dict[str, Any]) -> dict[str, Any]:
     values, the defaults of the keys left out, and ``OMITTED`` for an optional key without a
     default. It parses to the same scenario as ``data``.
 
-    Every table's keys (``[camera]`` and its ``mount_error``, ``[flight]`` for its mode,
+    Every table's keys (``[camera]`` and its ``mount_error``, ``[imu]`` and its
+    ``mount_error`` if the scenario has an IMU, ``[flight]`` for its mode,
     ``[noise]``, ``[timing]``, each cone), and each check's that apply to its kind. The inline
     tables of ``flight.keyframes`` and ``flight.waypoints`` are kept as given (their keys are
     named in the list's comment).
@@ -115,6 +116,10 @@ def complete(data: dict[str, Any]) -> dict[str, Any]:
     camera = data.get("camera") or {}
     out["camera"] = _filled(camera, schema.CAMERA)
     out["camera"]["mount_error"] = _filled(camera.get("mount_error") or {}, schema.MOUNT_ERROR)
+    imu = data.get("imu")
+    if isinstance(imu, dict):  # optional: a scenario without one has none
+        out["imu"] = _filled(imu, schema.IMU)
+        out["imu"]["mount_error"] = _filled(imu.get("mount_error") or {}, schema.IMU_MOUNT_ERROR)
     flight = data["flight"]
     mode_keys = schema.FLIGHT_MODES.get(flight.get("mode"), ())
     out["flight"] = {"mode": flight.get("mode"), **_filled(flight, mode_keys)}

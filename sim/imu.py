@@ -1,0 +1,164 @@
+"""The simulated IMU: MuJoCo's accelerometer and gyro at the IMU site, sampled with noise.
+
+The site sits at the IMU's true mount (``sim.config.ImuConfig.T_b_i``, placed by
+``sim.world.build_spec``). MuJoCo's ``accelerometer`` reads the specific force at the site in
+the site frame (``+g`` up at rest: its spatial accelerations ``cacc``, computed by
+``mj_rnePostConstraint`` during the sensor stage, start from the negated gravity), its
+``gyro`` the angular velocity in the site frame; ``vnav.imu.specific_force_i`` and
+``vnav.imu.angular_rate_i`` give the same from the body's motion (``imu_discrepancy``, to
+about 1e-15).
+
+``ImuSampler`` takes reading ``j`` after the physics step nearest ``j / rate_hz`` (as the
+pose stream samples the state), adds the noise of ``vnav.imu.ImuNoiseProcess`` (Kalibr's
+model: white noise and a bias random walk per axis, from the run's seed), and stamps it on the
+IMU's clock.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from sim.config import ImuConfig
+from sim.world import World
+from vnav.imu import ImuNoiseProcess, angular_rate_i, specific_force_i
+
+__all__ = [
+    "ACCEL_SCALE_M_S2",
+    "GYRO_SCALE_RAD_S",
+    "ImuReading",
+    "ImuSampler",
+    "imu_discrepancy",
+    "mujoco_imu_i",
+]
+
+ACCEL_SCALE_M_S2 = 1.0
+"""Below this magnitude an accelerometer discrepancy is measured absolutely (m/s^2)."""
+GYRO_SCALE_RAD_S = 1.0
+"""Below this magnitude a gyro discrepancy is measured absolutely (rad/s)."""
+
+
+@dataclass(frozen=True)
+class ImuReading:
+    """One IMU reading.
+
+    Attributes
+    ----------
+    t_s : float
+        The stamp, on the IMU's clock, seconds.
+    accel_i : ndarray, shape (3,)
+        Specific force in the IMU frame, m/s^2 (noise and bias included).
+    gyro_i : ndarray, shape (3,)
+        Angular rate in the IMU frame, rad/s (noise and bias included).
+    """
+
+    t_s: float
+    accel_i: np.ndarray
+    gyro_i: np.ndarray
+
+
+def mujoco_imu_i(world: World) -> tuple[np.ndarray, np.ndarray]:
+    """MuJoCo's own accelerometer and gyro at the IMU site, now (noise-free).
+
+    Returns
+    -------
+    accel_i : ndarray, shape (3,)
+        m/s^2, site (IMU) axes.
+    gyro_i : ndarray, shape (3,)
+        rad/s, site (IMU) axes.
+    """
+    data = world.data.sensordata
+    a, g = world.imu_accel_adr, world.imu_gyro_adr
+    return data[a : a + 3].copy(), data[g : g + 3].copy()
+
+
+def imu_discrepancy(world: World) -> float:
+    """How far MuJoCo's sensors are from ``vnav.imu``'s chain, now: the larger of the two
+    relative errors ``|mujoco - vnav| / max(|mujoco|, scale)`` (scale: ``ACCEL_SCALE_M_S2``,
+    ``GYRO_SCALE_RAD_S``; absolute below it, where a relative error means nothing).
+
+    The chain is fed the body's true motion (``T_w_b``, ``acceleration_w``,
+    ``angular_velocity_b``, ``angular_acceleration_b``), the site's mount ``world.T_b_i`` and
+    the model's gravity.
+    """
+    accel_i, gyro_i = mujoco_imu_i(world)
+    T_b_i = world.T_b_i
+    f_i = specific_force_i(
+        world.T_w_b,
+        T_b_i,
+        world.acceleration_w,
+        world.angular_velocity_b,
+        world.angular_acceleration_b,
+        gravity_w=world.model.opt.gravity,
+    )
+    omega_i = angular_rate_i(T_b_i, world.angular_velocity_b)
+    e_a = np.linalg.norm(accel_i - f_i) / max(float(np.linalg.norm(accel_i)), ACCEL_SCALE_M_S2)
+    e_g = np.linalg.norm(gyro_i - omega_i) / max(float(np.linalg.norm(gyro_i)), GYRO_SCALE_RAD_S)
+    return float(max(e_a, e_g))
+
+
+class ImuSampler:
+    """The IMU of a ``World``: readings at ``config.rate_hz``, with noise, on the IMU's clock.
+
+    Parameters
+    ----------
+    config : ImuConfig
+        Rate and noise figures (the mount is the world's: its site).
+    timestep_s : float
+        The physics step, seconds (``world.model.opt.timestep``).
+    rng : numpy.random.Generator
+        The noise's draws (from the run's seed).
+    clock_offset_s : float
+        ``t_imu = t_sim + clock_offset_s``: how the simulator's time reads on the IMU's clock.
+        With the camera's ``t_pose = t_cam + camera_clock_offset_s`` (the pose clock being the
+        simulator's) and Kalibr's ``t_imu = t_cam + time_offset_s``, it is
+        ``time_offset_s - camera_clock_offset_s``.
+
+    Raises
+    ------
+    ValueError
+        If the rate exceeds the physics rate, or an argument has the wrong type.
+    """
+
+    def __init__(
+        self,
+        config: ImuConfig,
+        timestep_s: float,
+        rng: np.random.Generator,
+        clock_offset_s: float = 0.0,
+    ) -> None:
+        if not isinstance(config, ImuConfig):
+            raise ValueError(f"config must be an ImuConfig, got {type(config).__name__}")
+        if not timestep_s > 0.0:
+            raise ValueError(f"timestep_s must be > 0, got {timestep_s!r}")
+        if config.rate_hz > 1.0 / timestep_s + 1e-9:
+            raise ValueError(
+                f"config.rate_hz ({config.rate_hz:g} Hz) must be at most the physics rate, "
+                f"{1.0 / timestep_s:g} Hz"
+            )
+        self.config = config
+        self.timestep_s = float(timestep_s)
+        self.clock_offset_s = float(clock_offset_s)
+        self.process = ImuNoiseProcess(config.noise, 1.0 / config.rate_hz, rng)
+        self.count = 0
+        """Readings taken so far (the next one is reading ``count``)."""
+
+    @property
+    def next_step(self) -> int:
+        """The physics step after which the next reading is due: nearest ``count / rate_hz``."""
+        return round(self.count / self.config.rate_hz / self.timestep_s)
+
+    def due(self, world: World) -> bool:
+        """Whether the world's current physics step is the next reading's."""
+        return round(world.time_s / self.timestep_s) >= self.next_step
+
+    def sample(self, world: World) -> ImuReading:
+        """The next reading, from the world's state now: MuJoCo's sensors plus the noise."""
+        accel_i, gyro_i = mujoco_imu_i(world)
+        if not self.config.noise.is_zero:
+            da, dg = self.process.next()
+            accel_i += da
+            gyro_i += dg
+        self.count += 1
+        return ImuReading(world.time_s + self.clock_offset_s, accel_i, gyro_i)
