@@ -23,6 +23,7 @@ from scenarios.record.viewer import (
     NEWEST_POSE_COLOR,
     PIN_COLOR,
     PIN_TOP_M,
+    PLAN_COLOR,
     RAY_COLOR,
     RECOVERED_MOUNT_COLOR,
     TRUTH_COLOR,
@@ -68,8 +69,10 @@ def _names_w(run) -> dict[str, np.ndarray]:
     middle, a point's at the point."""
     rrd = run.rrd
     tick = _moment(rrd)["camera_tick"]
-    (body_row,) = [r for r in read_rows(rrd, entity.BODY) if r.get("tick") == tick]
-    T_w_b = _pose(body_row)
+    # The viewer shows each entity's latest row at or before the moment (a navigating
+    # flight's contact is after the last tick).
+    body_rows = [r for r in read_rows(rrd, entity.BODY) if r.get("tick", tick + 1) <= tick]
+    T_w_b = _pose(max(body_rows, key=lambda r: r["tick"]))
     mount_rows = [r for r in read_rows(rrd, entity.CAMERA) if r.get("Transform3D:translation")]
     at_tick = [r for r in mount_rows if r.get("tick") == tick]
     T_b_c = _pose(at_tick[0] if at_tick else mount_rows[0])
@@ -99,19 +102,36 @@ def _names_w(run) -> dict[str, np.ndarray]:
         for label, p in zip(_static(rrd, path, "Points3D:labels"), points, strict=True):
             if label:
                 names[label] = se3.apply(T_w_f, p)
+    # A navigating flight's goal (static) and contact (from its time on), in the world frame.
+    labelled = [r for r in read_rows(rrd, entity.NAV_GOAL) if "Points3D:labels" in r]
+    labelled += [
+        r
+        for r in read_rows(rrd, entity.NAV_CONTACT)
+        if "Points3D:labels" in r and r.get("tick", tick) <= tick
+    ]
+    for row in labelled:
+        for label, p in zip(row["Points3D:labels"], row["Points3D:positions"], strict=True):
+            if label:
+                names[label] = np.array(p)
     return names
 
 
 @pytest.mark.parametrize("name", NAMES)
 def test_names_in_the_3d_views_do_not_pile_up(builtin_runs, name):
-    """Every name drawn in 3D (world, body, camera, cone 0 and, calibrated, the two mounts)
-    stands at least ``NAME_SPACING_M`` from every other at the instant the views show; the
-    cones' truth points carry none (eight of them from afar were one blot)."""
+    """Every name drawn in 3D (world, body, camera, cone 0 and, calibrated, the two mounts;
+    navigating, the goal and the contact) stands at least ``NAME_SPACING_M`` from every other
+    at the instant the views show; the cones' truth points carry none (eight of them from afar
+    were one blot)."""
     run = builtin_runs[name]
     names = _names_w(run)
     assert {"world", "body", "camera", "cone 0"} <= set(names)
     if run.spec.checks_calibration:
         assert {"declared", "recovered"} <= set(names)
+    if run.result.navigation is not None:
+        assert "goal" in names
+        contact = run.result.navigation.contact
+        if contact is not None:
+            assert f"contact, t = {contact.t_s:.2f} s" in names
     for (a, p), (b, q) in itertools.combinations(names.items(), 2):
         assert np.linalg.norm(p - q) >= NAME_SPACING_M, (a, b, p, q)
     assert _static(run.rrd, entity.TRUTH, "Points3D:labels") is None
@@ -181,6 +201,7 @@ def test_legend_shows_every_colour_of_the_3d_views(builtin_runs, name):
     assert _has_colour(rgb, NEWEST_POSE_COLOR) == run.spec.timing.delivers_late
     for colour in (DECLARED_MOUNT_COLOR, RECOVERED_MOUNT_COLOR):
         assert _has_colour(rgb, colour) == run.spec.checks_calibration
+    assert _has_colour(rgb, PLAN_COLOR) == (run.result.navigation is not None)
 
 
 def test_nees_above_the_plots_top_is_marked(builtin_runs):
@@ -219,10 +240,17 @@ def test_nees_marks_are_exactly_the_values_off_the_top():
 @pytest.mark.parametrize("name", NAMES)
 def test_moment_is_the_tick_at_show_at_s(builtin_runs, name):
     """The recording names the instant its 3D views are framed for (screenshots move the time
-    cursor there): the last tick at or before the scenario's ``show_at_s``, else the last."""
+    cursor there): the last tick at or before the scenario's ``show_at_s``, else the last
+    or, for a navigating flight that ended at a contact, the contact."""
     run = builtin_runs[name]
     moment = _moment(run.rrd)
     ticks = run.result.ticks
+    nav = run.result.navigation
+    if run.spec.show_at_s is None and nav is not None and nav.contact is not None:
+        # The contact falls after the last tick: it is logged at the tick after it.
+        assert moment["camera_tick"] == ticks[-1].tick + 1
+        assert moment["sim_time_s"] == pytest.approx(nav.contact.t_s)
+        return
     if run.spec.show_at_s is None:
         expected = ticks[-1]
     else:

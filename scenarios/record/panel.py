@@ -14,10 +14,14 @@ At the time cursor the recording shows, as numbers (VNAV lecture 1):
   was neither late nor stamped on another clock (a synchronous run), one line in the header;
 - in a calibrated run (``mount_lines``), the camera mount the estimator was told, the true
   one and the one calibration recovered, side by side, each with its error against the true
-  mount, and the clock offset, true and recovered.
+  mount, and the clock offset, true and recovered;
+- in a navigating flight (``navigation_lines``), the plan from the estimated position, the
+  map, the true clearance and distance from the nearest cone's axis, and the flight's outcome
+  (``navigation_outcome``: the collision, or the goal reached or not).
 
 All of it is the simulator's truth at that tick (the estimator's noisy pose is not shown),
-except the declared and recovered mounts, shown against it.
+except the declared and recovered mounts, shown against it, and the navigating drone's
+estimated position, map and plan, shown beside it.
 """
 
 from __future__ import annotations
@@ -26,11 +30,24 @@ import math
 
 import numpy as np
 
-from scenarios.run.records import CalibrationRecord, ImageTiming, TickRecord
+from scenarios.run.records import (
+    CalibrationRecord,
+    ImageTiming,
+    NavigationRecord,
+    NavigationTick,
+    TickRecord,
+)
 from vnav import quat, se3, so3
 from vnav.estimators import naive
 
-__all__ = ["SYNCHRONOUS_NOTE", "mount_lines", "state_text"]
+__all__ = [
+    "SYNCHRONOUS_NOTE",
+    "mount_lines",
+    "navigation_lines",
+    "navigation_outcome",
+    "nearest_axis_m",
+    "state_text",
+]
 
 
 def _number(x: float, decimals: int, width: int) -> str:
@@ -179,11 +196,87 @@ def mount_lines(calibration: CalibrationRecord, camera_clock_offset_s: float) ->
     ]
 
 
+def navigation_outcome(nav: NavigationRecord) -> str:
+    """How a navigating flight ended, in the words ``vnav-demo run`` prints: ``collision with
+    cone 0 at t = 5.15 s``, ``reached the goal at t = 10.12 s`` or ``did not reach the goal``
+    (with how far from it)."""
+    if nav.contact is not None:
+        return (
+            f"collision with cone {nav.contact.cone_index} at t = {nav.contact.t_s:.2f} s, at "
+            f"{_vector(nav.contact.point_w, 2, 6)} (MuJoCo's contact point)"
+        )
+    if nav.reached_goal_s is not None:
+        return f"reached the goal at t = {nav.reached_goal_s:.2f} s, no collision"
+    return f"did not reach the goal: {nav.final_distance_m:.2f} m from it at the end, no collision"
+
+
+def nearest_axis_m(p_w: np.ndarray, cones_w: np.ndarray) -> tuple[float, int]:
+    """The horizontal distance from ``p_w`` (3,) to the nearest cone's vertical axis, m, and
+    that cone's index, over the true cones' base centres ``cones_w`` (N, 3), N >= 1: what the
+    planner's ``clearance_m`` bounds from a mapped cone (docs/CONVENTIONS.md, "Navigation")."""
+    d_m = np.linalg.norm(np.asarray(cones_w)[:, :2] - np.asarray(p_w)[:2], axis=1)
+    i = int(np.argmin(d_m))
+    return float(d_m[i]), i
+
+
+def navigation_lines(
+    nav_tick: NavigationTick,
+    record: TickRecord,
+    nav: NavigationRecord,
+    cones_w: np.ndarray,
+    *,
+    estimate: str,
+    goal_w: np.ndarray,
+    clearance_m: float,
+    dropped: int = 0,
+) -> list[str]:
+    """The state panel's navigation block at one camera tick.
+
+    Parameters
+    ----------
+    nav_tick : NavigationTick
+        The tick's map and plan (the navigator's record of ``record``).
+    record : TickRecord
+        The same camera tick (its true body pose).
+    nav : NavigationRecord
+        The whole flight (its outcome).
+    cones_w : ndarray, shape (N, 3)
+        The true cones' base centres, m.
+    estimate : str
+        The method the map takes.
+    goal_w : ndarray, shape (3,)
+    clearance_m : float
+        What the planner keeps from each mapped cone's axis, m.
+    dropped : int
+        The estimates the map dropped up to this tick (``NavigationTick.rejected`` summed).
+    """
+    n = len(nav_tick.obstacles_w)
+    why = ""
+    if dropped:
+        why = f"; {dropped} estimate(s) dropped so far: base outside the flight band"
+    lines = [
+        f"navigate  plan {nav_tick.plan_length_m:.2f} m: estimated position "
+        f"{_vector(nav_tick.position_w_est, 2, 6)} -> goal {_vector(goal_w, 2, 6)}",
+        f"          {estimate}'s map: {n} cone{'' if n == 1 else 's'}{why}",
+    ]
+    if len(cones_w):
+        c = int(np.argmin(nav_tick.clearance_true_m))
+        axis_m, a = nearest_axis_m(record.T_w_b[:3, 3], cones_w)
+        lines += [
+            f"truth     clearance {nav_tick.clearance_true_m[c]:.3f} m to cone {c} (MuJoCo, "
+            "geometry to geometry; 0: contact)",
+            f"          drone centre {axis_m:.2f} m from cone {a}'s axis; the planner keeps "
+            f"{clearance_m:.2f} m from each mapped axis",
+        ]
+    return [*lines, f"outcome   {navigation_outcome(nav)}"]
+
+
 def state_text(
     record: TickRecord,
     quat_xyzw: np.ndarray,
     cone0_w: np.ndarray,
     mounts: list[str] | None = None,
+    navigation: list[str] | None = None,
 ) -> str:
     """Markdown for the state panel at one tick.
 
@@ -198,6 +291,9 @@ def state_text(
         Cone 0's true base centre in the world, metres.
     mounts : list of str, optional
         A calibrated run's mounts block (``mount_lines``), shown under the poses.
+    navigation : list of str, optional
+        A navigating flight's block at this tick (``navigation_lines``), shown under the
+        poses.
     """
     T_w_b, T_b_c = record.T_w_b, record.T_b_c
     T_w_c = T_w_b @ T_b_c
@@ -205,6 +301,8 @@ def state_text(
     lines = _side_by_side(names, [_matrix_rows(T) for T in (T_w_b, T_b_c, T_w_c)])
     if mounts is not None:
         lines += ["", *mounts]
+    if navigation is not None:
+        lines += ["", *navigation]
 
     p = record.coordinates_of(cone0_w)
     lines += [

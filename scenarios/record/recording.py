@@ -56,7 +56,8 @@ docs/CONVENTIONS.md; "in F" is the named transform frame an entity is drawn in):
     plots/depth_scale              the depth colour scale, logged at the end (static)
     plots/legend                   the 3D views' colours named, an image (static)
     moment                         AnyValues (static): camera_tick and sim_time_s the 3D views
-                                   are framed for (scenario's show_at_s, else the last tick)
+                                   are framed for (scenario's show_at_s, else the last tick;
+                                   a navigating flight's contact, ``viewer.moment``)
     description                    TextDocument (markdown), logged again at the end with
                                    every check's verdict and what calibration recovered
     estimator/pose_stream          sim_time only: Transform3D T_w_b of every pose sample the
@@ -65,6 +66,8 @@ docs/CONVENTIONS.md; "in F" is the named transform frame an entity is drawn in):
     estimator/stamp_cam_s          Scalars: the image's exposure stamp on the camera clock
     truth                          AnyValues (static): camera_clock_offset_s
                                    (``vnav-demo calibrate`` reads these and the detections)
+    world/navigation/..., metrics/navigation/...   a navigating flight's plan, map, goal,
+                                   contact and clearances (``navigation_views``)
 
 Timelines: ``tick`` (camera tick index) and ``sim_time`` (simulated seconds, on the pose
 clock). Everything about an image, the image itself first, is logged at its tick and at its
@@ -97,7 +100,13 @@ import numpy as np
 import rerun as rr
 
 from scenarios.judge.checks import CheckResult
-from scenarios.record.panel import mount_lines, state_text
+from scenarios.record.navigation_views import send_navigation
+from scenarios.record.panel import (
+    mount_lines,
+    navigation_lines,
+    navigation_outcome,
+    state_text,
+)
 from scenarios.record.plots import depth_scale_png, error_against_range_png, legend_png
 from scenarios.record.viewer import (
     AXES_NOTE,
@@ -132,11 +141,12 @@ from scenarios.record.viewer import (
     entity,
     eye_for,
     legend_entries,
+    moment,
     shown_tick,
 )
 from scenarios.run.records import CalibrationRecord, PoseStream, RunResult, TickRecord
 from scenarios.scenario.builtin import mount_error_text
-from scenarios.scenario.spec import ScenarioSpec
+from scenarios.scenario.spec import NavigateFlight, ScenarioSpec
 from vnav import quat, so3
 from vnav.camera import PinholeCamera, depth_to_world_points
 from vnav.cone import TRAFFIC_CONE
@@ -362,7 +372,9 @@ class Recording:
         self._seed = seed
         # A calibrated run's state panel shows what calibration recovers from the whole flight,
         # known only at the end: its rows wait until then (the records are kept by the run).
-        self._state_waits = spec.checks_calibration
+        # So does a navigating flight's, which shows the flight's outcome and its map, plans
+        # and truth at each tick (``navigation_lines``).
+        self._state_waits = spec.checks_calibration or isinstance(spec.flight, NavigateFlight)
         _log_static(self.rec, spec, seed, camera, scenery)
         if self._latency:
             _log_latency_static(self.rec)
@@ -429,6 +441,7 @@ class Recording:
         if result.calibration is not None:
             _log_mounts(rec, result.calibration)
             _send_recovered_mount_errors(rec, result)
+        send_navigation(rec, result)
         self._send_waiting_state(result)
         self._log_depth_scale_and_legend(result)
         self._send_layout(result, judged)
@@ -457,7 +470,10 @@ class Recording:
             entity.LEGEND,
             rr.EncodedImage(
                 contents=legend_png(
-                    legend_entries(latency=self._latency, mounts=mounts), AXES_NOTE
+                    legend_entries(
+                        latency=self._latency, mounts=mounts, navigation=_map_method(result)
+                    ),
+                    AXES_NOTE,
                 ),
                 media_type="image/png",
             ),
@@ -469,11 +485,12 @@ class Recording:
         mounts = result.calibration is not None
         shown = result.ticks[shown_tick(self._spec, result)] if result.ticks else None
         if shown is not None:
-            # Where the 3D views are framed: a screenshot (scripts/screenshots.sh) moves the
-            # viewer's time cursor here.
+            # Where the 3D views are framed (or a navigating flight's contact): a screenshot
+            # (scripts/screenshots.sh) moves the viewer's time cursor here.
+            camera_tick, sim_time_s = moment(self._spec, result)
             self.rec.log(
                 entity.MOMENT,
-                rr.AnyValues(camera_tick=shown.tick, sim_time_s=shown.t_s),
+                rr.AnyValues(camera_tick=camera_tick, sim_time_s=sim_time_s),
                 static=True,
             )
         eye_w, look_target_w = eye_for(self._spec, result)
@@ -490,6 +507,7 @@ class Recording:
                 latency=self._latency,
                 verdict=checks_summary(judged),
                 mounts_T_w_c=shown.T_w_b @ shown.T_b_c if mounts and shown is not None else None,
+                navigation=result.navigation is not None,
             )
         )
 
@@ -501,10 +519,13 @@ class Recording:
         mounts = None
         if result.calibration is not None:
             mounts = mount_lines(result.calibration, self._spec.timing.camera_clock_offset_s)
+        navigation = _navigation_blocks(result)
         send = _Sender(self.rec)
         for i in range(0, len(waiting), FLUSH_EVERY_TICKS):
             batch = waiting[i : i + FLUSH_EVERY_TICKS]
-            texts = [state_text(r, q, self._cones_w[0], mounts) for r, q in batch]
+            texts = [
+                state_text(r, q, self._cones_w[0], mounts, navigation.get(r.tick)) for r, q in batch
+            ]
             send.records(entity.STATE, [r for r, _ in batch], _state_columns(texts))
 
     def abort(self) -> None:
@@ -562,6 +583,34 @@ class Recording:
                 positions=np.concatenate(clouds) if clouds else np.zeros((0, 3)),
             ).partition([len(c) for c in clouds]),
         )
+
+
+def _map_method(result: RunResult) -> str | None:
+    """The method a navigating flight's map takes, or None for any other flight."""
+    flight = result.spec.flight
+    return flight.estimate if isinstance(flight, NavigateFlight) else None
+
+
+def _navigation_blocks(result: RunResult) -> dict[int, list[str]]:
+    """A navigating flight's state-panel block per camera tick index (empty for any other)."""
+    nav, flight = result.navigation, result.spec.flight
+    if nav is None or not isinstance(flight, NavigateFlight):
+        return {}
+    goal_w = np.asarray(flight.goal_w, dtype=np.float64)
+    dropped = np.cumsum([k.rejected for k in nav.ticks])
+    return {
+        record.tick: navigation_lines(
+            nav_tick,
+            record,
+            nav,
+            result.cones_w,
+            estimate=flight.estimate,
+            goal_w=goal_w,
+            clearance_m=flight.clearance_m,
+            dropped=int(n_dropped),
+        )
+        for record, nav_tick, n_dropped in zip(result.ticks, nav.ticks, dropped, strict=True)
+    }
 
 
 def _state_columns(texts: list[str]) -> rr.ComponentColumnList:
@@ -1141,6 +1190,13 @@ def _log_outcome(
     verdict and, when the run was calibrated, what calibration recovered (a static row
     replaces the one logged at the start)."""
     text = describe(spec, seed, judged)
+    if result.navigation is not None:
+        nav = result.navigation
+        text += (
+            f"\n\n## Navigation: {navigation_outcome(nav)}\n\nOn "
+            f"{_map_method(result)}'s map; smallest true clearance {nav.min_clearance_m:.3f} m, "
+            f"flew {nav.path_length_m:.2f} m."
+        )
     if result.calibration is not None:
         text += "\n\n" + calibration_text(result.calibration)
         if (before_after := recovered_mount_text(result)) != "":

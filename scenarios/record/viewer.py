@@ -44,12 +44,15 @@ __all__ = [
     "AXIS_LENGTH_M",
     "CAMERA_AXES_UI_POINTS",
     "CAMERA_NAME_Z_M",
+    "CLEARANCE_COLOR",
     "CONE0_SERIES",
+    "CONTACT_COLOR",
     "DECLARED_MOUNT_COLOR",
     "DEPTH_CLOUD_COLOR",
     "EXPOSURE_POSE_COLOR",
     "FRAME",
     "IMAGE_PLANE_M",
+    "KEPT_COLOR",
     "MOUNT_AXIS_LENGTH_M",
     "NEES_CLIP_MARK",
     "NEES_TOP",
@@ -59,6 +62,7 @@ __all__ = [
     "PIN_HEAD_UI_POINTS",
     "PIN_LINE_UI_POINTS",
     "PIN_TOP_M",
+    "PLAN_COLOR",
     "POSE_SAMPLE_COLOR",
     "RAY_COLOR",
     "RECOVERED_MOUNT_COLOR",
@@ -77,6 +81,8 @@ __all__ = [
     "entity",
     "eye_for",
     "legend_entries",
+    "moment",
+    "navigation_tab",
     "shown_tick",
 ]
 
@@ -135,6 +141,14 @@ def _stream(quantity: str, series: str) -> str:
     return f"time/{quantity}/{series}"
 
 
+def _nav_obstacles(method: str) -> str:
+    return f"world/navigation/obstacles/{_part(method)}"
+
+
+def _nav_keep_out(method: str) -> str:
+    return f"world/navigation/keep_out/{_part(method)}"
+
+
 entity = SimpleNamespace(
     WORLD="world",
     BODY="world/body",
@@ -177,6 +191,17 @@ entity = SimpleNamespace(
     MOUNT_DECLARED="estimator/mount",
     STAMP_CAM="estimator/stamp_cam_s",
     TRUTH_VALUES="truth",
+    NAV_PLAN="world/navigation/plan",
+    NAV_POSITION_EST="world/navigation/position_est",
+    NAV_GOAL="world/navigation/goal",
+    NAV_CONTACT="world/navigation/contact",
+    NAV_CONTACT_CROSS="world/navigation/contact/cross",
+    NAV_CLEARANCE="metrics/navigation/clearance_true_m",
+    NAV_CONTACT_LEVEL="metrics/navigation/contact_level_m",
+    NAV_CONTACT_MARK="metrics/navigation/contact",
+    NAV_AXIS_DISTANCE="metrics/navigation/axis_distance_m",
+    NAV_CLEARANCE_KEPT="metrics/navigation/clearance_m",
+    NAV_PLAN_LENGTH="metrics/navigation/plan_length_m",
     error=_error,
     allowed=_allowed,
     error_recovered=_error_recovered,
@@ -189,12 +214,15 @@ entity = SimpleNamespace(
     nees_clipped=_nees_clipped,
     cone0=_cone0,
     stream=_stream,
+    nav_obstacles=_nav_obstacles,
+    nav_keep_out=_nav_keep_out,
 )
 """Every entity path of a recording (``entity.error(method)`` and the like for families).
 
 ``entity.stream(quantity, series)`` is a plot of the pose stream against the image stamps
 (runs with latency only): ``quantity`` one of ``STREAM_QUANTITIES``, ``series`` one of
-``STREAM_SERIES``."""
+``STREAM_SERIES``. ``entity.NAV_*``, ``entity.nav_obstacles(method)`` and
+``entity.nav_keep_out(method)`` are a navigating flight's only (``navigation_views``)."""
 
 FRAME = SimpleNamespace(
     WORLD="world",
@@ -264,6 +292,16 @@ PIN_COLOR = tuple(round(255 * c) for c in TRAFFIC_CONE.color_rgb)
 """A cone's pin (``PIN_TOP_M``) has the cone's own colour."""
 DEPTH_CLOUD_COLOR = (150, 150, 200)
 TRAJECTORY_COLOR = (170, 170, 185)
+PLAN_COLOR = (255, 130, 200)
+"""Pink: a navigating drone's plan at the time cursor, the estimated position it starts from,
+the goal, and the plan's length in its plot (no method and no frame axis is pink)."""
+CONTACT_COLOR = (255, 0, 0)
+"""The contact with a cone, drawn as a cross with its name (naive's red dots are points in the
+sky, with no name)."""
+CLEARANCE_COLOR = (235, 235, 235)
+"""The true clearance (MuJoCo's, geometry to geometry) in the navigation plots."""
+KEPT_COLOR = (150, 150, 150)
+"""The planner's ``clearance_m`` in the navigation plots, grey like a contract's bound."""
 
 
 @dataclass(frozen=True)
@@ -280,11 +318,15 @@ AXES_NOTE = "axes x y z: red green blue; body thick, camera thin"
 """The legend's last line: how the frames' axes read."""
 
 
-def legend_entries(*, latency: bool = False, mounts: bool = False) -> list[list[LegendEntry]]:
+def legend_entries(
+    *, latency: bool = False, mounts: bool = False, navigation: str | None = None
+) -> list[list[LegendEntry]]:
     """Every colour of the 3D views, in the legend's two rows (``entity.LEGEND``): the truth
     and each method's estimate (``vnav.methods.active_methods``), with ``latency`` the newest-pose
     estimate and with ``mounts`` the declared and recovered camera mounts; then the rays, the
-    cones' pins, the depth cloud and the flown path (and ``AXES_NOTE``)."""
+    cones' pins, the depth cloud and the flown path (and ``AXES_NOTE``). A navigating flight
+    (``navigation``: the method its map takes) adds its plan, its map's keep-out circles and
+    the contact."""
     estimates = [LegendEntry("truth", TRUTH_COLOR, "dot")]
     estimates += [LegendEntry(m.name, m.color_rgb, "dot") for m in active_methods()]
     if latency:
@@ -300,6 +342,12 @@ def legend_entries(*, latency: bool = False, mounts: bool = False) -> list[list[
         LegendEntry("depth image", DEPTH_CLOUD_COLOR, "dot"),
         LegendEntry("flown path", TRAJECTORY_COLOR, "line"),
     ]
+    if navigation is not None:
+        estimates += [
+            LegendEntry("plan", PLAN_COLOR, "line"),
+            LegendEntry("keep-out", method(navigation).color_rgb, "line"),
+            LegendEntry("contact", CONTACT_COLOR, "line"),
+        ]
     return [estimates, drawn]
 
 
@@ -330,6 +378,7 @@ def blueprint(
     latency: bool = False,
     verdict: str | None = None,
     mounts_T_w_c: np.ndarray | None = None,
+    navigation: bool = False,
 ) -> rrb.Blueprint:
     """The default layout: images and plots on the left; the world, a close-up of the drone
     and the state panel on the right.
@@ -367,6 +416,10 @@ def blueprint(
         at the declared, true and recovered camera mounts (``mounts_close_up``), the state
         panel gets the room its mounts block needs, and each error plot also draws the error
         with the recovered mount (``entity.error_recovered``).
+    navigation : bool
+        A navigating flight: the lower left panel opens on its tab (``navigation_tab``: the
+        true clearance, the drone's distance from the cones' axes, the plan's length), and the
+        time panel on ``sim_time`` (the contact falls between two camera ticks).
     """
     if view not in VIEWS:
         raise ValueError(f"view must be one of {list(VIEWS)}, got {view!r}")
@@ -388,6 +441,7 @@ def blueprint(
                     cone0_top_m,
                     latency,
                     recovered_mount=mounts_T_w_c is not None,
+                    navigation=navigation,
                 ),
                 row_shares=[4, 6] if latency else [3, 5],
             ),
@@ -399,7 +453,7 @@ def blueprint(
         rrb.TimePanel(
             state="collapsed",
             play_state="following",
-            timeline="sim_time" if latency else "tick",
+            timeline="sim_time" if latency or navigation else "tick",
         ),
         collapse_panels=True,
     )
@@ -769,8 +823,10 @@ def _lower_tabs(
     cone0_top_m: float | None,
     latency: bool,
     recovered_mount: bool = False,
+    navigation: bool = False,
 ) -> rrb.Tabs:
-    """The tabs below the images: ``VIEWS`` first (in order), then the other plots.
+    """The tabs below the images: ``VIEWS`` first (in order), then the other plots; a
+    navigating flight's tab (``navigation_tab``) after them, shown first.
 
     With ``latency`` the error tab shows the lesson of time: the depth_image error beside the
     newest pose's, and the pose stream around the time cursor with each image's exposure and
@@ -812,6 +868,8 @@ def _lower_tabs(
         "attitude": _attitude_tab(),
         "nees": _nees_tab(error_top_m),
     }
+    if navigation:
+        extra.append(navigation_tab())
     return rrb.Tabs(
         *[tabs[name] for name in VIEW_NAMES],
         *extra,
@@ -825,7 +883,34 @@ def _lower_tabs(
             ),
             name="naive, range",
         ),
-        active_tab=VIEWS[view],
+        active_tab=len(VIEWS) + len(extra) - 1 if navigation else VIEWS[view],
+    )
+
+
+def navigation_tab() -> rrb.Vertical:
+    """A navigating flight's plots, one above the other (each title names its lines):
+
+    - the true clearance, MuJoCo's distance between the drone's and the nearest cone's
+      collision geometry (what a contact is), with its 0 (contact) in red and the contact
+      marked where MuJoCo found it;
+    - the drone's centre to the nearest true cone's axis, in the plane, against the
+      ``clearance_m`` the planner keeps from each *mapped* axis: where the map is right the
+      first stays above the second; the two distances differ by the cone's and the drone's
+      size;
+    - the planned path's length at each camera tick.
+    """
+    return rrb.Vertical(
+        _series(
+            "true clearance to the nearest cone (m, MuJoCo); red: 0, contact",
+            [entity.NAV_CLEARANCE, entity.NAV_CONTACT_LEVEL, entity.NAV_CONTACT_MARK],
+        ),
+        _series(
+            "centre to nearest cone axis (m, truth); grey: planner's clearance_m",
+            [entity.NAV_AXIS_DISTANCE, entity.NAV_CLEARANCE_KEPT],
+        ),
+        _series("planned path length (m), replanned at each camera tick", [entity.NAV_PLAN_LENGTH]),
+        row_shares=[4, 4, 3],
+        name="navigation",
     )
 
 
@@ -838,12 +923,26 @@ def shown_tick(spec: ScenarioSpec, result: RunResult) -> int:
     return at_or_before[-1] if at_or_before else 0
 
 
+def moment(spec: ScenarioSpec, result: RunResult) -> tuple[int, float]:
+    """The instant the recording opens its screenshot at (``entity.MOMENT``): the camera tick
+    and its simulated time, s, of ``shown_tick``; but for a navigating flight that ended at a
+    contact, with no ``show_at_s``, the contact itself: its time, and the tick after the last,
+    where the contact is logged on the ``tick`` timeline (``navigation_views``)."""
+    nav = result.navigation
+    last = result.ticks[-1]
+    if spec.show_at_s is None and nav is not None and nav.contact is not None:
+        return last.tick + 1, nav.contact.t_s
+    shown = result.ticks[shown_tick(spec, result)]
+    return shown.tick, shown.t_s
+
+
 def eye_for(spec: ScenarioSpec, result: RunResult | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Where the 3D view's eye starts and what it looks at, world frame, each (3,).
 
     The eye frames the lesson at the tick shown (``shown_tick``: the scenario's ``show_at_s``
     or the last): the cones, the drone and, if ``result`` is given, every estimate of that
     tick, the naive one included, seen from behind the drone's heading, to the side and above.
+    A navigating flight's goal is framed too, and the eye looks along the start-goal line.
     """
     cones_w = np.array(spec.scene.cones_w, dtype=np.float64).reshape(-1, 3)
     drone_w = np.asarray(spec.scene.start_position_w, dtype=np.float64)
@@ -853,17 +952,23 @@ def eye_for(spec: ScenarioSpec, result: RunResult | None = None) -> tuple[np.nda
         drone_w = last.T_w_b[:3, 3]
         points += [last.estimates_w(m.name) for m in METHODS]
     points.append(drone_w[None, :])
+    heading_w = cones_w.mean(axis=0) - drone_w
+    if spec.flight.mode == "navigate":
+        goal_w = np.asarray(spec.flight.goal_w, dtype=np.float64)
+        points.append(goal_w[None, :])
+        heading_w = goal_w - np.asarray(spec.flight.start_w, dtype=np.float64)
     points_w = np.concatenate(points)
     low, high = points_w.min(axis=0), points_w.max(axis=0)
     target_w = 0.5 * (low + high)
     radius_m = max(4.0, 0.5 * float(np.linalg.norm(high - low)))
-    heading_w = cones_w.mean(axis=0) - drone_w
     heading_w[2] = 0.0
     norm = np.linalg.norm(heading_w)
     heading_w = heading_w / norm if norm > 1e-6 else np.array([1.0, 0.0, 0.0])
     side_w = np.array([-heading_w[1], heading_w[0], 0.0])
     # About 2.2 radii away the bounding sphere fills most of the viewer's default field of view.
-    direction_w = -heading_w + 0.8 * side_w + np.array([0.0, 0.0, 0.7])
+    # A navigating flight is seen from higher up: its map and plan lie in a horizontal plane.
+    up = 1.6 if spec.flight.mode == "navigate" else 0.7
+    direction_w = -heading_w + 0.8 * side_w + np.array([0.0, 0.0, up])
     eye_w = target_w + 2.2 * radius_m * direction_w / np.linalg.norm(direction_w)
     return eye_w, target_w
 
@@ -936,6 +1041,8 @@ def describe(spec: ScenarioSpec, seed: int, judged: Sequence[CheckResult] | None
         "",
         _describe_timing(spec),
     ]
+    if spec.flight.mode == "navigate":
+        lines += ["", _describe_navigation(spec)]
     if spec.show_at_s is not None:
         lines += [
             "",
@@ -945,6 +1052,23 @@ def describe(spec: ScenarioSpec, seed: int, judged: Sequence[CheckResult] | None
     if spec.checks_calibration:
         lines += ["", _describe_mounts()]
     return "\n".join(lines)
+
+
+def _describe_navigation(spec: ScenarioSpec) -> str:
+    """One paragraph on what a navigating flight's recording draws of its closed loop."""
+    f = spec.flight
+    m = method(f.estimate)
+    return (
+        f"Navigation: at each camera tick the cones **{f.estimate}** estimates update the map "
+        f"({m.color_name}: each mapped cone's base, its axis and its keep-out circle of "
+        f"clearance_m = {f.clearance_m:g} m at the flight altitude), and the path to the goal "
+        "is planned again from the drone's estimated position (**pink**: the plan at the "
+        "time cursor and the estimated position). A contact with a cone is a red cross at "
+        "MuJoCo's contact point, named with its time. The navigation tab plots the true "
+        "clearance (MuJoCo's distance between the drone's and the cones' geometry: 0 is a "
+        "contact), the drone's centre to the nearest cone axis against clearance_m (what the "
+        "planner keeps from each *mapped* axis) and the plan's length."
+    )
 
 
 def _describe_mounts() -> str:

@@ -133,7 +133,7 @@ class Navigator:
             The newest body pose the estimator has received: where it thinks the drone is.
         """
         f = self.flight
-        self.map.update(self._estimates_w(record, T_w_b_newest), f.estimate)
+        update = self.map.update(self._estimates_w(record, T_w_b_newest), f.estimate)
         p_w_est = T_w_b_newest[:3, 3]
         try:
             self._plan_xy_w = plan_path(
@@ -171,5 +171,7 @@ class Navigator:
                     [[*o.p_xy_w, o.base_z_m] for o in obstacles], dtype=np.float64
                 ).reshape(-1, 3),
                 clearance_true_m=self._clearance_m.copy(),
+                obstacle_methods=tuple(o.method for o in obstacles),
+                rejected=update.rejected,
             )
         )

@@ -327,6 +327,11 @@ class NavigationTick:
         The mapped cones' estimated base centres, m (``vnav.navigate``).
     clearance_true_m : ndarray, shape (N,)
         MuJoCo's distance between the drone's collision geometry and each true cone's, m.
+    obstacle_methods : tuple of str, length M
+        The method that put each obstacle of ``obstacles_w`` in the map (``vnav.obstacle_map``).
+    rejected : int
+        This tick's estimates the map dropped: their base outside the flight band (the naive
+        chain's, in the sky).
     """
 
     t_s: float
@@ -335,6 +340,8 @@ class NavigationTick:
     plan_length_m: float
     obstacles_w: np.ndarray
     clearance_true_m: np.ndarray
+    obstacle_methods: tuple[str, ...] = ()
+    rejected: int = 0
 
 
 @dataclass

@@ -499,6 +499,8 @@ def avoid() -> Scenario:
         "round it at clearance_m, and MuJoCo's own distance between the drone and the cone "
         "never drops below 0.3 m.",
         **_avoid_world("depth_image"),
+        # Mid-detour: the plan bends round the mapped cone's keep-out circle ahead.
+        "show_at_s": 4.5,
         "checks": [
             *ACCURACY_CHECKS,
             _check("reached_goal", GOAL_RADIUS_M, name="reached the goal"),
