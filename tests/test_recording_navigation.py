@@ -19,7 +19,7 @@ from vnav.methods import method
 
 FLOAT32_ATOL = 1e-5
 """Rerun stores positions as float32: a few micrometres at 20 m."""
-NAVIGATING = ("avoid", "avoid-naive")
+NAVIGATING = tuple(n for n in builtin.names() if builtin.load(n).flight.mode == "navigate")
 
 
 def _report(run) -> dict:

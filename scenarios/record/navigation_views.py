@@ -46,10 +46,10 @@ from scenarios.record.viewer import (
     KEPT_COLOR,
     PLAN_COLOR,
     entity,
+    map_color,
 )
 from scenarios.run.records import NavigationRecord, RunResult, TickRecord
 from scenarios.scenario.spec import GOAL_RADIUS_M, NavigateFlight
-from vnav.methods import method
 
 __all__ = ["CIRCLE_SEGMENTS", "CONTACT_CROSS_M", "circle_w", "send_navigation"]
 
@@ -111,7 +111,7 @@ def _log_styles(rec: rr.RecordingStream, methods: list[str]) -> None:
         static=True,
     )
     for m in methods:
-        color = method(m).color_rgb
+        color = map_color(m)[0]
         rec.log(
             entity.nav_obstacles(m), rr.Points3D.from_fields(colors=[color], radii=0.1), static=True
         )

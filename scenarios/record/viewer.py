@@ -29,7 +29,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from scenarios.judge.checks import CheckResult, Outcome
-from scenarios.scenario.schema import VIEW_NAMES
+from scenarios.scenario.schema import ESTIMATE_MISTAKES, VIEW_NAMES
 from scenarios.scenario.spec import ScenarioSpec
 from vnav import se3, so3
 from vnav.cone import TRAFFIC_CONE
@@ -139,6 +139,19 @@ def _cone0(frame_name: str) -> str:
 
 def _stream(quantity: str, series: str) -> str:
     return f"time/{quantity}/{series}"
+
+
+MISTAKE_MAP_COLOR = (255, 140, 0)
+"""A navigating flight's map made by a classic mistake (``estimate = "mistake:..."``): orange."""
+
+
+def map_color(estimate: str) -> tuple[tuple[int, int, int], str]:
+    """The colour (RGB, and its name in words) of the cones ``estimate`` maps: its method's,
+    or orange for a classic mistake (``scenarios.scenario.schema.ESTIMATE_MISTAKES``)."""
+    if estimate in ESTIMATE_MISTAKES:
+        return MISTAKE_MAP_COLOR, "orange"
+    m = method(estimate)
+    return m.color_rgb, m.color_name
 
 
 def _nav_obstacles(method: str) -> str:
@@ -345,7 +358,7 @@ def legend_entries(
     if navigation is not None:
         estimates += [
             LegendEntry("plan", PLAN_COLOR, "line"),
-            LegendEntry("keep-out", method(navigation).color_rgb, "line"),
+            LegendEntry("keep-out", map_color(navigation)[0], "line"),
             LegendEntry("contact", CONTACT_COLOR, "line"),
         ]
     return [estimates, drawn]
@@ -1057,10 +1070,10 @@ def describe(spec: ScenarioSpec, seed: int, judged: Sequence[CheckResult] | None
 def _describe_navigation(spec: ScenarioSpec) -> str:
     """One paragraph on what a navigating flight's recording draws of its closed loop."""
     f = spec.flight
-    m = method(f.estimate)
+    color_name = map_color(f.estimate)[1]
     return (
         f"Navigation: at each camera tick the cones **{f.estimate}** estimates update the map "
-        f"({m.color_name}: each mapped cone's base, its axis and its keep-out circle of "
+        f"({color_name}: each mapped cone's base, its axis and its keep-out circle of "
         f"clearance_m = {f.clearance_m:g} m at the flight altitude), and the path to the goal "
         "is planned again from the drone's estimated position (**pink**: the plan at the "
         "time cursor and the estimated position). A contact with a cone is a red cross at "
