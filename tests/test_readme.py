@@ -314,26 +314,34 @@ def test_toml_example_runs_and_passes_with_the_cone_well_inside_the_image(
 
 def test_sweep_commands_run(tmp_path: Path) -> None:
     """The README's sweep file saved as it says, then its sweep commands in order: the first
-    runs every episode on Ray (exit 1: the noisy points fail, as the README says), the second
-    finds nothing left to run and writes the same tables."""
+    runs every episode on Ray (exit 1: the noisy points fail, as the README says; its first
+    lines as the README quotes them), the second finds nothing left to run and writes the same
+    tables. The episode count the README gives is the file's."""
+    sweep_file = tomllib.loads(_toml_block("my-sweep.toml"))
     (tmp_path / "my-sweep.toml").write_text(_toml_block("my-sweep.toml"))
     commands = [c for c in COMMANDS if _kind(c) == "sweep" and " my-sweep.toml " in c]
     assert len(commands) == 2 and "--resume" in commands[1]
-    outs = []
+    outs, outs_stdout = [], []
     for command in commands:
         proc = _shell(command, tmp_path, timeout_s=600.0)
         assert proc.returncode == 1, f"{command}\n{proc.stdout}\n{proc.stderr}"
         assert proc.stderr == "", proc.stderr
+        outs_stdout.append(proc.stdout)
         out = tmp_path / re.search(r"--out (\S+)", command)[1]
         outs.append((out / "results.parquet").read_bytes())
     assert "0 to run" in proc.stdout and outs[0] == outs[1]
     summary = json.loads((out / "summary.json").read_text())
-    assert summary["complete"] and summary["episodes"]["done"] == 30
+    points = int(np.prod([len(values) for values in sweep_file["grid"].values()]))
+    seeds, episodes = sweep_file["seeds"], sweep_file["seeds"] * points
+    assert f"that is {points} grid points x {seeds} seeds = {episodes} episodes" in README
+    quoted = re.search(r'sweep says so as it starts \(here "(.*?)"\)', README, re.S)[1]
+    assert " ".join(quoted.split()) in outs_stdout[0]
+    assert summary["complete"] and summary["episodes"]["done"] == episodes
     for point in summary["points"]:
         noisy = point["values"]["noise.attitude_std_deg"] > 0.0
         assert point["pass_rate"] == (0.0 if noisy else 1.0)
         median = point["methods"]["depth_image"]["median_m"]["median"]
-        assert (0.12 < median < 0.2) if noisy else (median < 0.03)  # "about 2 cm to 16 cm"
+        assert (0.12 < median < 0.2) if noisy else (median < 0.03)  # "about 2 cm to 17 cm"
 
 
 def test_avoid_sweep_shows_what_the_readme_says(tmp_path: Path) -> None:

@@ -70,6 +70,25 @@ def sweep_cli(*args: str, cwd: Path, timeout: float = 300) -> subprocess.Complet
     )
 
 
+@pytest.fixture
+def sweep_here(monkeypatch, capsys):
+    """``vnav-demo sweep ARGS`` in this process (the command's ``main``, run in ``cwd``): its
+    exit status and output as ``sweep_cli`` gives them, without an interpreter to start and
+    everything to import again. For what does not need a process of its own; the tests of
+    signals, Ray's processes and the command's own duration use ``sweep_cli``."""
+    from scenarios import cli
+
+    def run(*args: str, cwd: Path) -> subprocess.CompletedProcess:
+        capsys.readouterr()  # what came before is not this command's
+        with monkeypatch.context() as patched:
+            patched.chdir(cwd)
+            status = cli.main(["sweep", *args])
+        out, err = capsys.readouterr()
+        return subprocess.CompletedProcess(["vnav-demo", "sweep", *args], status, out, err)
+
+    return run
+
+
 # Session-scoped (one per test process, never torn down midway): under pytest-xdist this
 # module's tests are spread over both processes, between other modules' tests.
 @pytest.fixture(scope="session")
@@ -741,25 +760,34 @@ def test_record_worst(work, serial):
         ('estimator = "json:dumps_nothing"\n' + SWEEP, [], "estimator: "),
     ],
 )
-def test_bad_input_exits_2_with_one_line(tmp_path, text, args, message):
+def test_bad_input_exits_2_with_one_line(tmp_path, monkeypatch, capsys, text, args, message):
+    """In this process (the command's ``main``, as ``vnav-demo`` calls it; the refusals of
+    the address tests above and the other sweep's below cross the process boundary)."""
+    from scenarios import cli
+
     (tmp_path / "bad.toml").write_text(text)
-    proc = sweep_cli("bad.toml", "--out", "o", *args, cwd=tmp_path, timeout=60)
-    assert proc.returncode == 2
-    assert message in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+    monkeypatch.chdir(tmp_path)
+    assert cli.main(["sweep", "bad.toml", "--out", "o", *args]) == 2
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "o" / "sweep.json").exists()
 
 
 @pytest.mark.parametrize("more", [1, 1000])
-def test_more_workers_than_cpus_is_refused(tmp_path, more):
+def test_more_workers_than_cpus_is_refused(tmp_path, monkeypatch, capsys, more):
     """Each worker takes a CPU: more would only wait (and hold memory), so more than this
-    process may use is refused, in one line, before anything is written."""
+    process may use is refused, in one line, before anything is written (in this process, as
+    the test above)."""
+    from scenarios import cli
+
     cpus = len(os.sched_getaffinity(0))
     (tmp_path / "s.toml").write_text(SWEEP)
     workers = str(cpus + more)
-    proc = sweep_cli("s.toml", "--out", "o", "--workers", workers, cwd=tmp_path, timeout=60)
-    assert proc.returncode == 2
-    assert f"--workers {workers}: this process may use {cpus} CPUs" in proc.stderr
-    assert len(proc.stderr.strip().splitlines()) == 1
+    monkeypatch.chdir(tmp_path)
+    assert cli.main(["sweep", "s.toml", "--out", "o", "--workers", workers]) == 2
+    err = capsys.readouterr().err
+    assert f"--workers {workers}: this process may use {cpus} CPUs" in err
+    assert len(err.strip().splitlines()) == 1
     assert not (tmp_path / "o").exists()
 
 
@@ -866,24 +894,24 @@ def files_of(out: Path) -> dict[str, bytes]:
     ],
     ids=["other-values", "other-scenario"],
 )
-def test_resume_refuses_another_sweeps_journal(tiny, tmp_path, other, named):
+def test_resume_refuses_another_sweeps_journal(tiny, tmp_path, other, named, sweep_here):
     """episodes/ of another sweep of the same size, put in this sweep's directory: --resume
     says what differs and changes nothing."""
     out = copy_of_tiny(tiny, tmp_path)
     (tmp_path / "other.toml").write_text(other)
-    theirs = sweep_cli("other.toml", "--out", "theirs", "--workers", "0", cwd=tmp_path)
+    theirs = sweep_here("other.toml", "--out", "theirs", "--workers", "0", cwd=tmp_path)
     assert theirs.returncode in (0, 1), theirs.stderr
     shutil.rmtree(out / "episodes")
     shutil.copytree(tmp_path / "theirs" / "episodes", out / "episodes")
     before = files_of(out)
-    proc = sweep_cli("tiny.toml", "--out", "out", "--workers", "0", "--resume", cwd=tmp_path)
+    proc = sweep_here("tiny.toml", "--out", "out", "--workers", "0", "--resume", cwd=tmp_path)
     assert proc.returncode == 2, proc.stdout + proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1 and "another sweep" in proc.stderr
     assert named in proc.stderr
     assert files_of(out) == before
 
 
-def test_bad_journal_entries_are_reported_and_run_again(tiny, tmp_path):
+def test_bad_journal_entries_are_reported_and_run_again(tiny, tmp_path, sweep_here):
     """Valid JSON of the wrong shape, and a FIFO named like an entry: each is said, its
     episode runs again, and the tables equal the clean sweep's."""
     out = copy_of_tiny(tiny, tmp_path)
@@ -896,7 +924,7 @@ def test_bad_journal_entries_are_reported_and_run_again(tiny, tmp_path):
     (journal / "p1-s1.json").write_text(json.dumps({**entry, "point": 1, "row": None}))
     (journal / "p1-s2.json").unlink()
     os.mkfifo(journal / "p1-s2.json")
-    proc = sweep_cli("tiny.toml", "--out", "out", "--workers", "0", "--resume", cwd=tmp_path)
+    proc = sweep_here("tiny.toml", "--out", "out", "--workers", "0", "--resume", cwd=tmp_path)
     assert proc.returncode == 1, proc.stderr
     assert "Traceback" not in proc.stderr and not proc.stderr.strip()
     said = [line for line in proc.stdout.splitlines() if "journal entries" in line]
@@ -934,11 +962,11 @@ def _die_writing(kind: str, path: Path) -> None:
     assert proc.returncode == 9
 
 
-def test_resume_recovers_a_removed_journal_and_clears_dead_temporaries(tiny, tmp_path):
+def test_resume_recovers_a_removed_journal_and_clears_dead_temporaries(tiny, tmp_path, sweep_here):
     out = copy_of_tiny(tiny, tmp_path)
     shutil.rmtree(out / "episodes")
     resume = ("tiny.toml", "--out", "out", "--workers", "0", "--resume")
-    proc = sweep_cli(*resume, cwd=tmp_path)
+    proc = sweep_here(*resume, cwd=tmp_path)
     assert proc.returncode == 1, proc.stderr
     assert "4 to run" in proc.stdout
     done, _ = tiny
@@ -950,7 +978,7 @@ def test_resume_recovers_a_removed_journal_and_clears_dead_temporaries(tiny, tmp
     (out / "worst" / "notes.txt").write_text("mine")
     dead = [p for d in ("episodes", "worst") for p in (out / d).iterdir() if p.name[0] == "."]
     assert len(dead) == 2
-    proc = sweep_cli(*resume, cwd=tmp_path)
+    proc = sweep_here(*resume, cwd=tmp_path)
     assert proc.returncode == 1, proc.stderr
     assert not any(p.exists() for p in dead)
     assert (out / "worst" / "notes.txt").read_text() == "mine"
@@ -1018,7 +1046,7 @@ def test_a_raising_function_fails_and_resume_refuses_its_changed_file(tmp_path):
         assert files_of(tmp_path / "out") == before
 
 
-def test_seeds_that_change_nothing_are_said(tiny, tmp_path):
+def test_seeds_that_change_nothing_are_said(tiny, tmp_path, sweep_here):
     """Where no draw depends on the seed, the seeds' rows are identical, and the sweep says
     so when it starts: for some grid points, or for all."""
     done, proc = tiny
@@ -1035,7 +1063,7 @@ def test_seeds_that_change_nothing_are_said(tiny, tmp_path):
     )
     assert "no draw depends on the seed:" not in proc.stdout
     (tmp_path / "quiet.toml").write_text(TINY.replace("[0.0, 1.0]", "[0.0]"))
-    quiet = sweep_cli("quiet.toml", "--out", "q", "--workers", "0", cwd=tmp_path)
+    quiet = sweep_here("quiet.toml", "--out", "q", "--workers", "0", cwd=tmp_path)
     assert quiet.returncode == 1, quiet.stderr
     assert "no draw depends on the seed: 2 seeds give one result" in quiet.stdout
     (r1, r2) = rows(tmp_path / "q")
@@ -1049,7 +1077,7 @@ def _verdicts(report: dict) -> tuple[bool, list[str]]:
 
 
 @pytest.mark.parametrize("checkless", [False, True], ids=["builtin", "file-without-checks"])
-def test_a_grid_point_is_judged_as_its_scenario(tmp_path, checkless):
+def test_a_grid_point_is_judged_as_its_scenario(tmp_path, checkless, sweep_here):
     """A grid point's verdicts equal `vnav-demo run` of the same scenario with the same values
     and seed: a built-in with its own checks, and a file without [[checks]] whose default
     checks skip the methods that cannot apply (known_height, from straight above)."""
@@ -1065,7 +1093,7 @@ def test_a_grid_point_is_judged_as_its_scenario(tmp_path, checkless):
         f'scenario = {source}\nseeds = [3]\n[grid]\n"noise.attitude_std_deg" = [1.0]\n'
         '"duration_s" = [2.0]\n'
     )
-    proc = sweep_cli("s.toml", "--out", "sweep", "--workers", "0", cwd=tmp_path)
+    proc = sweep_here("s.toml", "--out", "sweep", "--workers", "0", cwd=tmp_path)
     assert proc.returncode in (0, 1), proc.stderr
     (row,) = rows(tmp_path / "sweep")
     scenario.update(name="same", duration_s=2.0, noise={"attitude_std_deg": 1.0})
@@ -1187,16 +1215,16 @@ def test_a_journal_without_its_manifest_is_resumed_not_overwritten(tiny, tmp_pat
     assert json.loads((out / "sweep.json").read_text())["fingerprint"] == plan.fingerprint
 
 
-def test_a_restarted_sweep_removes_only_the_plots_it_makes(tmp_path):
+def test_a_restarted_sweep_removes_only_the_plots_it_makes(tmp_path, sweep_here):
     """The derived files are made again at each (re)start; a file of the user's in ``plots/``
     is not the sweep's to delete."""
     (tmp_path / "tiny.toml").write_text(TINY)
-    first = sweep_cli("tiny.toml", "--out", "out", "--workers", "0", cwd=tmp_path)
+    first = sweep_here("tiny.toml", "--out", "out", "--workers", "0", cwd=tmp_path)
     assert first.returncode == 1, first.stderr
     notes = tmp_path / "out" / "plots" / "my-notes.txt"
     notes.write_text("mine")
     made = sorted(p.name for p in (tmp_path / "out" / "plots").iterdir() if p != notes)
-    again = sweep_cli("tiny.toml", "--out", "out", "--workers", "0", "--resume", cwd=tmp_path)
+    again = sweep_here("tiny.toml", "--out", "out", "--workers", "0", "--resume", cwd=tmp_path)
     assert again.returncode == 1, again.stderr
     assert notes.read_text() == "mine"
     assert sorted(p.name for p in notes.parent.iterdir()) == sorted([*made, notes.name])
