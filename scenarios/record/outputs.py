@@ -52,6 +52,7 @@ __all__ = [
     "OutputPair",
     "directory_lock",
     "remove_stale_partials",
+    "staging_dir",
     "temp_path",
     "temporary",
     "verify_rrd",
@@ -118,6 +119,31 @@ def temporary(final: Path) -> Iterator[Path]:
     finally:
         try:
             tmp.unlink(missing_ok=True)
+        finally:
+            _in_progress.discard(tmp)
+
+
+@contextlib.contextmanager
+def staging_dir(final: Path) -> Iterator[Path]:
+    """A new empty directory at this process's temporary name for ``final``
+    (``temp_path``), removed with what it holds when the block ends.
+
+    Raises
+    ------
+    OutputError
+        If it cannot be made.
+    """
+    tmp = temp_path(final)
+    _in_progress.add(tmp)
+    try:
+        try:
+            tmp.mkdir()
+        except OSError as exc:
+            raise _output_error(exc) from None
+        yield tmp
+    finally:
+        try:
+            _remove(tmp)
         finally:
             _in_progress.discard(tmp)
 
@@ -581,9 +607,10 @@ def _stale(path: Path) -> bool:
 def remove_stale_partials(out_dir: Path) -> list[Path]:
     """End the work of runs into ``out_dir`` whose process no longer exists: finish or roll
     back their interrupted commits (``OutputPair``'s journals), then delete their temporary
-    files and directories (an export's staging directory, a new export directory). Only names made by ``temp_path`` are touched (and the final names of an undone
-    swap). A ``.old`` file with no journal beside it is left alone (a swap deletes its
-    journal last), as are the files of a run whose journal is not one this program wrote.
+    files and directories (an export's staging directory, a new export directory). Only
+    names made by ``temp_path`` are touched (and the final names of an undone swap). A
+    ``.old`` file with no journal beside it is left alone (a swap deletes its journal last),
+    as are the files of a run whose journal is not one this program wrote.
 
     Returns
     -------
