@@ -123,7 +123,7 @@ def _write_images(
 
 def _matrix_yaml(T: np.ndarray) -> str:
     """A 4x4 matrix as EuRoC writes ``T_BS``: ``cols``, ``rows``, ``data`` row-major."""
-    rows = [", ".join(f"{v:.12g}" for v in row) for row in np.asarray(T, dtype=np.float64)]
+    rows = [", ".join(repr(float(v)) for v in row) for row in np.asarray(T, dtype=np.float64)]
     data = ",\n         ".join(rows)
     return f"  cols: 4\n  rows: 4\n  data: [{data}]\n"
 
@@ -134,14 +134,15 @@ def _camera_yaml(
     return (
         "# General sensor definitions.\n"
         f"sensor_type: {kind}\n"
-        f"comment: {comment}\n\n"
+        f"comment: {_quoted(comment)}\n\n"
         "# Sensor extrinsics wrt. the body-frame.\n"
         f"T_BS:\n{_matrix_yaml(T_b_c)}\n"
         "# Camera specific definitions.\n"
         f"rate_hz: {rate_hz:g}\n"
         f"resolution: [{camera.width}, {camera.height}]\n"
         "camera_model: pinhole\n"
-        f"intrinsics: [{camera.fx:.12g}, {camera.fy:.12g}, {camera.cx:.12g}, {camera.cy:.12g}]"
+        f"intrinsics: [{float(camera.fx)!r}, {float(camera.fy)!r}, {float(camera.cx)!r}, "
+        f"{float(camera.cy)!r}]"
         " #fu, fv, cu, cv\n"
         "distortion_model: radial-tangential\n"
         "distortion_coefficients: [0.0, 0.0, 0.0, 0.0]\n" + more
@@ -224,9 +225,13 @@ class EurocExporter:
         _write_text(
             mav0 / "body.yaml",
             "# Additional sensor information\n"
-            "comment: The body frame B is vnav's body frame (FLU: x forward, y left, z up, at "
-            "the drone's centre), not an IMU's (the drone has none yet); every T_BS is "
-            "relative to it.\n",
+            "comment: "
+            + _quoted(
+                "The body frame B is vnav's body frame (FLU: x forward, y left, z up, at the "
+                "drone's centre), not an IMU's (the drone has none yet); every T_BS is "
+                "relative to it."
+            )
+            + "\n",
         )
         moved = (
             " The camera slides on the body in this flight: T_BS is its mount at the first image."
@@ -271,9 +276,13 @@ class EurocExporter:
             state / "sensor.yaml",
             "# Additional sensor information\n"
             "sensor_type: ground-truth\n"
-            f"comment: {about}: the simulator's true body state at each image's stamp "
-            "(camera clock); p and v in the world (z up), q the body's attitude (w, x, y, z); "
-            "biases zero (no IMU).\n\n"
+            "comment: "
+            + _quoted(
+                f"{about}: the simulator's true body state at each image's stamp (camera "
+                "clock); p and v in the world (z up), q the body's attitude (w, x, y, z); "
+                "biases zero (no IMU)."
+            )
+            + "\n\n"
             "# Sensor extrinsics wrt. the body-frame.\n"
             f"T_BS:\n{_matrix_yaml(np.eye(4))}",
         )
@@ -289,6 +298,11 @@ class EurocExporter:
         if self._writer is not None:
             self._writer.shutdown(wait=True, cancel_futures=True)
         self._pending.clear()
+
+
+def _quoted(text: str) -> str:
+    """A YAML single-quoted string (a plain one cannot hold ``: ``)."""
+    return "'" + text.replace("'", "''") + "'"
 
 
 def _write_text(path: Path, text: str) -> None:
