@@ -521,7 +521,7 @@ def _truth(tick: int, world: World, driver, cones_w: np.ndarray) -> TickTruth:
         # A keyframe flight places the body and zeroes MuJoCo's velocity: its keyframes know.
         v_w_b_mps=driver.keyframes.velocity_w(world.time_s)
         if isinstance(driver, KeyframePlayer)
-        else world.velocity_w(),
+        else world.velocity_w,
     )
 
 
