@@ -180,7 +180,8 @@ def run(
                 }
             for done, where in zip(exported, stagings, strict=True):
                 for name in done.written:
-                    pair.add(out_dir / name, where / name)
+                    # An exporter flushes every file it writes (scenarios.export.base).
+                    pair.add(out_dir / name, where / name, flushed=True)
                 for name in done.not_written:
                     pair.add(out_dir / name, None)
         pair.write_json(report.dumps(rep))

@@ -148,6 +148,24 @@ def test_stale_partials_of_dead_runs_are_removed_live_ones_kept(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted([live.name, keep.name])
 
 
+def test_a_dead_runs_export_directories_are_removed_whole(tmp_path):
+    """An export's staging directory and a new export directory at its temporary name, left
+    by a killed run, go with what they hold; a live run's stay."""
+    proc = multiprocessing.get_context("spawn").Process(target=_exit_at_once)
+    proc.start()
+    proc.join()
+    staging = outputs.temp_path(tmp_path / "s.export-euroc", pid=proc.pid)
+    new = outputs.temp_path(tmp_path / "s.euroc", pid=proc.pid)
+    for top in (staging, new):
+        (top / "s.euroc" / "mav0" / "cam0").mkdir(parents=True)
+        (top / "s.euroc" / "mav0" / "cam0" / "data.csv").write_text("#timestamp [ns],filename\n")
+    with outputs.staging_dir(tmp_path / "t.export-euroc") as mine:
+        (mine / "t.euroc").mkdir()
+        assert sorted(outputs.remove_stale_partials(tmp_path)) == sorted([staging, new])
+        assert (mine / "t.euroc").is_dir()
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_temporary_names_carry_the_program_and_the_file(tmp_path):
     name = outputs.temp_path(tmp_path / "s.rrd", "old", pid=42).name
     assert name == ".vnav-demo.42.s.rrd.old"

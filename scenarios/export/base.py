@@ -4,10 +4,12 @@ directory, and what it reports.
 An exporter (``Exporter``) is made with its staging directory, a hidden temporary name in
 the output directory (``scenarios.record.outputs.staging_dir``). The run feeds it as it feeds
 the recording (``scenarios.run.runner.FanOut``): ``start``, ``on_tick`` per camera tick,
-then ``finish`` once the run is judged, or ``abort`` if anything fails. ``finish`` returns an
-``ExportResult``: the final names it staged (files or directories, named as they will be in
-the output directory) and those it did not write this time (with the reason in ``note``).
-``scenarios.pipeline`` commits them with the recording and the report, all or none
+then ``finish`` once the run is judged, or ``abort`` if anything fails. Every file it writes
+is flushed to the disk (``write_flushed``) before ``finish`` returns, so that the commit
+flushes only the directories. ``finish`` returns an ``ExportResult``: the final names it
+staged (files or directories, named as they will be in the output directory) and those it
+did not write this time (with the reason in ``note``). ``scenarios.pipeline`` commits them
+with the recording and the report, all or none
 (``scenarios.record.outputs.OutputPair.add``).
 """
 
@@ -27,7 +29,7 @@ if TYPE_CHECKING:  # annotations only: importing sim.mesh loads MuJoCo before si
     from scenarios.scenario.spec import ScenarioSpec
     from sim.mesh import Scenery
 
-__all__ = ["ExportResult", "Exporter", "listed_files", "stamp_ns"]
+__all__ = ["ExportResult", "Exporter", "listed_files", "stamp_ns", "write_flushed"]
 
 
 @dataclass(frozen=True)
@@ -72,6 +74,20 @@ class Exporter(Protocol):
     def finish(self, result: RunResult) -> ExportResult: ...
 
     def abort(self) -> None: ...
+
+
+def write_flushed(path: Path, data: bytes) -> None:
+    """Write ``data`` to a new file at ``path`` and flush it to the disk (``fsync``).
+
+    Raises
+    ------
+    OSError
+        If it cannot be written (a full disk...).
+    """
+    with open(path, "xb") as f:
+        f.write(data)
+        f.flush()
+        os.fsync(f.fileno())
 
 
 def stamp_ns(record: TickRecord) -> int:

@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from scenarios.export.base import ExportResult
+from scenarios.export.base import ExportResult, write_flushed
 from scenarios.run.records import RunResult, TickRecord
 from vnav import quat
 from vnav.camera import PinholeCamera
@@ -154,9 +154,9 @@ class TumExporter:
         truth_name, pnp_name = f"{name}.truth.tum", f"{name}.pnp.tum"
         truth = truth_trajectory(result)
         pnp = pnp_trajectory(result, self._camera)
-        (self.staging / truth_name).write_text(tum_text(*truth), encoding="utf-8")
+        write_flushed(self.staging / truth_name, tum_text(*truth).encode("utf-8"))
         if len(pnp[0]):
-            (self.staging / pnp_name).write_text(tum_text(*pnp), encoding="utf-8")
+            write_flushed(self.staging / pnp_name, tum_text(*pnp).encode("utf-8"))
             return ExportResult(
                 "tum", (truth_name, pnp_name), figures={"pnp_ape_m": ape_statistics(truth, pnp)}
             )

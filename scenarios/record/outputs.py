@@ -239,14 +239,17 @@ def _remove(path: Path) -> bool:
     return _unlink(path)
 
 
-def _fsync_tree(path: Path) -> None:
-    """Flush a file, or every file and directory of a tree (directories after their files)."""
+def _fsync_tree(path: Path, files: bool = True) -> None:
+    """Flush a file, or every file (unless ``files`` is false: flushed already) and directory
+    of a tree, directories after their files."""
     if not Path(path).is_dir():
-        _fsync(path)
+        if files:
+            _fsync(path)
         return
-    for root, _, files in os.walk(path, topdown=False):
-        for f in files:
-            _fsync(Path(root, f))
+    for root, _, names in os.walk(path, topdown=False):
+        if files:
+            for f in names:
+                _fsync(Path(root, f))
         _fsync(Path(root))
 
 
@@ -461,15 +464,18 @@ class OutputPair:
     def __init__(self, rrd_path: Path, json_path: Path) -> None:
         self.finals = (Path(rrd_path), Path(json_path))
         self._others: list[tuple[Path, bool]] = []  # (final name, has a new file)
+        self._flushed: set[Path] = set()  # new files whose writer flushed their files
         self._swap = _Swap(self.finals, os.getpid())
         self.rrd_tmp, self.json_tmp = self._swap.news
         self._pending = False  # a journal left for the next run to recover
         _in_progress.update(self._swap.paths)
 
-    def add(self, final: Path, staged: Path | None) -> None:
+    def add(self, final: Path, staged: Path | None, flushed: bool = False) -> None:
         """Commit one more final name with the pair: ``staged``, a whole file or directory in
         the same directory (an export's), is moved to its temporary name now; None means
         there is no new file there this time and the commit removes the previous one.
+        ``flushed``: every file of ``staged`` is on the disk already (``fsync``); the commit
+        then flushes only its directories.
 
         Raises
         ------
@@ -489,6 +495,8 @@ class OutputPair:
         self._swap = _Swap(names, os.getpid(), has_new)
         _in_progress.update(self._swap.paths)
         if staged is not None:
+            if flushed:
+                self._flushed.add(temp_path(final))
             try:
                 os.replace(staged, temp_path(final))
             except OSError as exc:
@@ -521,7 +529,7 @@ class OutputPair:
             _fsync(self.rrd_tmp)
             for new in swap.news[:-2]:
                 if new is not None:
-                    _fsync_tree(new)
+                    _fsync_tree(new, files=new not in self._flushed)
             swap.begin()
         except OSError as exc:
             with contextlib.suppress(OSError):
