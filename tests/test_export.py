@@ -23,7 +23,12 @@ from scenarios.scenario import builtin
 from sim.flight import KeyframeTrajectory
 from vnav import quat, se3, so3
 
-yaml = pytest.importorskip("yaml", reason="PyYAML reads the EuRoC sensor files (evo needs it)")
+
+def _yaml(path: Path) -> dict:
+    """A YAML file read by PyYAML (evo's dependency), as EuRoC readers read sensor.yaml."""
+    yaml = pytest.importorskip("yaml", reason="PyYAML reads the EuRoC sensor files")
+    return yaml.safe_load(path.read_text())
+
 
 SENSOR_KEYS = [
     "sensor_type",
@@ -93,7 +98,7 @@ def test_euroc_ground_truth_read_by_evo_is_the_tum_truth(calibration):
         str(mav0 / "state_groundtruth_estimate0" / "data.csv")
     )
     camera = file_interface.read_tum_trajectory_file(str(calibration.out / "calibration.truth.tum"))
-    sensor = yaml.safe_load((mav0 / "cam0" / "sensor.yaml").read_text())
+    sensor = _yaml(mav0 / "cam0" / "sensor.yaml")
     T_b_c = np.array(sensor["T_BS"]["data"], dtype=np.float64).reshape(4, 4)
     assert body.num_poses == camera.num_poses == len(calibration.records)
     np.testing.assert_allclose(body.timestamps, camera.timestamps, rtol=0, atol=1e-9)
@@ -157,7 +162,7 @@ def test_euroc_sensor_files_describe_the_camera(calibration):
     """cam0/sensor.yaml has EuRoC's keys in its order; the intrinsics are the camera's,
     ``T_BS`` the true mount, row-major; the ground truth's T_BS the identity."""
     mav0 = _mav0(calibration)
-    cam0 = yaml.safe_load((mav0 / "cam0" / "sensor.yaml").read_text())
+    cam0 = _yaml(mav0 / "cam0" / "sensor.yaml")
     assert list(cam0) == SENSOR_KEYS
     spec = calibration.outcome.result.spec
     from vnav.camera import PinholeCamera
@@ -174,11 +179,11 @@ def test_euroc_sensor_files_describe_the_camera(calibration):
     T_BS = np.array(cam0["T_BS"]["data"]).reshape(4, 4)
     np.testing.assert_array_equal(T_BS, calibration.records[0].T_b_c)
     se3.check_transform(T_BS)
-    depth0 = yaml.safe_load((mav0 / "depth0" / "sensor.yaml").read_text())
+    depth0 = _yaml(mav0 / "depth0" / "sensor.yaml")
     assert list(depth0)[: len(SENSOR_KEYS)] == SENSOR_KEYS and depth0["depth_scale"] == 1000
-    truth = yaml.safe_load((mav0 / "state_groundtruth_estimate0" / "sensor.yaml").read_text())
+    truth = _yaml(mav0 / "state_groundtruth_estimate0" / "sensor.yaml")
     np.testing.assert_array_equal(np.array(truth["T_BS"]["data"]).reshape(4, 4), np.eye(4))
-    assert "comment" in yaml.safe_load((mav0 / "body.yaml").read_text())
+    assert "comment" in _yaml(mav0 / "body.yaml")
     assert not (mav0 / "imu0").exists()
     assert "no IMU" in calibration.outcome.report["exports"]["euroc"]["note"]
 
