@@ -14,7 +14,7 @@ SLAM front ends and evo read.
                                         as cam0's, with depth_scale
     state_groundtruth_estimate0/data.csv   the body's true state at each image's stamp:
                                         p_RS_R, q_RS (w, x, y, z), v_RS_R, gyroscope and
-                                        accelerometer biases (zero: no IMU)
+                                        accelerometer biases (zero)
     state_groundtruth_estimate0/sensor.yaml
 
 Frames (docs/CONVENTIONS.md, "Data out"): R is vnav's world (z up), S the state's sensor is
@@ -23,8 +23,8 @@ frame, ``T_BS`` of the ground truth the identity), the camera's S its optical fr
 ``T_BS`` of cam0 is ``T_b_c``. Stamps are integer nanoseconds on the camera clock, the
 images' exposure stamps, as in the TUM files (``scenarios.export.tum``); the ground truth is
 given at those same stamps (the pose clock's ``stamp + camera_clock_offset_s``). The depth
-is millimetres (1000 per metre; TUM RGB-D's PNGs use 5000). There is no ``imu0/``: the
-simulated drone has no IMU yet.
+is millimetres (1000 per metre; TUM RGB-D's PNGs use 5000). There is no ``imu0/``: this
+export writes no IMU readings yet (the note says so).
 
 The velocity is the simulator's (``scenarios.run.records.TickRecord.v_w_b_mps``): MuJoCo's
 free-joint velocity, or a keyframe flight's segment slope, not a difference of poses.
@@ -240,8 +240,7 @@ class EurocExporter:
             "comment: "
             + _quoted(
                 "The body frame B is vnav's body frame (FLU: x forward, y left, z up, at the "
-                "drone's centre), not an IMU's (the drone has none yet); every T_BS is "
-                "relative to it."
+                "drone's centre of mass), not an IMU's; every T_BS is relative to it."
             )
             + "\n",
         )
@@ -292,13 +291,13 @@ class EurocExporter:
             + _quoted(
                 f"{about}: the simulator's true body state at each image's stamp (camera "
                 "clock); p and v in the world (z up), q the body's attitude (w, x, y, z); "
-                "biases zero (no IMU)."
+                "biases zero (no IMU readings are exported)."
             )
             + "\n\n"
             "# Sensor extrinsics wrt. the body-frame.\n"
             f"T_BS:\n{_matrix_yaml(np.eye(4))}",
         )
-        notes = ["no IMU (imu0/): the simulated drone has none yet"]
+        notes = ["no IMU (imu0/): this export writes no IMU readings yet"]
         if self._mount_moved:
             notes.append("the camera slides in this flight: cam0's T_BS is its first mount")
         if self._images and self._images[0] < 0:
