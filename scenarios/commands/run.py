@@ -36,6 +36,7 @@ from scenarios.commands.common import (
 )
 from scenarios.commands.console import WIDTH, say
 from scenarios.commands.console import error as _error
+from scenarios.export.base import ExportResult
 from scenarios.run.evaluate import MATCH_GATE_M
 from scenarios.scenario import builtin
 from scenarios.scenario.spec import MAX_SEED, ScenarioError, ScenarioSpec, load_toml
@@ -444,7 +445,7 @@ def run_one(spec: ScenarioSpec, args: argparse.Namespace, out_dir: Path) -> tupl
     return (EXIT_PASSED if outcome.passed else EXIT_CHECK_FAILED), outcome.rrd_path
 
 
-def export_lines(done, out_dir: Path) -> list[str]:
+def export_lines(done: ExportResult, out_dir: Path) -> list[str]:
     """What one export format wrote (``scenarios.export.base.ExportResult``), and its note."""
     wrote = " and ".join(str(out_dir / n) for n in done.written) or "nothing"
     note = f"; {done.note}" if done.note else ""
