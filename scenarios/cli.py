@@ -157,12 +157,16 @@ def _add_run_parser(sub) -> None:
         help="stop a call of an --estimator function that takes longer than S seconds: a "
         "failure of that function, which is then not called again that run (default: no limit)",
     )
+    from scenarios import export
+
     p.add_argument(
         "--export",
-        choices=["tum"],
         default=None,
-        help="also write DIR/<name>.truth.tum and DIR/<name>.pnp.tum (camera trajectories "
-        "for evo: true, and from PnP on the cones)",
+        metavar="FORMAT[,FORMAT]",
+        help="also write the run's data for other tools into DIR, committed with the "
+        "recording and the report: "
+        + "; ".join(f"{n}: {export.FORMATS[n].help}" for n in export.available())
+        + " (README: Use the data elsewhere)",
     )
     p.set_defaults(func=_verb("run"))
 

@@ -9,29 +9,38 @@ scenario is run, judged and written the same way everywhere::
     judge      scenarios.judge.checks.judge             (the spec's checks, else the default ones;
                and each user function's, ``check_kinds.user_checks``)
     finish     scenarios.record.recording.Recording.finish  (with the verdicts and calibration)
-    report     scenarios.judge.report.build              (JSON)
-    commit     scenarios.record.outputs.OutputPair.commit  (both files in place, or neither)
+               and each exporter's finish                (scenarios.export, if asked)
+    report     scenarios.judge.report.build              (JSON; with ``exports``, if asked)
+    commit     scenarios.record.outputs.OutputPair.commit  (every file in place, or none)
 
 The recording is finished only after the run is judged: what the checks found (and the mount
 calibration recovered) is in the recording as well as in the report. The report's
 ``timing_s`` gives the run's stages, ``calibrate``, ``judge`` and its ``total`` wall and CPU
 seconds (what ``vnav-demo run`` prints).
+
+Exports (``scenarios.export``) observe the run beside the recording
+(``scenarios.run.runner.FanOut``), each writing into a staging directory of its own in the
+output directory, and are committed with the recording and the report: the report's
+``exports`` lists every file each wrote, with its size, and why a file was not written.
 """
 
 from __future__ import annotations
 
+import contextlib
 import time
 import uuid
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from scenarios import export
+from scenarios.export.base import ExportResult, listed_files
 from scenarios.judge import checks, report
-from scenarios.record.outputs import OutputPair
+from scenarios.record.outputs import OutputPair, staging_dir
 from scenarios.record.recording import Recording
 from scenarios.run.records import RunResult
-from scenarios.run.runner import run_scenario
+from scenarios.run.runner import FanOut, run_scenario
 from scenarios.scenario import check_kinds
 from scenarios.scenario.spec import ScenarioSpec
 from sim.scene_cache import SceneCache
@@ -54,6 +63,8 @@ class Outcome:
         The JSON report (``scenarios.judge.report.build``).
     rrd_path, json_path : Path or None
         The files written, or None when nothing was written.
+    exports : tuple of ExportResult
+        What each export format asked for wrote (final names in the output directory).
     """
 
     result: RunResult
@@ -61,6 +72,7 @@ class Outcome:
     report: dict[str, Any]
     rrd_path: Path | None = None
     json_path: Path | None = None
+    exports: tuple[ExportResult, ...] = ()
 
     @property
     def passed(self) -> bool:
@@ -80,6 +92,7 @@ def run(
     out_dir: Path | None = None,
     progress: Callable[[int, int], None] | None = None,
     scenes: SceneCache | None = None,
+    exports: Sequence[str] = (),
 ) -> Outcome:
     """Run ``spec``, judge it with its checks (or ``check_kinds.default_checks()``), report it.
 
@@ -96,13 +109,18 @@ def run(
         Called after every camera tick.
     scenes : sim.scene_cache.SceneCache, optional
         Worlds and renderers to reuse across runs (``scenarios.run.runner.run_scenario``).
+    exports : sequence of str
+        Export formats (``scenarios.export.FORMATS``) written with the recording and the
+        report, committed with them; only with ``out_dir``.
 
     Raises
     ------
     sim.world.SimulationError
         If the flight diverges; nothing is written then.
     scenarios.record.outputs.OutputError
-        If the files cannot be written whole (a full disk...); the previous pair stays.
+        If the files cannot be written whole (a full disk...); the previous files stay.
+    ValueError
+        If ``exports`` are asked for without ``out_dir``, or name an unknown format.
     """
     started = _Clock()
     for m in active_methods():
@@ -110,36 +128,78 @@ def run(
             m.estimator.reset()
     recording_id = f"{spec.name}-seed{seed}-{uuid.uuid4().hex[:12]}"
     if out_dir is None:
+        if exports:
+            raise ValueError("exports are written beside the recording: give out_dir")
         result = run_scenario(spec, seed=seed, progress=progress, scenes=scenes)
         judged = _calibrate_and_judge(spec, result)
         started.stop(result)
         return Outcome(result, judged, report.build(result, judged))
-    rrd_path, json_path = output_paths(spec, Path(out_dir))
+    out_dir = Path(out_dir)
+    for name in exports:
+        if name not in export.FORMATS:
+            raise ValueError(
+                f"unknown export format {name!r}; the formats are {', '.join(export.FORMATS)}"
+            )
+    rrd_path, json_path = output_paths(spec, out_dir)
     pair = OutputPair(rrd_path, json_path)
     try:
-        recording = Recording(pair.rrd_tmp, recording_id)
-        try:
-            result = run_scenario(
-                spec, seed=seed, observer=recording, progress=progress, scenes=scenes
+        with contextlib.ExitStack() as staged:
+            stagings = [
+                staged.enter_context(staging_dir(out_dir / f"{spec.name}.export-{name}"))
+                for name in exports
+            ]
+            recording = Recording(pair.rrd_tmp, recording_id)
+            exporters = [export.create(n, d) for n, d in zip(exports, stagings, strict=True)]
+            observer = FanOut(recording, *exporters) if exporters else recording
+            try:
+                result = run_scenario(
+                    spec, seed=seed, observer=observer, progress=progress, scenes=scenes
+                )
+                judged = _calibrate_and_judge(spec, result)
+                finish_start = time.perf_counter()
+                recording.finish(result, judged)
+                export_start = time.perf_counter()
+                exported = tuple(e.finish(result) for e in exporters)
+            except BaseException:
+                # A failed run has aborted its observers already (a second abort does
+                # nothing); a failure while judging or finishing must not leave a file open.
+                observer.abort()
+                raise
+            # The recording's end (plots, layout, footer) is set-up work, as its start is.
+            result.timing_s["setup"] += export_start - finish_start
+            if exporters:
+                result.timing_s["export"] = time.perf_counter() - export_start
+            started.stop(result)
+            rep = report.build(
+                result, judged, recording={"file": rrd_path.name, "id": recording_id}
             )
-            judged = _calibrate_and_judge(spec, result)
-            finish_start = time.perf_counter()
-            recording.finish(result, judged)
-        except BaseException:
-            # A failed run has aborted its observer already (a second abort does nothing); a
-            # failure while judging or finishing must not leave the file open.
-            recording.abort()
-            raise
-        # The recording's end (plots, layout, footer) is set-up work, as its start is.
-        result.timing_s["setup"] += time.perf_counter() - finish_start
-        started.stop(result)
-        rep = report.build(result, judged, recording={"file": rrd_path.name, "id": recording_id})
+            if exporters:
+                rep["exports"] = {
+                    done.format: _export_entry(done, where)
+                    for done, where in zip(exported, stagings, strict=True)
+                }
+            for done, where in zip(exported, stagings, strict=True):
+                for name in done.written:
+                    # An exporter flushes every file it writes (scenarios.export.base).
+                    pair.add(out_dir / name, where / name, flushed=True)
+                for name in done.not_written:
+                    pair.add(out_dir / name, None)
         pair.write_json(report.dumps(rep))
         pair.commit()
     except BaseException:
         pair.discard()
         raise
-    return Outcome(result, judged, rep, rrd_path, json_path)
+    return Outcome(result, judged, rep, rrd_path, json_path, exported)
+
+
+def _export_entry(done: ExportResult, staging: Path) -> dict[str, Any]:
+    """The report's entry for one format: every file written with its size, the note, the
+    format's figures."""
+    return {
+        "files": listed_files(staging, done.written),
+        "note": done.note,
+        **done.figures,
+    }
 
 
 def _calibrate_and_judge(spec: ScenarioSpec, result: RunResult) -> list[checks.CheckResult]:

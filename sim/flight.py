@@ -757,6 +757,17 @@ class KeyframeTrajectory:
         t = min(max(float(t_s), float(self.times_s[0])), float(self.times_s[-1]))
         return self._buffer.lookup("world", "body", t)
 
+    def velocity_w(self, t_s: float) -> np.ndarray:
+        """(3,) the body origin's velocity in the world at ``t_s``, m/s: the slope of the
+        linear segment holding ``t_s`` (the later one at a keyframe), zero outside the
+        keyframes' span."""
+        t = float(t_s)
+        times = self.times_s
+        if not times[0] <= t < times[-1]:
+            return np.zeros(3)
+        i = int(np.searchsorted(times, t, side="right")) - 1
+        return (self.positions_w[i + 1] - self.positions_w[i]) / (times[i + 1] - times[i])
+
     def poses(self, t_s: np.ndarray) -> np.ndarray:
         """(N, 4, 4) ``T_w_b`` at each of the times ``t_s`` (N,), in one vectorised lookup."""
         t = np.clip(np.asarray(t_s, dtype=np.float64), self.times_s[0], self.times_s[-1])

@@ -148,6 +148,24 @@ def test_stale_partials_of_dead_runs_are_removed_live_ones_kept(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted([live.name, keep.name])
 
 
+def test_a_dead_runs_export_directories_are_removed_whole(tmp_path):
+    """An export's staging directory and a new export directory at its temporary name, left
+    by a killed run, go with what they hold; a live run's stay."""
+    proc = multiprocessing.get_context("spawn").Process(target=_exit_at_once)
+    proc.start()
+    proc.join()
+    staging = outputs.temp_path(tmp_path / "s.export-euroc", pid=proc.pid)
+    new = outputs.temp_path(tmp_path / "s.euroc", pid=proc.pid)
+    for top in (staging, new):
+        (top / "s.euroc" / "mav0" / "cam0").mkdir(parents=True)
+        (top / "s.euroc" / "mav0" / "cam0" / "data.csv").write_text("#timestamp [ns],filename\n")
+    with outputs.staging_dir(tmp_path / "t.export-euroc") as mine:
+        (mine / "t.euroc").mkdir()
+        assert sorted(outputs.remove_stale_partials(tmp_path)) == sorted([staging, new])
+        assert (mine / "t.euroc").is_dir()
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_temporary_names_carry_the_program_and_the_file(tmp_path):
     name = outputs.temp_path(tmp_path / "s.rrd", "old", pid=42).name
     assert name == ".vnav-demo.42.s.rrd.old"
@@ -180,18 +198,25 @@ def test_a_second_writer_is_refused_while_the_first_holds_the_directory(tmp_path
 # ------------------------------------------------- killed at any instant, recovered by the next run
 
 _KILLED_AT = textwrap.dedent("""\
-    import json, os, signal, sys
+    import json, os, shutil, signal, sys
     from pathlib import Path
     from rerun.chunk import RrdReader  # imported once, before the forks
     from scenarios.record import outputs
 
-    OPERATIONS = ("open", "write", "fsync", "replace", "rename", "unlink")
+    OPERATIONS = ("open", "write", "fsync", "replace", "rename", "unlink", "rmdir")
 
     def job(stage, out, k, files):
         if stage == "commit":
             pair = outputs.OutputPair(out / "s.rrd", out / "s.json")
             pair.rrd_tmp.write_bytes(Path(files[0]).read_bytes())
             pair.write_json(Path(files[1]).read_text())
+            for extra in map(Path, files[2:]):  # an export's file or directory, staged
+                staged = out / f"staged-{extra.name}"
+                if extra.is_dir():
+                    shutil.copytree(extra, staged)
+                else:
+                    shutil.copyfile(extra, staged)
+                pair.add(out / extra.name, staged)
         calls = [0]
 
         def killing(real):
@@ -222,8 +247,9 @@ _KILLED_AT = textwrap.dedent("""\
         results.append(None if status == -signal.SIGKILL else status)
     print(json.dumps(results))
 """)
-"""Run jobs ``(stage, OUT, K, files)``, each in a process of its own that commits a pair into
-OUT (``commit``, from ``files``: a recording and its report) or recovers OUT (``recover``),
+"""Run jobs ``(stage, OUT, K, files)``, each in a process of its own that commits a set into
+OUT (``commit``, from ``files``: a recording, its report, then exports: files or directories
+added to the commit under their names) or recovers OUT (``recover``),
 killed by SIGKILL right after its K-th call of a file operation (K = 0: before the first);
 print for each job None if it was killed, else how many such calls it made."""
 
@@ -239,19 +265,51 @@ def _killed_at(jobs: list[tuple[str, Path, int, list[Path]]]) -> list[int | None
     return json.loads(proc.stdout)
 
 
-def _held(out: Path, pairs: list[tuple[bytes, bytes]]) -> int | None:
+EXPORTS = ("s.truth.tum", "s.euroc")
+"""The exports committed with each pair: a file and a directory (``_exports``)."""
+
+
+def _exports(directory: Path, index: int) -> list[Path]:
+    """Write run ``index``'s exports into ``directory``: a TUM-like file and a small
+    EuRoC-like directory tree, their content naming the run."""
+    tum = directory / EXPORTS[0]
+    tum.write_text(f"{index}.0 0 0 {index} 0 0 0 1\n")
+    mav0 = directory / EXPORTS[1] / "mav0"
+    (mav0 / "cam0" / "data").mkdir(parents=True)
+    (mav0 / "cam0" / "data.csv").write_text(f"#timestamp [ns],filename\n{index},{index}.png\n")
+    (mav0 / "cam0" / "data" / f"{index}.png").write_bytes(bytes([index]) * (100 + index))
+    return [tum, directory / EXPORTS[1]]
+
+
+def _tree(path: Path) -> dict[str, bytes]:
+    """A file's bytes, or every file of a directory by its relative path."""
+    if path.is_file():
+        return {"": path.read_bytes()}
+    return {p.relative_to(path).as_posix(): p.read_bytes() for p in path.rglob("*") if p.is_file()}
+
+
+def _held(out: Path, pairs: list[tuple[bytes, bytes]], exports: bool = False) -> int | None:
     """Which of ``pairs`` ``out`` holds (None: no pair), asserting the files are one whole
-    pair (the report names the recording's id), beside the lock and nothing else."""
+    pair (the report names the recording's id), with that run's exports if ``exports``,
+    beside the lock and nothing else."""
     names = sorted(p.name for p in out.iterdir())
     if names == [outputs.LOCK_NAME]:
         return None
-    assert names == [outputs.LOCK_NAME, "s.json", "s.rrd"]
+    assert names == sorted([outputs.LOCK_NAME, "s.json", "s.rrd", *(EXPORTS if exports else ())])
     report = json.loads((out / "s.json").read_text())
     ids = [r.recording_id for r in RrdReader(str(out / "s.rrd")).recordings()]
     assert ids == [report["recording"]["id"]]
     held = ((out / "s.rrd").read_bytes(), (out / "s.json").read_bytes())
     assert held in pairs
-    return pairs.index(held)
+    index = pairs.index(held)
+    if exports:
+        expected = out.parent / f"exports-{index}"
+        if not expected.exists():
+            expected.mkdir()
+            _exports(expected, index)
+        for name in EXPORTS:
+            assert _tree(out / name) == _tree(expected / name), name
+    return index
 
 
 def _next_run(out: Path) -> None:
@@ -259,15 +317,19 @@ def _next_run(out: Path) -> None:
         pass
 
 
-def _killed_commits(tmp_path: Path, pairs, with_old: bool) -> list[tuple[Path, bool]]:
-    """A commit of ``pairs[1]`` over ``pairs[0]`` (or into an empty directory) killed at each
-    instant it can be: the directory it leaves, and whether the commit ran to its end (the
-    last one does)."""
+def _killed_commits(
+    tmp_path: Path, pairs, with_old: bool, exports: bool = False
+) -> list[tuple[Path, bool]]:
+    """A commit of ``pairs[1]`` over ``pairs[0]`` (or into an empty directory), with each
+    one's exports if ``exports``, killed at each instant it can be: the directory it leaves,
+    and whether the commit ran to its end (the last one does)."""
     src = tmp_path / "new"
     src.mkdir()
     files = [src / "s.rrd", src / "s.json"]
     files[0].write_bytes(pairs[1][0])
     files[1].write_bytes(pairs[1][1])
+    if exports:
+        files += _exports(src, 1)
 
     def outs(n: int) -> list[Path]:
         made = []
@@ -277,6 +339,8 @@ def _killed_commits(tmp_path: Path, pairs, with_old: bool) -> list[tuple[Path, b
             if with_old:
                 (made[-1] / "s.rrd").write_bytes(pairs[0][0])
                 (made[-1] / "s.json").write_bytes(pairs[0][1])
+                if exports:
+                    _exports(made[-1], 0)
         return made
 
     (n_calls,) = _killed_at([("commit", outs(1)[0], 1000, files)])
@@ -287,14 +351,15 @@ def _killed_commits(tmp_path: Path, pairs, with_old: bool) -> list[tuple[Path, b
     return [(out, end is not None) for out, end in zip(dirs, ends, strict=True)]
 
 
-@pytest.mark.parametrize("with_old", [True, False], ids=["over-a-pair", "first-pair"])
-def test_a_commit_killed_at_any_instant_leaves_one_whole_pair(tmp_path, two_pairs, with_old):
-    """SIGKILL after each file operation of the commit: the next run into the directory finds
-    the previous pair or the new one, whole, and no temporary file."""
+@pytest.mark.parametrize("with_old", [True, False], ids=["over-a-set", "first-set"])
+def test_a_commit_killed_at_any_instant_leaves_one_whole_set(tmp_path, two_pairs, with_old):
+    """SIGKILL after each file operation of the commit of a pair and its exports (a TUM file
+    and a EuRoC directory tree): the next run into the directory finds the previous set or
+    the new one, whole, and no temporary file."""
     held = []
-    for out, finished in _killed_commits(tmp_path, two_pairs, with_old):
+    for out, finished in _killed_commits(tmp_path, two_pairs, with_old, exports=True):
         _next_run(out)
-        held.append(_held(out, two_pairs))
+        held.append(_held(out, two_pairs, exports=True))
         assert held[-1] == 1 or not finished
     assert len(held) >= 10  # the commit's file operations, each a kill point
     assert held[0] == (0 if with_old else None)  # killed before its first
@@ -303,8 +368,9 @@ def test_a_commit_killed_at_any_instant_leaves_one_whole_pair(tmp_path, two_pair
 
 def test_a_recovery_killed_at_any_instant_is_finished_by_the_next_run(tmp_path, two_pairs):
     """The recovery itself killed after each of its file operations, for every state a
-    killed commit leaves: the run after it finds the same whole pair as an uncut recovery."""
-    states = [out for out, _ in _killed_commits(tmp_path, two_pairs, with_old=True)]
+    killed commit of a pair and its exports leaves: the run after it finds the same whole set
+    as an uncut recovery."""
+    states = [out for out, _ in _killed_commits(tmp_path, two_pairs, True, exports=True)]
     uncut = [out.with_name(f"{out.name}-recovered") for out in states]
     for out, first in zip(states, uncut, strict=True):
         shutil.copytree(out, first)
@@ -319,7 +385,7 @@ def test_a_recovery_killed_at_any_instant_is_finished_by_the_next_run(tmp_path, 
     for first, n_calls in zip(uncut, counts, strict=True):
         _next_run(first)
         expected = _files(first)
-        assert _held(first, two_pairs) is not None
+        assert _held(first, two_pairs, exports=True) is not None
         assert [next(ends) for _ in range(n_calls + 2)] == [None] * (n_calls + 1) + [n_calls]
         for _ in range(n_calls + 2):
             copy = next(copies)
@@ -328,7 +394,12 @@ def test_a_recovery_killed_at_any_instant_is_finished_by_the_next_run(tmp_path, 
 
 
 def _files(directory: Path) -> dict[str, bytes]:
-    return {p.name: p.read_bytes() for p in sorted(directory.iterdir())}
+    """Every file under ``directory`` by its relative path."""
+    return {
+        p.relative_to(directory).as_posix(): p.read_bytes()
+        for p in sorted(directory.rglob("*"))
+        if p.is_file()
+    }
 
 
 def test_a_dead_run_with_this_process_id_is_recovered(tmp_path, two_pairs):

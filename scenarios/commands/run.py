@@ -36,7 +36,7 @@ from scenarios.commands.common import (
 )
 from scenarios.commands.console import WIDTH, say
 from scenarios.commands.console import error as _error
-from scenarios.record import outputs
+from scenarios.export.base import ExportResult
 from scenarios.run.evaluate import MATCH_GATE_M
 from scenarios.scenario import builtin
 from scenarios.scenario.spec import MAX_SEED, ScenarioError, ScenarioSpec, load_toml
@@ -75,18 +75,32 @@ def resolve(targets: list[str], run_all: bool) -> list[ScenarioSpec]:
     return specs
 
 
-def check_outputs(specs: list[ScenarioSpec], out_dir: Path, export: str | None = None) -> None:
+def check_outputs(specs: list[ScenarioSpec], out_dir: Path, exports: tuple[str, ...] = ()) -> None:
     """Refuse outputs that could not be written: an existing directory under a file's name
-    (the recording, the report and, with ``export="tum"``, the TUM files)."""
-    from scenarios.judge import tum
+    (the recording, the report, an export's file), a file under an export directory's name,
+    or a directory there that is not such an export (its previous one is replaced whole)."""
+    from scenarios import export
 
     for spec in specs:
-        paths = pipeline.output_paths(spec, out_dir)
-        if export == "tum":
-            paths = (*paths, *tum.output_paths(spec.name, out_dir))
-        for path in paths:
+        for path in pipeline.output_paths(spec, out_dir):
             if path.is_dir():
                 raise InputError(f"{path} is a directory; the run would write a file there")
+        for name in exports:
+            fmt = export.FORMATS[name]
+            for final in fmt.final_names(spec.name):
+                path = out_dir / final
+                if not fmt.directory and path.is_dir():
+                    raise InputError(f"{path} is a directory; the run would write a file there")
+                if fmt.directory and (path.exists() or path.is_symlink()):
+                    if path.is_symlink() or not path.is_dir():
+                        raise InputError(
+                            f"{path} is not a directory; --export {name} writes a directory there"
+                        )
+                    if sorted(p.name for p in path.iterdir()) not in ([], ["mav0"]):
+                        raise InputError(
+                            f"{path} holds more than an --export {name} directory (mav0/); "
+                            "the run would replace it whole: move it or choose another --out"
+                        )
 
 
 def check_lengths(specs: list[ScenarioSpec], max_ticks: int) -> None:
@@ -399,6 +413,7 @@ def run_one(spec: ScenarioSpec, args: argparse.Namespace, out_dir: Path) -> tupl
                 seed=args.seed,
                 out_dir=out_dir,
                 progress=Progress(spec.name, enabled=not args.quiet),
+                exports=getattr(args, "exports", ()),
             )
         except Exception as exc:
             # A signal whose exception landed inside a library that turned it into another
@@ -424,29 +439,17 @@ def run_one(spec: ScenarioSpec, args: argparse.Namespace, out_dir: Path) -> tupl
         return EXIT_INCOMPLETE, None
     if not args.quiet:
         say(summary(outcome.report, outcome.rrd_path, outcome.json_path))
-    if getattr(args, "export", None) == "tum":
-        try:
-            written = _export_tum(spec, outcome, out_dir)
-        except OSError as exc:
-            _error(f"{spec.name}: cannot write its TUM trajectories: {exc}")
-            return EXIT_INCOMPLETE, outcome.rrd_path
-        if not args.quiet:
-            say("  wrote " + " and ".join(str(p) for p in written) + " (TUM, for evo)")
+    if not args.quiet:
+        for done in outcome.exports:
+            say("\n".join(export_lines(done, out_dir)))
     return (EXIT_PASSED if outcome.passed else EXIT_CHECK_FAILED), outcome.rrd_path
 
 
-def _export_tum(spec: ScenarioSpec, outcome: pipeline.Outcome, out_dir: Path) -> list[Path]:
-    """Write ``NAME.truth.tum`` and ``NAME.pnp.tum`` (``scenarios.judge.tum``), each complete
-    or not at all (``scenarios.record.outputs.write_atomic``); return their paths."""
-    from scenarios.judge import tum
-    from vnav.camera import PinholeCamera
-
-    cam = spec.scene.camera
-    camera = PinholeCamera.from_fovy(cam.fovy_deg, cam.width, cam.height)
-    files = tum.tum_files(outcome.result, camera, out_dir)
-    for path, text in files.items():
-        outputs.write_atomic(path, lambda tmp, text=text: tmp.write_text(text, encoding="utf-8"))
-    return list(files)
+def export_lines(done: ExportResult, out_dir: Path) -> list[str]:
+    """What one export format wrote (``scenarios.export.base.ExportResult``), and its note."""
+    wrote = " and ".join(str(out_dir / n) for n in done.written) or "nothing"
+    note = f"; {done.note}" if done.note else ""
+    return _wrap(f"{done.format}: wrote {wrote}{note}", 2)
 
 
 def _validate(args: argparse.Namespace) -> tuple[list[ScenarioSpec], Path]:
@@ -472,8 +475,16 @@ def _validate(args: argparse.Namespace) -> tuple[list[ScenarioSpec], Path]:
         if not getattr(args, "estimator", None):
             raise InputError("--estimator-timeout-s limits an --estimator function: give one")
     args.user_methods = user_methods(getattr(args, "estimator", None) or [], timeout_s)
+    args.exports = ()
+    if getattr(args, "export", None) is not None:
+        from scenarios import export
+
+        try:
+            args.exports = export.parse(args.export)
+        except ValueError as exc:
+            raise InputError(str(exc)) from None
     out_dir = prepare_out_dir(args.out)
-    check_outputs(specs, out_dir, getattr(args, "export", None))
+    check_outputs(specs, out_dir, args.exports)
     return specs, out_dir
 
 

@@ -1,27 +1,32 @@
-"""A run's output files: both or neither, complete, from the same run, never half-written, at
+"""A run's output files: all or none, complete, from the same run, never half-written, at
 whatever instant the run is stopped (SIGKILL included).
 
 Every file is first written under a hidden temporary name beside its final one, made by
 ``temp_path`` alone: ``.vnav-demo.<pid>.<name>.partial`` for the new file, ``.old`` for the
-previous one while a pair is swapped and ``.journal`` for the swap's journal. Apart from a
+previous one while a set is swapped and ``.journal`` for the swap's journal. Apart from a
 new file it put in place itself (a swap undone), these are the only files this program
-removes: a user's file never has such a name, whatever its suffix.
+removes: a user's file never has such a name, whatever its suffix. A final name may be a
+directory (an export such as ``NAME.euroc/``): it is written, moved and removed whole under
+the same temporary names, and only ever deleted at one of them.
 
 ``write_atomic`` writes one file: the temporary file is flushed to the disk (``fsync``) and
-renamed over the final name. ``OutputPair.commit`` puts a recording and its report in place
-together, as a database commits with a journal: it checks the recording reads back whole
-(Rerun writes its footer last; a full disk or a killed writer leaves none), flushes both files,
-writes and flushes a journal naming the pair and its new files, moves the previous pair aside,
-puts the new pair in place, deletes the previous pair and then the journal. If a step fails,
-the previous pair is put back and the error is raised; without ``commit`` (an exception, an
-interrupt) the temporary files are removed.
+renamed over the final name. ``OutputPair.commit`` puts a recording, its report and the run's
+exports (``OutputPair.add``) in place together, as a database commits with a journal: it
+checks the recording reads back whole (Rerun writes its footer last; a full disk or a killed
+writer leaves none), flushes every file, writes and flushes a journal naming the set and its
+new files, moves the previous files aside, puts the new set in place, deletes the previous
+files and then the journal. A final name with no new file this time (an export that wrote
+nothing there) loses its previous file with the swap, so that no file of an older run is left
+beside the new set. If a step fails, the previous set is put back and the error is raised;
+without ``commit`` (an exception, an interrupt) the temporary files are removed.
 
 One run at a time writes into a directory (``directory_lock``). Under the lock, the next run
 first finishes the work of runs whose process no longer exists (``remove_stale_partials``): a
-journal left by a killed commit is rolled forward if the new pair is there whole (both files,
-as the journal names them), else rolled back to the previous pair; then the dead runs'
-temporary files are removed. Whatever instant a run was killed at, the directory then holds the
-previous pair or the new one, whole, and none of the dead run's temporary files.
+journal left by a killed commit is rolled forward if the new set is there whole (every new
+file or directory, its size as the journal names it), else rolled back to the previous set;
+then the dead runs' temporary files are removed. Whatever instant a run was killed at, the
+directory then holds the previous set or the new one, whole, and none of the dead run's
+temporary files.
 """
 
 from __future__ import annotations
@@ -33,6 +38,8 @@ import json
 import logging
 import os
 import re
+import shutil
+import stat
 import warnings
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
@@ -45,6 +52,7 @@ __all__ = [
     "OutputPair",
     "directory_lock",
     "remove_stale_partials",
+    "staging_dir",
     "temp_path",
     "temporary",
     "verify_rrd",
@@ -115,6 +123,31 @@ def temporary(final: Path) -> Iterator[Path]:
             _in_progress.discard(tmp)
 
 
+@contextlib.contextmanager
+def staging_dir(final: Path) -> Iterator[Path]:
+    """A new empty directory at this process's temporary name for ``final``
+    (``temp_path``), removed with what it holds when the block ends.
+
+    Raises
+    ------
+    OutputError
+        If it cannot be made.
+    """
+    tmp = temp_path(final)
+    _in_progress.add(tmp)
+    try:
+        try:
+            tmp.mkdir()
+        except OSError as exc:
+            raise _output_error(exc) from None
+        yield tmp
+    finally:
+        try:
+            _remove(tmp)
+        finally:
+            _in_progress.discard(tmp)
+
+
 def _fsync(path: Path) -> None:
     fd = os.open(path, os.O_RDONLY)
     try:
@@ -166,30 +199,85 @@ def verify_rrd(path: Path) -> None:
 
 
 def _size(path: Path) -> int | None:
-    """The file's size in bytes, or None if there is no file."""
+    """A file's size in bytes; for a directory, the bytes of every file in it plus the number
+    of its entries, at any depth (each deletion lowers it, so a directory cut short while it
+    was removed never has its whole size); None if there is nothing."""
     try:
-        return os.stat(path).st_size
+        st = os.lstat(path)
     except FileNotFoundError:
         return None
+    if not stat.S_ISDIR(st.st_mode):
+        return st.st_size
+    total = 0
+    for root, dirs, files in os.walk(path):
+        total += len(dirs) + len(files)
+        total += sum(os.lstat(os.path.join(root, f)).st_size for f in files)
+    return total
+
+
+def _size_of(path: Path) -> int:
+    """``_size`` of a file that must be there (FileNotFoundError if it is not)."""
+    size = _size(path)
+    if size is None:
+        raise FileNotFoundError(errno.ENOENT, "No such file or directory", str(path))
+    return size
+
+
+def _exists(path: Path) -> bool:
+    return os.path.lexists(path)
+
+
+def _remove(path: Path) -> bool:
+    """Remove a file or a directory tree; True if something was there."""
+    try:
+        st = os.lstat(path)
+    except FileNotFoundError:
+        return False
+    if stat.S_ISDIR(st.st_mode):
+        shutil.rmtree(path)
+        return True
+    return _unlink(path)
+
+
+def _fsync_tree(path: Path, files: bool = True) -> None:
+    """Flush a file, or every file (unless ``files`` is false: flushed already) and directory
+    of a tree, directories after their files."""
+    if not Path(path).is_dir():
+        if files:
+            _fsync(path)
+        return
+    for root, _, names in os.walk(path, topdown=False):
+        if files:
+            for f in names:
+                _fsync(Path(root, f))
+        _fsync(Path(root))
 
 
 class _Swap:
-    """The journalled swap of a group of files (a recording and its report) in one directory.
+    """The journalled swap of a set of files (a recording, its report, the run's exports) in
+    one directory.
 
-    ``finals`` are the final names, ``news`` the new files (``.partial``), ``olds`` where the
-    previous files wait while the new ones are put in place (``.old``), ``journal`` the file
-    naming them, all named by ``temp_path`` with the writer's process id. The journal's first
-    line holds the final names, the new files' sizes and which final names held a previous
-    file; a second line ``back`` marks a swap being undone.
+    ``finals`` are the final names, ``news`` the new files or directories (``.partial``;
+    None where the set has no new file: the previous one is then removed), ``olds`` where
+    the previous files wait while the new ones are put in place (``.old``), ``journal`` the
+    file naming them, all named by ``temp_path`` with the writer's process id. The journal's
+    first line holds the final names, the new files' sizes (``_size``; null for no new file)
+    and which final names held a previous file; a second line ``back`` marks a swap being
+    undone.
 
     Every state the swap passes through is told by which names exist: a new file leaves its
-    temporary name only by its rename to the final name, and a previous file its ``.old``
-    name only by its rename back or, once every new file is in place, by its deletion.
+    temporary name only by its rename to the final name (or, a directory being undone, back
+    from it), and a previous file its ``.old`` name only by its rename back or, once every new
+    file is in place, by its deletion. A directory is deleted only at a temporary name.
     """
 
-    def __init__(self, finals: Sequence[Path], pid: int) -> None:
+    def __init__(self, finals: Sequence[Path], pid: int, has_new: Sequence[bool] | None = None):
         self.finals = tuple(Path(p) for p in finals)
-        self.news = tuple(temp_path(p, "partial", pid) for p in self.finals)
+        has_new = [True] * len(self.finals) if has_new is None else list(has_new)
+        self.news = tuple(
+            temp_path(p, "partial", pid) if new else None
+            for p, new in zip(self.finals, has_new, strict=True)
+        )
         self.olds = tuple(temp_path(p, "old", pid) for p in self.finals)
         self.journal = temp_path(self.finals[-1], "journal", pid)
         self.directory = self.finals[-1].parent
@@ -197,7 +285,7 @@ class _Swap:
     @property
     def paths(self) -> tuple[Path, ...]:
         """Every temporary name of the swap."""
-        return (*self.news, *self.olds, self.journal)
+        return (*(p for p in self.news if p is not None), *self.olds, self.journal)
 
     # ------------------------------------------------------------------ the commit, in order
 
@@ -206,8 +294,8 @@ class _Swap:
         instant the process dies at, ``recover`` ends the swap one way or the other."""
         entry = {
             "files": [p.name for p in self.finals],
-            "sizes": [os.stat(p).st_size for p in self.news],
-            "previous": [p.exists() for p in self.finals],
+            "sizes": [None if p is None else _size_of(p) for p in self.news],
+            "previous": [_exists(p) for p in self.finals],
         }
         self._write_journal(json.dumps(entry) + "\n", os.O_CREAT | os.O_TRUNC)
 
@@ -223,16 +311,17 @@ class _Swap:
     def put_in_place(self) -> None:
         """Previous files aside, new files in (each an atomic rename), flushed."""
         for final, old in zip(self.finals, self.olds, strict=True):
-            if final.exists():
+            if _exists(final):
                 os.replace(final, old)
         for new, final in zip(self.news, self.finals, strict=True):
-            os.replace(new, final)
+            if new is not None:
+                os.replace(new, final)
         _fsync(self.directory)
 
     def end(self) -> list[Path]:
         """Delete the previous files, then the journal: the swap is over. Return what was
         deleted."""
-        removed = [old for old in self.olds if _unlink(old)]
+        removed = [old for old in self.olds if _remove(old)]
         _fsync(self.directory)  # the previous files gone before the journal that names them
         if _unlink(self.journal):
             removed.append(self.journal)
@@ -250,13 +339,24 @@ class _Swap:
         for final, old, new, size, previous in zip(
             self.finals, self.olds, self.news, entry["sizes"], entry["previous"], strict=True
         ):
-            if old.exists():
+            if new is None:  # nothing new went there: the previous file back, if moved
+                if _exists(old):
+                    os.replace(old, final)
+                continue
+            if _exists(old):
+                if os.path.isdir(old) and _exists(final):
+                    # A directory cannot be renamed over: the new one back to its temporary
+                    # name (removed below) first.
+                    os.replace(final, new)
                 os.replace(old, final)  # over the new file, if it was put there
-            elif not previous and not new.exists() and _size(final) == size:
-                final.unlink()  # the new file, where there was none before
-                removed.append(final)
+            elif not previous and not _exists(new) and _size(final) == size:
+                if os.path.isdir(final):
+                    os.replace(final, new)  # removed below, at its temporary name
+                else:
+                    final.unlink()  # the new file, where there was none before
+                    removed.append(final)
         _fsync(self.directory)  # the previous files back before the new ones go
-        removed += [new for new in self.news if _unlink(new)]
+        removed += [new for new in self.news if new is not None and _remove(new)]
         _fsync(self.directory)
         if _unlink(self.journal):
             removed.append(self.journal)
@@ -279,7 +379,10 @@ class _Swap:
             isinstance(sizes, list)
             and isinstance(previous, list)
             and len(sizes) == len(previous) == n
-            and all(type(v) is int and v >= 0 for v in sizes)
+            and all(
+                (v is None) if new is None else (type(v) is int and v >= 0)
+                for v, new in zip(sizes, self.news, strict=True)
+            )
             and all(type(v) is bool for v in previous)
         ):
             return None
@@ -291,19 +394,24 @@ class _Swap:
         (it is written whole before any file is moved: one cut short names no move)."""
         match = _TEMP.match(journal.name)
         try:
-            files = json.loads(journal.read_text(encoding="utf-8").partition("\n")[0])["files"]
+            entry = json.loads(journal.read_text(encoding="utf-8").partition("\n")[0])
+            files, sizes = entry["files"], entry["sizes"]
         except (OSError, ValueError, TypeError, KeyError):
             return None
         if not (
             match
             and isinstance(files, list)
             and files
+            and isinstance(sizes, list)
+            and len(sizes) == len(files)
             and all(
                 isinstance(f, str) and f == Path(f).name and f not in ("", ".", "..") for f in files
             )
         ):
             return None
-        swap = cls([journal.parent / f for f in files], int(match.group(1)))
+        swap = cls(
+            [journal.parent / f for f in files], int(match.group(1)), [v is not None for v in sizes]
+        )
         if swap.journal != journal or swap._entry() is None:
             return None
         return swap
@@ -317,14 +425,18 @@ class _Swap:
         if entry is None:
             raise OutputError(errno.EIO, f"{self.journal} cannot be read back")
         whole = all(
-            _size(new) == size if new.exists() else _size(final) == size
+            new is None or (_size(new) if _exists(new) else _size(final)) == size
             for new, final, size in zip(self.news, self.finals, entry["sizes"], strict=True)
         )
         if whole and not entry["back"]:
             logger.info("%s: finishing the commit of a run that died", self.journal)
-            for new, final in zip(self.news, self.finals, strict=True):
-                if new.exists():
-                    os.replace(new, final)
+            for new, final, old in zip(self.news, self.finals, self.olds, strict=True):
+                if new is None or _exists(new):
+                    # Not moved yet: what the final name holds is the previous file, aside.
+                    if _exists(final):
+                        os.replace(final, old)
+                    if new is not None:
+                        os.replace(new, final)
             _fsync(self.directory)
             return self.end()
         logger.info("%s: undoing the commit of a run that died", self.journal)
@@ -341,7 +453,7 @@ def _unlink(path: Path) -> bool:
 
 
 class OutputPair:
-    """The recording and the report of one run, committed together.
+    """The recording and the report of one run, and its exports, committed together.
 
     Parameters
     ----------
@@ -351,10 +463,44 @@ class OutputPair:
 
     def __init__(self, rrd_path: Path, json_path: Path) -> None:
         self.finals = (Path(rrd_path), Path(json_path))
+        self._others: list[tuple[Path, bool]] = []  # (final name, has a new file)
+        self._flushed: set[Path] = set()  # new files whose writer flushed their files
         self._swap = _Swap(self.finals, os.getpid())
         self.rrd_tmp, self.json_tmp = self._swap.news
         self._pending = False  # a journal left for the next run to recover
         _in_progress.update(self._swap.paths)
+
+    def add(self, final: Path, staged: Path | None, flushed: bool = False) -> None:
+        """Commit one more final name with the pair: ``staged``, a whole file or directory in
+        the same directory (an export's), is moved to its temporary name now; None means
+        there is no new file there this time and the commit removes the previous one.
+        ``flushed``: every file of ``staged`` is on the disk already (``fsync``); the commit
+        then flushes only its directories.
+
+        Raises
+        ------
+        ValueError
+            If ``final`` is already in the set or lies in another directory.
+        OutputError
+            If ``staged`` cannot be moved.
+        """
+        final = Path(final)
+        if final.parent != self.finals[0].parent or final in self.finals:
+            raise ValueError(f"{final}: not a new name beside {self.finals[0].name}")
+        if any(final == f for f, _ in self._others):
+            raise ValueError(f"{final}: already in the set")
+        self._others.append((final, staged is not None))
+        names = (*(f for f, _ in self._others), *self.finals)
+        has_new = (*(n for _, n in self._others), True, True)
+        self._swap = _Swap(names, os.getpid(), has_new)
+        _in_progress.update(self._swap.paths)
+        if staged is not None:
+            if flushed:
+                self._flushed.add(temp_path(final))
+            try:
+                os.replace(staged, temp_path(final))
+            except OSError as exc:
+                raise _output_error(exc) from None
 
     def write_json(self, text: str) -> None:
         """Write the report's text to its temporary name and flush it to the disk."""
@@ -367,13 +513,13 @@ class OutputPair:
             raise OutputError(exc.errno, f"{self.finals[1].name}: {exc.strerror}") from None
 
     def commit(self) -> None:
-        """Check the recording, then put both files in place together (see the module doc).
+        """Check the recording, then put every file in place together (see the module doc).
 
         Raises
         ------
         OutputError
             If the recording is incomplete or a file cannot be synced or moved; the previous
-            pair (if any) is then as it was, and the temporary files are removed. Should
+            set (if any) is then as it was, and the temporary files are removed. Should
             putting it back fail too, the journal stays and the next run into the directory
             ends the commit (``remove_stale_partials``); the message says so.
         """
@@ -381,6 +527,9 @@ class OutputPair:
         try:
             verify_rrd(self.rrd_tmp)
             _fsync(self.rrd_tmp)
+            for new in swap.news[:-2]:
+                if new is not None:
+                    _fsync_tree(new, files=new not in self._flushed)
             swap.begin()
         except OSError as exc:
             with contextlib.suppress(OSError):
@@ -395,7 +544,7 @@ class OutputPair:
         try:
             swap.put_in_place()
         except BaseException as exc:
-            # An error or an interrupt (SIGTERM, Ctrl-C) mid-swap: the previous pair back.
+            # An error or an interrupt (SIGTERM, Ctrl-C) mid-swap: the previous set back.
             try:
                 swap.roll_back()
             except BaseException:
@@ -404,7 +553,7 @@ class OutputPair:
                     raise OutputError(
                         exc.errno,
                         f"{_output_error(exc)}; the next run into {swap.directory} puts the "
-                        "previous pair back",
+                        "previous files back",
                     ) from None
                 raise
             self.discard()
@@ -412,14 +561,14 @@ class OutputPair:
                 raise _output_error(exc) from None
             raise
         try:
-            swap.end()  # the new pair is in place: what is left is clearing up
+            swap.end()  # the new set is in place: what is left is clearing up
         except BaseException as exc:
-            self._pending = True  # the next run removes the previous pair
+            self._pending = True  # the next run removes the previous set
             if isinstance(exc, OSError):
                 raise OutputError(
                     exc.errno,
-                    f"{_output_error(exc)}; the new pair is in place, the next run into "
-                    f"{swap.directory} removes the previous one",
+                    f"{_output_error(exc)}; the new files are in place, the next run into "
+                    f"{swap.directory} removes the previous ones",
                 ) from None
             raise
         _in_progress.difference_update(swap.paths)
@@ -429,8 +578,9 @@ class OutputPair:
         commit's journal is left for the next run to recover."""
         if self._pending:
             return
-        for tmp in (self.rrd_tmp, self.json_tmp):
-            tmp.unlink(missing_ok=True)
+        for tmp in self._swap.news:
+            if tmp is not None:
+                _remove(tmp)
         _in_progress.difference_update(self._swap.paths)
 
 
@@ -465,9 +615,10 @@ def _stale(path: Path) -> bool:
 def remove_stale_partials(out_dir: Path) -> list[Path]:
     """End the work of runs into ``out_dir`` whose process no longer exists: finish or roll
     back their interrupted commits (``OutputPair``'s journals), then delete their temporary
-    files. Only names made by ``temp_path`` are touched (and the final names of an undone
-    swap). A ``.old`` file with no journal beside it is left alone (a swap deletes its
-    journal last), as are the files of a run whose journal is not one this program wrote.
+    files and directories (an export's staging directory, a new export directory). Only
+    names made by ``temp_path`` are touched (and the final names of an undone swap). A
+    ``.old`` file with no journal beside it is left alone (a swap deletes its journal last),
+    as are the files of a run whose journal is not one this program wrote.
 
     Returns
     -------
@@ -501,7 +652,7 @@ def remove_stale_partials(out_dir: Path) -> list[Path]:
             and match.group(3) == "partial"
             and match.group(1) not in unknown
             and _stale(path)
-            and _unlink(path)
+            and _remove(path)
         ):
             removed.append(path)
     return removed

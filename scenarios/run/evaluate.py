@@ -61,6 +61,8 @@ class TickTruth:
         True base centres of the cones, metres.
     reference_error_m : float or None
         Distance of the body from the flight's reference position, if it has one.
+    v_w_b_mps : ndarray, shape (3,), or None
+        The body origin's true velocity in the world, m/s, if known.
     """
 
     tick: int
@@ -70,6 +72,7 @@ class TickTruth:
     quat_xyzw: np.ndarray
     cones_w: np.ndarray
     reference_error_m: float | None = None
+    v_w_b_mps: np.ndarray | None = None
 
 
 def evaluate_tick(
@@ -174,6 +177,7 @@ def evaluate_tick(
         cones_in_view=in_view,
         detections=records,
         reference_error_m=truth.reference_error_m,
+        v_w_b_mps=truth.v_w_b_mps,
         timing=timing,
         cov_T_w_b_est=cov_T_w_b,
     )
@@ -235,7 +239,7 @@ def reevaluate(
     out = []
     for t in ticks:
         truth = TickTruth(
-            t.tick, t.t_s, t.T_w_b, t.T_b_c, t.quat_xyzw, cones_w, t.reference_error_m
+            t.tick, t.t_s, t.T_w_b, t.T_b_c, t.quat_xyzw, cones_w, t.reference_error_m, t.v_w_b_mps
         )
         timing = None if t.timing is None else dataclasses.replace(t.timing, T_w_b_latest=None)
         out.append(

@@ -196,6 +196,10 @@ class TickRecord:
         runner's streams, e.g. in a unit test).
     cov_T_w_b_est : ndarray, shape (6, 6), or None
         The covariance the estimator was told for ``T_w_b_est`` (None: exact).
+    v_w_b_mps : ndarray, shape (3,), or None
+        The body origin's true velocity in the world at ``t_s``, m/s: MuJoCo's (the free
+        joint's) in a flight with dynamics, the keyframes' (``sim.flight.KeyframeTrajectory``)
+        in a kinematic one; None for a tick not made by the runner.
     """
 
     tick: int
@@ -212,6 +216,7 @@ class TickRecord:
     reference_error_m: float | None = None
     timing: ImageTiming | None = None
     cov_T_w_b_est: np.ndarray | None = None
+    v_w_b_mps: np.ndarray | None = None
 
     def estimates_w(self, method: str) -> np.ndarray:
         """Every estimate of ``method`` at this tick, one row per detection giving one, (K, 3)."""

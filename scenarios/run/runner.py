@@ -64,7 +64,7 @@ from vnav.frames import FrameBuffer
 from vnav.localize import Localizer
 from vnav.sensor_noise import body_pose_covariance, mount_covariance
 
-__all__ = ["STAGES", "TickObserver", "run_scenario"]
+__all__ = ["STAGES", "FanOut", "TickObserver", "run_scenario"]
 
 logger = logging.getLogger(__name__)
 
@@ -95,6 +95,38 @@ class TickObserver(Protocol):
     def on_tick(self, record: TickRecord, rgb: np.ndarray, depth_m: np.ndarray | None) -> None: ...
 
     def abort(self) -> None: ...
+
+
+class FanOut:
+    """One ``TickObserver`` that passes everything to several, in order (the recording, then
+    each exporter, ``scenarios.export``).
+
+    Parameters
+    ----------
+    *observers : TickObserver
+    """
+
+    def __init__(self, *observers: TickObserver) -> None:
+        self.observers = observers
+
+    def start(self, spec: ScenarioSpec, seed: int, camera: PinholeCamera, scenery: Scenery) -> None:
+        for o in self.observers:
+            o.start(spec, seed, camera, scenery)
+
+    def on_tick(self, record: TickRecord, rgb: np.ndarray, depth_m: np.ndarray | None) -> None:
+        for o in self.observers:
+            o.on_tick(record, rgb, depth_m)
+
+    def abort(self) -> None:
+        """Abort every observer, even if one fails to; then raise the first failure."""
+        first: BaseException | None = None
+        for o in self.observers:
+            try:
+                o.abort()
+            except BaseException as exc:
+                first = first or exc
+        if first is not None:
+            raise first
 
 
 def run_scenario(
@@ -541,6 +573,10 @@ def _truth(tick: int, world: World, driver, cones_w: np.ndarray) -> TickTruth:
         reference_error_m=None
         if reference is None
         else float(np.linalg.norm(T_w_b[:3, 3] - reference.p_w)),
+        # A keyframe flight places the body and zeroes MuJoCo's velocity: its keyframes know.
+        v_w_b_mps=driver.keyframes.velocity_w(world.time_s)
+        if isinstance(driver, KeyframePlayer)
+        else world.velocity_w,
     )
 
 

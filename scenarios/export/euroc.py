@@ -1,0 +1,333 @@
+"""A run in the EuRoC MAV dataset's folder layout (ETH Zurich's ASL format), which VIO and
+SLAM front ends and evo read.
+
+``NAME.euroc/mav0/``::
+
+    body.yaml                           what the body frame B is
+    cam0/data.csv                       #timestamp [ns],filename: one row per image
+    cam0/data/<t_ns>.png                the image the estimator saw (noise included), 8-bit RGB
+    cam0/sensor.yaml                    T_BS (the true camera mount, optical frame in the
+                                        body), rate_hz, resolution, pinhole intrinsics
+                                        [fu, fv, cu, cv], radial-tangential distortion (none)
+    depth0/data.csv, data/<t_ns>.png    planar z-depth, 16-bit PNG in millimetres (0: no return:
+                                        the sky, beyond the far plane or 65.535 m); sensor.yaml
+                                        as cam0's, with depth_scale
+    state_groundtruth_estimate0/data.csv   the body's true state at each image's stamp:
+                                        p_RS_R, q_RS (w, x, y, z), v_RS_R, gyroscope and
+                                        accelerometer biases (zero)
+    state_groundtruth_estimate0/sensor.yaml
+
+Frames (docs/CONVENTIONS.md, "Data out"): R is vnav's world (z up), S the state's sensor is
+the body B itself (FLU; in the real dataset B is the IMU's frame, here it is vnav's body
+frame, ``T_BS`` of the ground truth the identity), the camera's S its optical frame (RDF), so
+``T_BS`` of cam0 is ``T_b_c``. Stamps are integer nanoseconds on the camera clock, the
+images' exposure stamps, as in the TUM files (``scenarios.export.tum``); the ground truth is
+given at those same stamps (the pose clock's ``stamp + camera_clock_offset_s``). The depth
+is millimetres (1000 per metre; TUM RGB-D's PNGs use 5000). There is no ``imu0/``: this
+export writes no IMU readings yet (the note says so).
+
+The velocity is the simulator's (``scenarios.run.records.TickRecord.v_w_b_mps``): MuJoCo's
+free-joint velocity, or a keyframe flight's segment slope, not a difference of poses.
+
+Images are encoded and written on a worker thread (OpenCV and file writes release the GIL),
+overlapping the next tick's rendering, as the recording's JPEGs are.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import deque
+from concurrent.futures import Future, ThreadPoolExecutor
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import cv2
+import numpy as np
+
+from scenarios.export.base import ExportResult, stamp_ns, write_flushed
+from scenarios.run.records import RunResult, TickRecord
+from vnav import quat
+from vnav.camera import PinholeCamera
+
+if TYPE_CHECKING:  # annotations only: importing sim.mesh loads MuJoCo before sim.gl
+    from scenarios.scenario.spec import ScenarioSpec
+    from sim.mesh import Scenery
+
+__all__ = [
+    "DEPTH_SCALE",
+    "GROUNDTRUTH_HEADER",
+    "EurocExporter",
+    "depth_png_mm",
+]
+
+logger = logging.getLogger(__name__)
+
+DEPTH_SCALE = 1000.0
+"""The depth PNG's value per metre (millimetres)."""
+DEPTH_MM_MAX = np.iinfo(np.uint16).max
+PNG_PARAMS = [cv2.IMWRITE_PNG_COMPRESSION, 1, cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_NONE]
+"""zlib level 1 and no PNG row filter: a rendered 640x480 image is encoded in about 6 ms
+instead of OpenCV's default's 13 ms (level 1) to 25 ms (level 3), and comes out smaller than
+with the default filters (lossless either way)."""
+MAX_QUEUED = 8
+"""Images waiting for the writer thread at most; beyond, a tick waits (bounded memory)."""
+
+GROUNDTRUTH_HEADER = (
+    "#timestamp, p_RS_R_x [m], p_RS_R_y [m], p_RS_R_z [m], q_RS_w [], q_RS_x [], q_RS_y [], "
+    "q_RS_z [], v_RS_R_x [m s^-1], v_RS_R_y [m s^-1], v_RS_R_z [m s^-1], "
+    "b_w_RS_S_x [rad s^-1], b_w_RS_S_y [rad s^-1], b_w_RS_S_z [rad s^-1], "
+    "b_a_RS_S_x [m s^-2], b_a_RS_S_y [m s^-2], b_a_RS_S_z [m s^-2]"
+)
+"""The EuRoC ground truth's header, column for column."""
+IMAGES_HEADER = "#timestamp [ns],filename"
+
+
+def depth_png_mm(depth_m: np.ndarray, far_m: float) -> np.ndarray:
+    """Planar depth in metres -> uint16 millimetres, rounded; 0 where there is no return
+    (not finite, not positive, at or beyond ``far_m``: the sky) or beyond 65.535 m.
+
+    Parameters
+    ----------
+    depth_m : ndarray, shape (H, W)
+    far_m : float
+        The renderer's far plane (the sky reads it).
+
+    Returns
+    -------
+    ndarray, shape (H, W), uint16
+    """
+    depth_m = np.asarray(depth_m)
+    mm = np.rint(depth_m.astype(np.float64) * DEPTH_SCALE)  # float32 would round some 0.5 mm off
+    # NaN compares false: no return.
+    valid = (depth_m > 0.0) & (depth_m < far_m) & (mm <= DEPTH_MM_MAX)
+    return np.where(valid, mm, 0).astype(np.uint16)
+
+
+def _write_file(path: Path, data: bytes) -> None:
+    """Write ``data`` to a new file and flush it to the disk (an exporter's files are
+    flushed before ``finish`` returns, ``scenarios.export.base``)."""
+    write_flushed(path, data)
+
+
+def _png(image: np.ndarray) -> bytes:
+    ok, png = cv2.imencode(".png", image, PNG_PARAMS)
+    if not ok:
+        raise RuntimeError("OpenCV could not PNG-encode an image")
+    return png.tobytes()
+
+
+def _write_images(
+    rgb_path: Path,
+    rgb: np.ndarray,
+    depth_path: Path | None,
+    depth_m: np.ndarray | None,
+    far_m: float,
+) -> None:
+    """Encode and write one tick's images (on the writer thread)."""
+    _write_file(rgb_path, _png(cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)))
+    if depth_path is not None and depth_m is not None:
+        _write_file(depth_path, _png(depth_png_mm(depth_m, far_m)))
+
+
+def _matrix_yaml(T: np.ndarray) -> str:
+    """A 4x4 matrix as EuRoC writes ``T_BS``: ``cols``, ``rows``, ``data`` row-major."""
+    rows = [", ".join(repr(float(v)) for v in row) for row in np.asarray(T, dtype=np.float64)]
+    data = ",\n         ".join(rows)
+    return f"  cols: 4\n  rows: 4\n  data: [{data}]\n"
+
+
+def _camera_yaml(
+    kind: str, comment: str, T_b_c: np.ndarray, rate_hz: float, camera: PinholeCamera, more: str
+) -> str:
+    return (
+        "# General sensor definitions.\n"
+        f"sensor_type: {kind}\n"
+        f"comment: {_quoted(comment)}\n\n"
+        "# Sensor extrinsics wrt. the body-frame.\n"
+        f"T_BS:\n{_matrix_yaml(T_b_c)}\n"
+        "# Camera specific definitions.\n"
+        f"rate_hz: {rate_hz:g}\n"
+        f"resolution: [{camera.width}, {camera.height}]\n"
+        "camera_model: pinhole\n"
+        f"intrinsics: [{float(camera.fx)!r}, {float(camera.fy)!r}, {float(camera.cx)!r}, "
+        f"{float(camera.cy)!r}]"
+        " #fu, fv, cu, cv\n"
+        "distortion_model: radial-tangential\n"
+        "distortion_coefficients: [0.0, 0.0, 0.0, 0.0]\n" + more
+    )
+
+
+class EurocExporter:
+    """``NAME.euroc/`` (``scenarios.export.base.Exporter``; the layout in the module doc).
+
+    Parameters
+    ----------
+    staging : Path
+        An empty directory: ``NAME.euroc/`` is made in it.
+    """
+
+    name = "euroc"
+
+    def __init__(self, staging: Path) -> None:
+        self.staging = Path(staging)
+        self._root: Path | None = None
+        self._spec: ScenarioSpec | None = None
+        self._camera: PinholeCamera | None = None
+        self._seed = 0
+        self._writer: ThreadPoolExecutor | None = None
+        self._pending: deque[Future] = deque()
+        self._images: list[int] = []
+        self._depths: list[int] = []
+        self._states: list[str] = []
+        self._T_b_c_first: np.ndarray | None = None
+        self._mount_moved = False
+
+    def start(self, spec: ScenarioSpec, seed: int, camera: PinholeCamera, scenery: Scenery) -> None:
+        self._spec, self._camera, self._seed = spec, camera, seed
+        self._root = self.staging / f"{spec.name}.euroc"
+        mav0 = self._root / "mav0"
+        for sub in ("cam0/data", "depth0/data", "state_groundtruth_estimate0"):
+            (mav0 / sub).mkdir(parents=True)
+        self._writer = ThreadPoolExecutor(max_workers=1, thread_name_prefix="vnav-euroc")
+
+    def on_tick(self, record: TickRecord, rgb: np.ndarray, depth_m: np.ndarray | None) -> None:
+        """Queue the tick's images for the writer thread; keep its ground-truth row."""
+        assert self._writer is not None and self._root is not None, "start() first"
+        self._raise_done()
+        t_ns = stamp_ns(record)
+        mav0 = self._root / "mav0"
+        depth_path = None if depth_m is None else mav0 / "depth0" / "data" / f"{t_ns}.png"
+        self._pending.append(
+            self._writer.submit(
+                _write_images,
+                mav0 / "cam0" / "data" / f"{t_ns}.png",
+                rgb,
+                depth_path,
+                depth_m,
+                self._spec.scene.zfar_m,
+            )
+        )
+        self._images.append(t_ns)
+        if depth_path is not None:
+            self._depths.append(t_ns)
+        self._states.append(_state_row(t_ns, record))
+        if self._T_b_c_first is None:
+            self._T_b_c_first = record.T_b_c
+        elif not np.array_equal(record.T_b_c, self._T_b_c_first):
+            self._mount_moved = True
+        while len(self._pending) > MAX_QUEUED:
+            self._pending.popleft().result()
+
+    def _raise_done(self) -> None:
+        """Raise a finished write's error now (a full disk stops the run early)."""
+        while self._pending and self._pending[0].done():
+            self._pending.popleft().result()
+
+    def finish(self, result: RunResult) -> ExportResult:
+        """Wait for the images, then write the tables and the sensors' descriptions."""
+        assert self._writer is not None and self._root is not None, "start() first"
+        try:
+            while self._pending:
+                self._pending.popleft().result()
+        finally:
+            self._writer.shutdown(wait=True, cancel_futures=True)
+        mav0, spec, camera = self._root / "mav0", self._spec, self._camera
+        T_b_c = self._T_b_c_first if self._T_b_c_first is not None else np.eye(4)
+        about = f"vnav-sim scenario {spec.name}, seed {self._seed}"
+        _write_text(
+            mav0 / "body.yaml",
+            "# Additional sensor information\n"
+            "comment: "
+            + _quoted(
+                "The body frame B is vnav's body frame (FLU: x forward, y left, z up, at the "
+                "drone's centre of mass), not an IMU's; every T_BS is relative to it."
+            )
+            + "\n",
+        )
+        moved = (
+            " The camera slides on the body in this flight: T_BS is its mount at the first image."
+            if self._mount_moved
+            else ""
+        )
+        _write_text(mav0 / "cam0" / "data.csv", _image_table(self._images))
+        _write_text(
+            mav0 / "cam0" / "sensor.yaml",
+            _camera_yaml(
+                "camera",
+                f"{about}: the onboard camera (MuJoCo render, the scenario's image noise "
+                f"included), 8-bit RGB PNG; T_BS is the true mount T_b_c, optical frame "
+                f"(x right, y down, z forward) in the body.{moved}",
+                T_b_c,
+                spec.camera_rate_hz,
+                camera,
+                "",
+            ),
+        )
+        if self._depths:
+            _write_text(mav0 / "depth0" / "data.csv", _image_table(self._depths))
+            _write_text(
+                mav0 / "depth0" / "sensor.yaml",
+                _camera_yaml(
+                    "depth",
+                    f"{about}: planar z-depth along the optical axis of cam0 (the same pixels "
+                    "and stamps, the scenario's depth noise included), 16-bit PNG, "
+                    "millimetres; 0 is no return (the sky, the far plane, beyond 65.535 m).",
+                    T_b_c,
+                    spec.camera_rate_hz,
+                    camera,
+                    f"depth_scale: {DEPTH_SCALE:g} # pixel value per metre\n",
+                ),
+            )
+        else:
+            (mav0 / "depth0" / "data").rmdir()
+            (mav0 / "depth0").rmdir()
+        state = mav0 / "state_groundtruth_estimate0"
+        _write_text(state / "data.csv", GROUNDTRUTH_HEADER + "\n" + "".join(self._states))
+        _write_text(
+            state / "sensor.yaml",
+            "# Additional sensor information\n"
+            "sensor_type: ground-truth\n"
+            "comment: "
+            + _quoted(
+                f"{about}: the simulator's true body state at each image's stamp (camera "
+                "clock); p and v in the world (z up), q the body's attitude (w, x, y, z); "
+                "biases zero (no IMU readings are exported)."
+            )
+            + "\n\n"
+            "# Sensor extrinsics wrt. the body-frame.\n"
+            f"T_BS:\n{_matrix_yaml(np.eye(4))}",
+        )
+        notes = ["no IMU (imu0/): this export writes no IMU readings yet"]
+        if self._mount_moved:
+            notes.append("the camera slides in this flight: cam0's T_BS is its first mount")
+        if self._images and self._images[0] < 0:
+            notes.append("the camera clock starts before zero: the first stamps are negative")
+        return ExportResult("euroc", (self._root.name,), note="; ".join(notes))
+
+    def abort(self) -> None:
+        """Stop the writer (the staging directory is its owner's to remove)."""
+        if self._writer is not None:
+            self._writer.shutdown(wait=True, cancel_futures=True)
+        self._pending.clear()
+
+
+def _quoted(text: str) -> str:
+    """A YAML single-quoted string (a plain one cannot hold ``: ``)."""
+    return "'" + text.replace("'", "''") + "'"
+
+
+def _write_text(path: Path, text: str) -> None:
+    _write_file(path, text.encode("utf-8"))
+
+
+def _image_table(stamps_ns: list[int]) -> str:
+    return IMAGES_HEADER + "\n" + "".join(f"{t},{t}.png\n" for t in stamps_ns)
+
+
+def _state_row(t_ns: int, record: TickRecord) -> str:
+    """One ground-truth row: the body's position, attitude (w first), velocity, zero biases."""
+    p = record.T_w_b[:3, 3]
+    x, y, z, w = quat.from_matrix(record.T_w_b[:3, :3])
+    v = record.v_w_b_mps if record.v_w_b_mps is not None else np.full(3, np.nan)
+    values = [*p, w, x, y, z, *v, *([0.0] * 6)]
+    return f"{t_ns}," + ",".join(f"{float(u):.9f}" for u in values) + "\n"
