@@ -27,6 +27,7 @@ SCENARIOS_LAYERS = (
     "scenarios.run",
     "scenarios.judge",
     "scenarios.record",
+    "scenarios.export",
     "scenarios.pipeline",
     "scenarios.grading",
     "scenarios.sweep",
