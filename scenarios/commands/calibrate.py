@@ -31,7 +31,7 @@ def to_yaml(result: CalibrationResult, camera: PinholeCamera) -> str:
         result.T_b_c,
         result.time_offset_s,
         {
-            "T_b_c": se3.check_pose(result.T_b_c),
+            "T_b_c": se3.check_pose(result.T_b_c, "T_b_c"),
             "time_offset_s": result.time_offset_s,
             "reprojection_rms_px": result.reprojection_rms_px,
             "frames_used": result.frames_used,
