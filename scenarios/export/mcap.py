@@ -1,7 +1,7 @@
 """A run as a ROS 2 bag in one MCAP file, written without ROS (``mcap``, ``mcap-ros2-support``).
 
 Foxglove, Rerun (``rerun FILE.mcap``), ``ros2 bag play`` and the ``rosbags`` library read it.
-Topics (frames per REP 103 and REP 105, docs/CONVENTIONS.md, "ROS 2 bags"):
+Topics (frames per REP 103 and REP 105, docs/CONVENTIONS.md, "ROS 2 bags (MCAP) and Kalibr"):
 
 - ``/tf`` (``tf2_msgs/msg/TFMessage``): ``map`` -> ``base_link``, the true body pose ``T_w_b``
   at each image;
