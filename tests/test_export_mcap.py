@@ -188,6 +188,26 @@ def test_the_bag_read_by_rosbags_is_the_run(latency):
         assert all(p.header.frame_id == "map" for _, p, _ in by_topic[estimates_topic(method)])
 
 
+def test_evo_reads_the_ground_truth_as_the_runs_trajectory(latency):
+    """evo's ROS 2 bag reader (``file_interface.read_bag_trajectory``, through rosbags'
+    rosbag2 reader) takes ``/ground_truth/pose`` as a trajectory: its stamps the images'
+    (seconds), its positions and orientations (evo's w x y z) the true body poses."""
+    from evo.tools import file_interface
+    from rosbags.rosbag2 import Reader
+
+    _, keeper, _, _, path = latency
+    with Reader(path) as reader:
+        traj = file_interface.read_bag_trajectory(reader, "/ground_truth/pose")
+    records = sorted(keeper.records, key=lambda r: r.timing.stamp_cam_s)
+    assert traj.num_poses == len(records)
+    np.testing.assert_allclose(
+        traj.timestamps, [r.timing.stamp_cam_s + 1.0 for r in records], rtol=0, atol=1e-9
+    )
+    np.testing.assert_allclose(traj.positions_xyz, [r.T_w_b[:3, 3] for r in records], atol=1e-12)
+    R_w_b = Rotation.from_quat(traj.orientations_quat_wxyz, scalar_first=True).as_matrix()
+    np.testing.assert_allclose(R_w_b, [r.T_w_b[:3, :3] for r in records], atol=1e-12)
+
+
 def test_the_cones_are_latched_markers_at_the_true_cones(latency):
     """One TRIANGLE_LIST marker per true cone, posed at its base centre in ``map``, its
     triangles within the standard cone's footprint and height; together every triangle of the
