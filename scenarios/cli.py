@@ -10,7 +10,7 @@
 - ``vnav-demo sweep FILE.toml [--out DIR] [--workers N] [--address ADDR] [--resume]``: a
   scenario over a grid of values and many seeds, on Ray (``scenarios.sweep``).
 - ``vnav-demo calibrate FILE.rrd [--out FILE.yaml]``: the camera mount and clock offset
-  recovered from a recording (``scenarios.commands.calibrate``).
+  recovered from a recording (``scenarios.commands.calibrate``), written as Kalibr's camchain.
 
 Output fits 80 columns (``scenarios.commands.console.WIDTH``). Exit status: 0 when every check
 passed (or was skipped), 1 when a check failed or had no data, 2 for bad usage or bad input
@@ -96,7 +96,12 @@ def build_parser() -> argparse.ArgumentParser:
         "few cones seen, no rotation to reveal the offset): the message says which.",
     )
     p.add_argument("recording", metavar="FILE.rrd", help="a recording from vnav-demo run")
-    p.add_argument("--out", default=None, metavar="FILE.yaml", help="also write the answer as YAML")
+    p.add_argument(
+        "--out",
+        default=None,
+        metavar="FILE.yaml",
+        help="also write the answer as Kalibr camchain YAML",
+    )
     p.set_defaults(func=_verb("calibrate"))
     return parser
 

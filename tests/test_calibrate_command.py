@@ -12,6 +12,7 @@ import sys
 
 import numpy as np
 import pytest
+import yaml
 
 from scenarios.cli import main
 from scenarios.judge.calibration import inputs_from_run
@@ -20,15 +21,17 @@ from vnav import so3
 
 
 def _yaml_numbers(text: str) -> dict:
-    """The four keys of the YAML ``calibrate`` writes, read back without a YAML library."""
-    rows = re.findall(r"\[([-0-9., ]+)\]", text)
-    T = np.array([[float(v) for v in row.split(",")] for row in rows])
-    values = dict(re.findall(r"^(\w+): ([-0-9.e]+)$", text, flags=re.M))
+    """The mount and offset of the camchain ``calibrate`` writes, read by PyYAML (what Kalibr
+    reads it with) from Kalibr's keys and the project's section."""
+    cam0 = yaml.safe_load(text)["cam0"]
+    ours = cam0["vnav_sim"]
     return {
-        "T_b_c": T,
-        "time_offset_s": float(values["time_offset_s"]),
-        "reprojection_rms_px": float(values["reprojection_rms_px"]),
-        "frames_used": int(values["frames_used"]),
+        "T_cam_body": np.array(cam0["T_cam_body"]),
+        "timeshift_cam_body": cam0["timeshift_cam_body"],
+        "T_b_c": np.array(ours["T_b_c"]),
+        "time_offset_s": ours["time_offset_s"],
+        "reprojection_rms_px": ours["reprojection_rms_px"],
+        "frames_used": ours["frames_used"],
     }
 
 
@@ -50,8 +53,10 @@ def test_calibrate_a_recording_recovers_the_true_mount_and_offset(
     got = _yaml_numbers(out.read_text())
     cam = run.spec.scene.camera
     true_mount = cam.T_b_c_declared @ cam.mount_error.T
-    # 9 decimals in the file: project back onto SO(3) before taking the angle.
-    R_err = so3.nearest_rotation(got["T_b_c"][:3, :3]).T @ true_mount[:3, :3]
+    # Kalibr's T_cam_body is the inverse of the project's T_b_c, its shift the same offset.
+    np.testing.assert_allclose(got["T_cam_body"] @ got["T_b_c"], np.eye(4), atol=1e-12)
+    assert got["timeshift_cam_body"] == got["time_offset_s"]
+    R_err = got["T_b_c"][:3, :3].T @ true_mount[:3, :3]
     assert math.degrees(np.linalg.norm(so3.log(R_err))) < 0.1
     assert np.linalg.norm(got["T_b_c"][:3, 3] - true_mount[:3, 3]) < 0.01
     assert got["time_offset_s"] == pytest.approx(run.spec.timing.camera_clock_offset_s, abs=1e-3)

@@ -1,6 +1,7 @@
 """``vnav-demo calibrate FILE.rrd [--out calib.yaml]``: the camera mount and clock offset
 from a recording (``scenarios.record.reader``, ``vnav.calibration``), printed with their
-standard errors and, where the recording holds the truth, their errors; written as YAML."""
+standard errors and, where the recording holds the truth, their errors; written as Kalibr's
+camchain YAML (``scenarios.export.kalibr``)."""
 
 from __future__ import annotations
 
@@ -8,30 +9,41 @@ import argparse
 from pathlib import Path
 
 from scenarios.commands.console import error, say
+from scenarios.export.kalibr import camchain_yaml
 from scenarios.judge.calibration import Truth, errors_against
 from scenarios.record.outputs import OutputError, write_atomic
 from scenarios.record.reader import RecordingError, calibration_inputs
 from vnav import se3
 from vnav.calibration import CalibrationError, CalibrationResult
+from vnav.camera import PinholeCamera
 
 __all__ = ["command", "to_yaml", "write_yaml"]
 
 
-def to_yaml(result: CalibrationResult) -> str:
-    """The result as YAML: ``T_b_c`` (4x4, rows), ``time_offset_s``, ``reprojection_rms_px``,
-    ``frames_used`` (written by hand: four keys need no library)."""
-    rows = ",\n  ".join(
-        "[" + ", ".join(f"{v:.9f}" for v in row) + "]" for row in se3.check_pose(result.T_b_c)
-    )
-    return (
-        f"T_b_c: [\n  {rows}]\n"
-        f"time_offset_s: {result.time_offset_s:.9f}\n"
-        f"reprojection_rms_px: {result.reprojection_rms_px:.6f}\n"
-        f"frames_used: {result.frames_used}\n"
+def to_yaml(result: CalibrationResult, camera: PinholeCamera) -> str:
+    """The result as Kalibr's camchain YAML (``scenarios.export.kalibr``): ``cam0`` with the
+    camera's intrinsics, ``T_cam_body`` (the inverse of ``T_b_c``) and ``timeshift_cam_body``
+    (``time_offset_s``), and the project's figures under ``cam0.vnav_sim``: ``T_b_c``,
+    ``time_offset_s``, ``reprojection_rms_px``, ``frames_used``, ``observations_used`` and the
+    standard errors."""
+    return camchain_yaml(
+        camera,
+        result.T_b_c,
+        result.time_offset_s,
+        {
+            "T_b_c": se3.check_pose(result.T_b_c, "T_b_c"),
+            "time_offset_s": result.time_offset_s,
+            "reprojection_rms_px": result.reprojection_rms_px,
+            "frames_used": result.frames_used,
+            "observations_used": result.observations_used,
+            "std_rotation_deg": result.std_rotation_deg,
+            "std_translation_m": result.std_translation_m,
+            "std_offset_s": result.std_offset_s,
+        },
     )
 
 
-def write_yaml(result: CalibrationResult, path: str | Path) -> None:
+def write_yaml(result: CalibrationResult, camera: PinholeCamera, path: str | Path) -> None:
     """Write ``to_yaml`` to ``path`` completely or not at all
     (``scenarios.record.outputs.write_atomic``).
 
@@ -40,7 +52,7 @@ def write_yaml(result: CalibrationResult, path: str | Path) -> None:
     scenarios.record.outputs.OutputError
         If the file cannot be written; ``path`` is then as it was.
     """
-    text = to_yaml(result)
+    text = to_yaml(result, camera)
     write_atomic(Path(path), lambda tmp: tmp.write_text(text, encoding="utf-8"))
 
 
@@ -65,7 +77,7 @@ def command(args: argparse.Namespace) -> int:
     say(_table(solved, inputs.truth))
     if out_path is not None:
         try:
-            write_yaml(solved, out_path)
+            write_yaml(solved, inputs.camera, out_path)
         except OutputError as exc:
             error(f"--out {out}: cannot write: {exc.strerror}")
             return 2

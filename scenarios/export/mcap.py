@@ -1,0 +1,414 @@
+"""A run as a ROS 2 bag in one MCAP file, written without ROS (``mcap``, ``mcap-ros2-support``).
+
+Foxglove, Rerun (``rerun FILE.mcap``), ``ros2 bag play`` and the ``rosbags`` library read it.
+Topics (frames per REP 103 and REP 105, docs/CONVENTIONS.md, "ROS 2 bags (MCAP) and Kalibr"):
+
+- ``/tf`` (``tf2_msgs/msg/TFMessage``): ``map`` -> ``base_link``, the true body pose ``T_w_b``
+  at each image;
+- ``/tf_static`` (``tf2_msgs/msg/TFMessage``): ``base_link`` -> ``camera_optical_frame``, the
+  true mount ``T_b_c``, once, latched (transient local);
+- ``/camera/image_raw`` (``sensor_msgs/msg/Image``): the image as rendered, ``rgb8``;
+- ``/camera/camera_info`` (``sensor_msgs/msg/CameraInfo``): ``K``, ``P = [K | 0]``, ``R = I``,
+  ``plumb_bob`` with zero distortion;
+- ``/camera/depth/image_raw`` (``sensor_msgs/msg/Image``): planar depth, ``32FC1``, metres;
+- ``/ground_truth/pose`` (``geometry_msgs/msg/PoseStamped``): ``T_w_b`` in ``map``;
+- ``/cones`` (``visualization_msgs/msg/MarkerArray``): the true cones, one ``TRIANGLE_LIST``
+  each (the simulator's meshes), latched;
+- ``/estimates/<method>`` (``geometry_msgs/msg/PointStamped``): each estimate of a cone's
+  base centre, in ``map``.
+
+A flight that slides the camera on the body (a keyframed ``camera_position_b``) has no
+``/tf_static``: its mount goes on ``/tf`` with the body pose at every image.
+
+Stamps: every message of an image (its ``/tf``, its pose, its camera info, its estimates)
+carries the image's exposure stamp on the **camera clock** (as the TUM files do), plus
+``stamp_origin_s``: a whole number of seconds, 0 unless the camera clock reads negative at the
+start of the flight (``camera_clock_offset_s > 0``: ``t_cam = t_pose - offset``), which ROS
+time cannot hold. Each message's MCAP ``log_time`` and ``publish_time`` are that stamp in
+nanoseconds. The file's metadata record ``vnav_sim`` names the scenario, the seed, the clock
+offset and ``stamp_origin_s``.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+import re
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, BinaryIO
+
+import numpy as np
+from mcap.well_known import MessageEncoding, SchemaEncoding
+from mcap.writer import CompressionType
+from mcap.writer import Writer as McapWriter
+
+# The CDR encoder of mcap-ros2-support's own Writer (a module function; that Writer registers
+# channels without the ``offered_qos_profiles`` the ros2 profile requires, so the channels are
+# registered here through mcap's Writer).
+from mcap_ros2._dynamic import serialize_dynamic
+
+from scenarios.export.base import ExportResult
+from scenarios.export.ros2_msgs import QOS_LATCHED, QOS_VOLATILE, msgdef
+from scenarios.scenario.spec import KinematicFlight
+from vnav import quat, se3
+
+if TYPE_CHECKING:
+    from scenarios.run.records import RunResult, TickRecord
+    from scenarios.scenario.spec import ScenarioSpec
+    from sim.mesh import Scenery
+    from vnav.camera import PinholeCamera
+
+__all__ = ["FRAME_BODY", "FRAME_CAMERA", "FRAME_MAP", "TOPICS", "McapExporter", "estimates_topic"]
+
+logger = logging.getLogger(__name__)
+
+FRAME_MAP = "map"
+"""The world frame ``w`` (ENU, z up): REP 105's ``map``."""
+FRAME_BODY = "base_link"
+"""The body frame ``b`` (FLU): REP 103's ``base_link``."""
+FRAME_CAMERA = "camera_optical_frame"
+"""The camera's optical frame ``c`` (x right, y down, z forward): REP 103's ``*_optical_frame``."""
+
+TOPICS: dict[str, str] = {
+    "/tf": "tf2_msgs/msg/TFMessage",
+    "/tf_static": "tf2_msgs/msg/TFMessage",
+    "/camera/image_raw": "sensor_msgs/msg/Image",
+    "/camera/camera_info": "sensor_msgs/msg/CameraInfo",
+    "/camera/depth/image_raw": "sensor_msgs/msg/Image",
+    "/ground_truth/pose": "geometry_msgs/msg/PoseStamped",
+    "/cones": "visualization_msgs/msg/MarkerArray",
+}
+"""Every fixed topic and its type (``/estimates/<method>``: ``geometry_msgs/msg/PointStamped``)."""
+
+_LATCHED = {"/tf_static", "/cones"}
+_ESTIMATE_TYPE = "geometry_msgs/msg/PointStamped"
+_MARKER_TRIANGLE_LIST = 11
+_NS_PER_S = 1_000_000_000
+
+
+def estimates_topic(method: str) -> str:
+    """The topic of ``method``'s estimates: ``/estimates/<method>``, a user method
+    ``user:name`` as ``/estimates/user/name``, any character a ROS name cannot hold as ``_``."""
+    tokens = [re.sub(r"\W|^(?=\d)", "_", t, flags=re.ASCII) for t in method.split(":")]
+    return "/estimates/" + "/".join(t or "_" for t in tokens)
+
+
+class McapExporter:
+    """Writes a run as ``<final_name>.mcap`` under ``staging_dir`` as it happens
+    (``scenarios.export.base.Exporter``).
+
+    Parameters
+    ----------
+    staging_dir : Path
+        An existing directory; the file is created there (never over an existing one).
+    final_name : str, optional
+        The file's stem; the scenario's name if not given.
+    compression : mcap.writer.CompressionType
+        Of the file's chunks (zstd by default; ``LZ4`` writes faster, ``NONE`` fastest).
+    """
+
+    name = "mcap"
+
+    def __init__(
+        self,
+        staging_dir: Path,
+        final_name: str | None = None,
+        compression: CompressionType = CompressionType.ZSTD,
+    ) -> None:
+        self._staging_dir = Path(staging_dir)
+        self._final_name = final_name
+        self.path: Path | None = None
+        self._compression = compression
+        self._file: BinaryIO | None = None
+        self._writer: McapWriter | None = None
+        self._schemas: dict[str, tuple[int, Any]] = {}
+        self._channels: dict[str, tuple[int, Any]] = {}
+        self._sequence: dict[str, int] = {}
+        self._camera: PinholeCamera | None = None
+        self._T_b_c_static: np.ndarray | None = None
+        self._origin_ns = 0
+        self._depth_ticks = 0
+        self._ticks = 0
+
+    # -- the run -------------------------------------------------------------------------
+
+    def start(self, spec: ScenarioSpec, seed: int, camera: PinholeCamera, scenery: Scenery) -> None:
+        """Create the file; write its metadata, the static mount and the cones.
+
+        Raises
+        ------
+        OSError
+            If the file cannot be created (or already exists).
+        """
+        self.path = self._staging_dir / f"{self._final_name or spec.name}.mcap"
+        offset_s = spec.timing.camera_clock_offset_s
+        origin_s = max(0, math.ceil(offset_s))
+        self._origin_ns = origin_s * _NS_PER_S
+        self._camera = camera
+        self._file = open(self.path, "xb")  # closed by finish or abort
+        self._writer = McapWriter(self._file, compression=self._compression)
+        self._writer.start(profile="ros2", library="vnav-sim (mcap, mcap-ros2-support)")
+        self._writer.add_metadata(
+            "vnav_sim",
+            {
+                "scenario": spec.name,
+                "seed": str(seed),
+                "camera_clock_offset_s": repr(offset_s),
+                "stamp_origin_s": str(origin_s),
+                "stamps": "image exposure on the camera clock + stamp_origin_s",
+            },
+        )
+        for topic, type_name in TOPICS.items():
+            self._channel(topic, type_name)
+        # The flight starts at t_pose = 0, which the camera clock reads as -offset.
+        stamp_ns = self._stamp_ns(-offset_s)
+        moves_camera = isinstance(spec.flight, KinematicFlight) and spec.flight.moves_camera
+        if not moves_camera:
+            self._T_b_c_static = se3.check_pose(spec.scene.camera.T_b_c, "T_b_c")
+            tf = _transform(stamp_ns, FRAME_BODY, FRAME_CAMERA, self._T_b_c_static)
+            self._write("/tf_static", {"transforms": [tf]}, stamp_ns)
+        self._write("/cones", _cone_markers(spec, scenery, stamp_ns), stamp_ns)
+
+    def on_tick(self, record: TickRecord, rgb: np.ndarray, depth_m: np.ndarray | None) -> None:
+        """Write the image's messages, all stamped at its exposure (camera clock).
+
+        Raises
+        ------
+        ValueError
+            If ``rgb`` is not the camera's (H, W, 3) uint8 image, ``depth_m`` not its (H, W)
+            depth, or the mount differs from the static one written at the start.
+        """
+        if self._writer is None or self._camera is None:
+            raise ValueError("on_tick before start (or after finish or abort)")
+        cam = self._camera
+        rgb = np.asarray(rgb)
+        if rgb.shape != (cam.height, cam.width, 3) or rgb.dtype != np.uint8:
+            raise ValueError(
+                f"rgb: expected a ({cam.height}, {cam.width}, 3) uint8 image, got "
+                f"{rgb.shape} {rgb.dtype}"
+            )
+        depth = None
+        if depth_m is not None:
+            depth = np.asarray(depth_m)
+            if depth.shape != (cam.height, cam.width) or not np.issubdtype(
+                depth.dtype, np.floating
+            ):
+                raise ValueError(
+                    f"depth_m: expected a ({cam.height}, {cam.width}) float image, got "
+                    f"{depth.shape} {depth.dtype}"
+                )
+            depth = depth.astype("<f4", copy=False)
+        stamp_cam_s = record.t_s if record.timing is None else record.timing.stamp_cam_s
+        stamp_ns = self._stamp_ns(stamp_cam_s)
+        transforms = [_transform(stamp_ns, FRAME_MAP, FRAME_BODY, record.T_w_b)]
+        if self._T_b_c_static is None:
+            transforms.append(_transform(stamp_ns, FRAME_BODY, FRAME_CAMERA, record.T_b_c))
+        elif not np.allclose(record.T_b_c, self._T_b_c_static, rtol=0.0, atol=1e-9):
+            raise ValueError(
+                f"tick {record.tick}: the camera mount T_b_c moved from the static mount "
+                "written to /tf_static, in a flight that does not slide the camera"
+            )
+        self._write("/tf", {"transforms": transforms}, stamp_ns)
+        q_xyzw = quat.from_matrix(record.T_w_b[:3, :3])
+        self._write(
+            "/ground_truth/pose",
+            {
+                "header": _header(stamp_ns, FRAME_MAP),
+                "pose": {"position": _xyz(record.T_w_b[:3, 3]), "orientation": _q(q_xyzw)},
+            },
+            stamp_ns,
+        )
+        self._write("/camera/camera_info", _camera_info(cam, stamp_ns), stamp_ns)
+        self._write("/camera/image_raw", _image(rgb, "rgb8", stamp_ns), stamp_ns)
+        if depth is not None:
+            # Little-endian float32 whatever the machine: is_bigendian is written as 0.
+            self._write(
+                "/camera/depth/image_raw",
+                _image(depth, "32FC1", stamp_ns),
+                stamp_ns,
+            )
+            self._depth_ticks += 1
+        for d in record.detections:
+            for method, p_w in d.estimates_w.items():
+                topic = estimates_topic(method)
+                self._channel(topic, _ESTIMATE_TYPE)
+                point = {"header": _header(stamp_ns, FRAME_MAP), "point": _xyz(p_w)}
+                self._write(topic, point, stamp_ns)
+        self._ticks += 1
+
+    def finish(self, result: RunResult) -> ExportResult:
+        """Write the file's index and footer and close it, flushed to the disk.
+
+        Raises
+        ------
+        OSError
+            If the file cannot be completed (it is then removed).
+        """
+        if self._writer is None or self._file is None:
+            raise ValueError("finish before start (or after finish or abort)")
+        try:
+            self._writer.finish()
+            self._file.flush()
+            os.fsync(self._file.fileno())
+            self._file.close()
+        except BaseException:
+            self.abort()
+            raise
+        self._writer = self._file = None
+        note = None
+        if self._ticks and not self._depth_ticks:
+            note = "no depth images: the run rendered none"
+        logger.info("wrote %s: %d camera ticks of %s", self.path, self._ticks, result.spec.name)
+        return ExportResult(self.name, (self.path.name,), note=note)
+
+    def abort(self) -> None:
+        """Close and remove the file if it was started; nothing otherwise."""
+        if self._file is not None:
+            try:
+                self._file.close()
+            finally:
+                self._file = self._writer = None
+                if self.path is not None:
+                    self.path.unlink(missing_ok=True)
+
+    # -- the file ------------------------------------------------------------------------
+
+    def _stamp_ns(self, t_cam_s: float) -> int:
+        return round(t_cam_s * _NS_PER_S) + self._origin_ns
+
+    def _channel(self, topic: str, type_name: str) -> None:
+        """Register ``topic`` (and its type's schema) once."""
+        assert self._writer is not None
+        if topic in self._channels:
+            return
+        if type_name not in self._schemas:
+            text = msgdef(type_name)
+            schema_id = self._writer.register_schema(
+                type_name, SchemaEncoding.ROS2, text.encode("utf-8")
+            )
+            self._schemas[type_name] = (schema_id, serialize_dynamic(type_name, text)[type_name])
+        schema_id, encode = self._schemas[type_name]
+        qos = QOS_LATCHED if topic in _LATCHED else QOS_VOLATILE
+        channel_id = self._writer.register_channel(
+            topic, MessageEncoding.CDR, schema_id, {"offered_qos_profiles": qos}
+        )
+        self._channels[topic] = (channel_id, encode)
+        self._sequence[topic] = 0
+
+    def _write(self, topic: str, message: dict, stamp_ns: int) -> None:
+        assert self._writer is not None
+        channel_id, encode = self._channels[topic]
+        self._writer.add_message(
+            channel_id,
+            log_time=stamp_ns,
+            data=encode(message),
+            publish_time=stamp_ns,
+            sequence=self._sequence[topic],
+        )
+        self._sequence[topic] += 1
+
+
+# -- messages, as the dicts mcap-ros2-support encodes -----------------------------------------
+
+
+def _time(stamp_ns: int) -> dict:
+    sec, nanosec = divmod(stamp_ns, _NS_PER_S)
+    return {"sec": sec, "nanosec": nanosec}
+
+
+def _header(stamp_ns: int, frame_id: str) -> dict:
+    return {"stamp": _time(stamp_ns), "frame_id": frame_id}
+
+
+def _xyz(p) -> dict:
+    return {"x": float(p[0]), "y": float(p[1]), "z": float(p[2])}
+
+
+def _q(q_xyzw) -> dict:
+    # ROS messages order quaternions x, y, z, w as vnav does: nothing is reordered.
+    return dict(zip("xyzw", map(float, q_xyzw), strict=True))
+
+
+def _transform(stamp_ns: int, parent: str, child: str, T_parent_child: np.ndarray) -> dict:
+    """A ``TransformStamped``: tf2's transform from ``parent`` to ``child`` is the pose of
+    ``child`` in ``parent`` (``p_parent = T_parent_child p_child``), the project's ``T_a_b``."""
+    T = se3.check_pose(T_parent_child, "T_parent_child")
+    return {
+        "header": _header(stamp_ns, parent),
+        "child_frame_id": child,
+        "transform": {"translation": _xyz(T[:3, 3]), "rotation": _q(quat.from_matrix(T[:3, :3]))},
+    }
+
+
+def _camera_info(camera: PinholeCamera, stamp_ns: int) -> dict:
+    """``K`` as the project's (OpenCV's pixel-centre convention, which ROS's ``image_geometry``
+    shares), no distortion, ``R = I``, ``P = [K | 0]`` (a monocular camera)."""
+    K = camera.K
+    P = np.hstack([K, np.zeros((3, 1))])
+    return {
+        "header": _header(stamp_ns, FRAME_CAMERA),
+        "height": camera.height,
+        "width": camera.width,
+        "distortion_model": "plumb_bob",
+        "d": [0.0] * 5,
+        "k": [float(v) for v in K.ravel()],
+        "r": [float(v) for v in np.eye(3).ravel()],
+        "p": [float(v) for v in P.ravel()],
+        "binning_x": 0,
+        "binning_y": 0,
+        "roi": {"x_offset": 0, "y_offset": 0, "height": 0, "width": 0, "do_rectify": False},
+    }
+
+
+def _image(pixels: np.ndarray, encoding: str, stamp_ns: int) -> dict:
+    """A ``sensor_msgs/Image`` of an (H, W) or (H, W, C) array, rows packed (no padding)."""
+    data = np.ascontiguousarray(pixels)
+    height, width = data.shape[:2]
+    return {
+        "header": _header(stamp_ns, FRAME_CAMERA),
+        "height": height,
+        "width": width,
+        "encoding": encoding,
+        "is_bigendian": 0,
+        "step": data.strides[0],
+        "data": data.tobytes(),
+    }
+
+
+def _cone_markers(spec: ScenarioSpec, scenery: Scenery, stamp_ns: int) -> dict:
+    """One ``TRIANGLE_LIST`` marker per true cone, posed at its base centre in ``map``, its
+    points the simulator's mesh of that cone relative to the base centre (each triangle of the
+    scene's cone mesh goes to the cone nearest its centroid), coloured per vertex."""
+    cones_w = np.array(spec.scene.cones_w, dtype=np.float64).reshape(-1, 3)
+    mesh = scenery.cones_w
+    markers = []
+    if len(cones_w):
+        corners_w = mesh.vertices[mesh.triangles]  # (M, 3 corners, 3)
+        centroids_w = corners_w.mean(axis=1)
+        nearest = np.argmin(
+            np.linalg.norm(centroids_w[:, None, :2] - cones_w[None, :, :2], axis=2), axis=1
+        )
+        colors = mesh.colors_rgba[mesh.triangles] / 255.0  # (M, 3, 4)
+        for i, base_w in enumerate(cones_w):
+            mine = nearest == i
+            points = (corners_w[mine] - base_w).reshape(-1, 3)
+            rgba = colors[mine].reshape(-1, 4)
+            first = rgba[0] if len(rgba) else np.ones(4)
+            markers.append(
+                {
+                    "header": _header(stamp_ns, FRAME_MAP),
+                    "ns": "cones",
+                    "id": i,
+                    "type": _MARKER_TRIANGLE_LIST,
+                    "action": 0,
+                    "pose": {"position": _xyz(base_w), "orientation": _q((0.0, 0.0, 0.0, 1.0))},
+                    "scale": {"x": 1.0, "y": 1.0, "z": 1.0},
+                    "color": dict(zip("rgba", map(float, first), strict=True)),
+                    "lifetime": {"sec": 0, "nanosec": 0},  # forever
+                    "frame_locked": False,
+                    "points": [_xyz(p) for p in points],
+                    "colors": [dict(zip("rgba", map(float, c), strict=True)) for c in rgba],
+                }
+            )
+    return {"markers": markers}
