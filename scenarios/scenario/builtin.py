@@ -494,11 +494,14 @@ def imu() -> Scenario:
         (-0.5, 0.0, -0.3, 30.0),
         (0.0, -0.5, 0.0, -30.0),
     ]
-    waypoints = [{"t": 0.0, "position_w": [0.0, 0.0, 3.0], "yaw_deg": 0.0}]
+    # A second of hover first: at rest the accelerometer reads gravity's reaction, +9.81 m/s^2
+    # up, turned into the IMU's axes.
+    hover = {"position_w": [0.0, 0.0, 3.0], "yaw_deg": 0.0}
+    waypoints = [{"t": 0.0, **hover}, {"t": 1.0, **hover}]
     for k in range(8):
         dx, dy, dz, yaw = moves[k % len(moves)]
-        waypoints.append({"t": 1.5 + k, "position_w": [dx, dy, 3.0 + dz], "yaw_deg": yaw})
-    waypoints.append({"t": 9.5, "position_w": [0.0, 0.0, 3.0], "yaw_deg": 0.0})
+        waypoints.append({"t": 2.0 + k, "position_w": [dx, dy, 3.0 + dz], "yaw_deg": yaw})
+    waypoints.append({"t": 10.0, **hover})
     cones = [[8.0, 0.0], [9.0, 2.5], [10.0, -2.0]]
     return {
         "name": "imu",
