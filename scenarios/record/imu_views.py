@@ -9,8 +9,9 @@ calls ``log_imu_frames`` when the run starts and ``send_imu`` once it is over)::
     world/body/imu/axes, name      in imu: its axes, thin arrows, and its name on a dot past
                                    the tip of z (static)
     world/body/imu_declared        with an [imu.mount_error] only: Transform3D T_b_i_declared
-                                   (body <- the mount the estimator is told), static; its
-                                   axes (yellow) and name in imu_declared
+                                   (body <- the mount the estimator is told), static
+    world/body/imu_declared/axes, name   in imu_declared: its axes (yellow) and its name on a
+                                   yellow dot past the tip of x (static)
     imu/specific_force_i           Scalars x, y, z: each reading's specific force, m/s^2, in
                                    the IMU frame (noise and bias included)
     imu/angular_rate_i             Scalars x, y, z: each reading's angular rate, rad/s, in the
@@ -38,6 +39,7 @@ from scenarios.record.viewer import (
     FRAME,
     IMU_CHAIN,
     IMU_CHAIN_COLOR,
+    IMU_DECLARED_NAME_X_M,
     IMU_NAME_Z_M,
     MOUNT_AXIS_LENGTH_M,
     entity,
@@ -103,15 +105,26 @@ def log_imu_frames(rec: rr.RecordingStream, spec: ScenarioSpec) -> None:
         _mount_transform(imu.T_b_i_declared, FRAME.IMU_DECLARED),
         static=True,
     )
-    rec.log(entity.IMU_DECLARED_AXES, rr.CoordinateFrame(FRAME.IMU_DECLARED), static=True)
+    for path in (entity.IMU_DECLARED_AXES, entity.IMU_DECLARED_NAME):
+        rec.log(path, rr.CoordinateFrame(FRAME.IMU_DECLARED), static=True)
     rec.log(
         entity.IMU_DECLARED_AXES,
         rr.Arrows3D(
             vectors=MOUNT_AXIS_LENGTH_M[FRAME.IMU_DECLARED] * np.eye(3),
             colors=[DECLARED_MOUNT_COLOR],
             radii=rr.Radius.ui_points(CAMERA_AXES_UI_POINTS),
-            # Named once, at the middle of its x axis: the true IMU is named past its z.
-            labels=["imu declared", "", ""],
+        ),
+        static=True,
+    )
+    # Named past the tip of its x axis: its z lies within a degree or two of the true IMU's,
+    # where that one is named.
+    rec.log(
+        entity.IMU_DECLARED_NAME,
+        rr.Points3D(
+            [[IMU_DECLARED_NAME_X_M, 0.0, 0.0]],
+            colors=[DECLARED_MOUNT_COLOR],
+            radii=rr.Radius.ui_points(1.5),
+            labels=["imu declared"],
             show_labels=True,
         ),
         static=True,

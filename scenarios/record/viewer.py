@@ -54,6 +54,7 @@ __all__ = [
     "IMAGE_PLANE_M",
     "IMU_CHAIN",
     "IMU_CHAIN_COLOR",
+    "IMU_DECLARED_NAME_X_M",
     "IMU_NAME_Z_M",
     "IMU_SERIES",
     "KEPT_COLOR",
@@ -227,6 +228,7 @@ entity = SimpleNamespace(
     IMU_NAME="world/body/imu/name",
     IMU_DECLARED="world/body/imu_declared",
     IMU_DECLARED_AXES="world/body/imu_declared/axes",
+    IMU_DECLARED_NAME="world/body/imu_declared/name",
     IMU_SPECIFIC_FORCE="imu/specific_force_i",
     IMU_SPECIFIC_FORCE_CHAIN="imu/specific_force_i_noise_free",
     IMU_ANGULAR_RATE="imu/angular_rate_i",
@@ -302,7 +304,12 @@ runs); no axis colour is near it."""
 IMU_NAME_Z_M = 0.4
 """The IMU's name sits on a dot this far along its z axis, m, past the axis' tip (as the
 camera's, ``CAMERA_NAME_Z_M``): the IMU sits centimetres from the body's origin, where the
-body is named."""
+body is named.
+"""
+IMU_DECLARED_NAME_X_M = 0.45
+"""The declared IMU mount's name sits on a yellow dot this far along its x axis, m, past the
+axis' tip: its z is within a degree or two of the true IMU's, where that one is named, and the
+middle of an axis is a few centimetres from the body's name."""
 RECOVERED_MOUNT_COLOR = (0, 225, 225)
 """Cyan: the camera mount calibration recovered, drawn as one-coloured axes (calibrated runs)."""
 MOUNT_AXIS_LENGTH_M = {
