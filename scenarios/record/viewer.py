@@ -14,7 +14,9 @@ Everything here is a viewer concern, declared once and shared by the recording
 - ``blueprint``: the default layout; ``eye_for``: where the 3D view looks from, at the tick
   ``shown_tick`` picks; ``legend_entries``: the 3D views' colours, named in a strip over them;
 - ``describe``: the markdown shown beside the recording, with the checks' verdicts
-  (``checks_text``) once the run is judged.
+  (``checks_text``) once the run is judged;
+- a run with an ``[imu]``: its tab (``imu_tab``: ``IMU_SERIES`` beside ``IMU_CHAIN``, the
+  noise-free prediction) and its paragraph (``describe_imu``); ``imu_views`` logs them.
 """
 
 from __future__ import annotations
