@@ -29,6 +29,7 @@ __all__ = [
     "GYRO_SCALE_RAD_S",
     "ImuReading",
     "ImuSampler",
+    "chain_imu_i",
     "imu_discrepancy",
     "mujoco_imu_i",
 ]
@@ -73,16 +74,20 @@ def mujoco_imu_i(world: World) -> tuple[np.ndarray, np.ndarray]:
     return data[a : a + 3].copy(), data[g : g + 3].copy()
 
 
-def imu_discrepancy(world: World) -> float:
-    """How far MuJoCo's sensors are from ``vnav.imu``'s chain, now: the larger of the two
-    relative errors ``|mujoco - vnav| / max(|mujoco|, scale)`` (scale: ``ACCEL_SCALE_M_S2``,
-    ``GYRO_SCALE_RAD_S``; absolute below it, where a relative error means nothing).
+def chain_imu_i(world: World) -> tuple[np.ndarray, np.ndarray]:
+    """What ``vnav.imu``'s chain predicts a noise-free IMU at the site reads, now.
 
     The chain is fed the body's true motion (``T_w_b``, ``acceleration_w``,
     ``angular_velocity_b``, ``angular_acceleration_b``), the site's mount ``world.T_b_i`` and
     the model's gravity.
+
+    Returns
+    -------
+    f_i : ndarray, shape (3,)
+        Specific force, m/s^2, IMU axes (``vnav.imu.specific_force_i``).
+    omega_i : ndarray, shape (3,)
+        Angular rate, rad/s, IMU axes (``vnav.imu.angular_rate_i``).
     """
-    accel_i, gyro_i = mujoco_imu_i(world)
     T_b_i = world.T_b_i
     f_i = specific_force_i(
         world.T_w_b,
@@ -92,7 +97,18 @@ def imu_discrepancy(world: World) -> float:
         world.angular_acceleration_b,
         gravity_w=world.model.opt.gravity,
     )
-    omega_i = angular_rate_i(T_b_i, world.angular_velocity_b)
+    return f_i, angular_rate_i(T_b_i, world.angular_velocity_b)
+
+
+def imu_discrepancy(world: World, chain: tuple[np.ndarray, np.ndarray] | None = None) -> float:
+    """How far MuJoCo's sensors are from ``vnav.imu``'s chain, now: the larger of the two
+    relative errors ``|mujoco - vnav| / max(|mujoco|, scale)`` (scale: ``ACCEL_SCALE_M_S2``,
+    ``GYRO_SCALE_RAD_S``; absolute below it, where a relative error means nothing).
+
+    ``chain`` is ``chain_imu_i(world)`` if the caller has it already (computed here otherwise).
+    """
+    accel_i, gyro_i = mujoco_imu_i(world)
+    f_i, omega_i = chain_imu_i(world) if chain is None else chain
     e_a = np.linalg.norm(accel_i - f_i) / max(float(np.linalg.norm(accel_i)), ACCEL_SCALE_M_S2)
     e_g = np.linalg.norm(gyro_i - omega_i) / max(float(np.linalg.norm(gyro_i)), GYRO_SCALE_RAD_S)
     return float(max(e_a, e_g))

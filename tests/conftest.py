@@ -97,6 +97,7 @@ SHARED = {
             "tests/test_recording_outcome.py::",
             "tests/test_recording_views.py::",
             "tests/test_recording_navigation.py::",
+            "tests/test_recording_imu.py::",
             "tests/test_calibrate_command.py::test_calibrate_a_recording_recovers_",
             "tests/test_calibrate_command.py::test_recording_inputs_are_the_runs",
             "tests/test_calibrate_command.py::test_in_run_calibration_meets_",

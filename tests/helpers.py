@@ -302,6 +302,11 @@ def _chunks(path: Path) -> list[tuple[str, pa.Table]]:
     return _RECORDINGS[key]
 
 
+def entity_paths(path: Path) -> set[str]:
+    """Every entity path the recording at ``path`` logs to (with a leading ``/``)."""
+    return {entity_path for entity_path, _ in _chunks(path)}
+
+
 def read_rows(path: Path, entity: str) -> list[dict]:
     """Every row logged to ``entity`` as a dict {column name: value}, in file order.
 

@@ -386,8 +386,11 @@ def test_avoid_sweep_shows_what_the_readme_says(tmp_path: Path) -> None:
 # --------------------------------------------------------------- the Python example
 
 
-def test_python_example_prints_what_its_comment_says(capsys) -> None:
-    (block,) = _blocks("python")
+@pytest.mark.parametrize("index", range(len(_blocks("python"))))
+def test_python_example_prints_what_its_comment_says(index, capsys) -> None:
+    """Each Python block of the README (the library's first steps; the IMU's Allan deviation)
+    runs and prints what the comment after its ``print`` says."""
+    block = _blocks("python")[index]
     exec(compile(block, "README.md", "exec"), {})  # the README's own code
     printed = capsys.readouterr().out
     claimed = re.search(r"print\(.*\)\s*#\s*(\[[^\]]*\])", block)

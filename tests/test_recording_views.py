@@ -85,6 +85,15 @@ def _names_w(run) -> dict[str, np.ndarray]:
         rows = [r for r in read_rows(rrd, path) if r.get("Transform3D:translation")]
         if rows:
             frames[axes] = T_w_b @ _pose(rows[0])
+    # A run with an [imu]: the IMU's name and its declared mount's, each in its own frame.
+    named_points = [(entity.CONE_PIN_HEADS, np.eye(4)), (entity.CAMERA_NAME, T_w_c)]
+    for path, name_path in (
+        (entity.IMU, entity.IMU_NAME),
+        (entity.IMU_DECLARED, entity.IMU_DECLARED_NAME),
+    ):
+        rows = [r for r in read_rows(rrd, path) if r.get("Transform3D:translation")]
+        if rows:
+            named_points.append((name_path, T_w_b @ _pose(rows[0])))
     names: dict[str, np.ndarray] = {}
     for name, path, origin_w in (
         ("world", entity.WORLD, np.zeros(3)),
@@ -97,7 +106,7 @@ def _names_w(run) -> dict[str, np.ndarray]:
         for label, v in zip(_static(rrd, path, "Arrows3D:labels"), vectors, strict=True):
             if label:
                 names[label] = se3.apply(T_w_f, 0.5 * v)
-    for path, T_w_f in ((entity.CONE_PIN_HEADS, np.eye(4)), (entity.CAMERA_NAME, T_w_c)):
+    for path, T_w_f in named_points:
         points = np.array(_static(rrd, path, "Points3D:positions"))
         for label, p in zip(_static(rrd, path, "Points3D:labels"), points, strict=True):
             if label:
@@ -127,6 +136,8 @@ def test_names_in_the_3d_views_do_not_pile_up(builtin_runs, name):
     assert {"world", "body", "camera", "cone 0"} <= set(names)
     if run.spec.checks_calibration:
         assert {"declared", "recovered"} <= set(names)
+    if run.spec.scene.imu is not None:
+        assert {"imu (true)", "imu declared"} <= set(names)
     if run.result.navigation is not None:
         assert "goal" in names
         contact = run.result.navigation.contact
@@ -189,7 +200,8 @@ def _has_colour(image_rgb: np.ndarray, rgb, tolerance: int = 12, at_least: int =
 def test_legend_shows_every_colour_of_the_3d_views(builtin_runs, name):
     """The legend strip (an image over the 3D views) holds a mark of each method's colour, the
     truth's, the rays' and the pins'; the newest pose's only where images arrive late, the
-    mounts' only in a calibrated run."""
+    mounts' only in a calibrated run (the declared one's colour also where an IMU's declared
+    mount is drawn, an ``[imu.mount_error]``)."""
     run = builtin_runs[name]
     png = _static(run.rrd, entity.LEGEND, "EncodedImage:blob")
     assert png is not None
@@ -199,8 +211,10 @@ def test_legend_shows_every_colour_of_the_3d_views(builtin_runs, name):
     for colour in [TRUTH_COLOR, RAY_COLOR, PIN_COLOR, *(m.color_rgb for m in METHODS)]:
         assert _has_colour(rgb, colour), colour
     assert _has_colour(rgb, NEWEST_POSE_COLOR) == run.spec.timing.delivers_late
-    for colour in (DECLARED_MOUNT_COLOR, RECOVERED_MOUNT_COLOR):
-        assert _has_colour(rgb, colour) == run.spec.checks_calibration
+    imu = run.spec.scene.imu
+    imu_declared = imu is not None and not imu.mount_error.is_zero
+    assert _has_colour(rgb, DECLARED_MOUNT_COLOR) == (run.spec.checks_calibration or imu_declared)
+    assert _has_colour(rgb, RECOVERED_MOUNT_COLOR) == run.spec.checks_calibration
     assert _has_colour(rgb, PLAN_COLOR) == (run.result.navigation is not None)
 
 

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from scenarios.scenario import builtin, spec, toml_out
-from scenarios.sweep.plan import SweepError, load, plan
+from scenarios.sweep.plan import SweepError, draws_from_seed, load, plan
 from vnav.methods import METHOD_NAMES
 
 
@@ -267,3 +267,35 @@ def test_rank_by_may_name_a_users_function(tmp_path):
     (tmp_path / "mine.py").write_text(REFERENCE)
     data = {"scenario": "approach", "estimator": "mine.py:ref", "rank_by": "user:ref"}
     assert plan(data, "s.toml", base_dir=tmp_path).rank_by == "user:ref"
+
+
+def test_a_grid_over_imu_keys_sets_the_scenes_imu():
+    """``imu.*`` keys sweep as any other: each point's IMU has its values, the rest of the
+    built-in's ``[imu]`` (mount, its error, the clock offset) as declared; a point whose IMU
+    draws noise draws from its seed, one with a perfect IMU (and no other noise) does not."""
+    grid = {"imu.rate_hz": [100.0, 200.0], "imu.gyroscope_noise_density": [1e-3, 0.0]}
+    zero = {f"imu.{k}": [0.0] for k in builtin.IMU_NOISE if k != "gyroscope_noise_density"}
+    p = plan({"scenario": "imu", "seeds": 2, "grid": {**grid, **zero}}, "s.toml")
+    assert [tuple(pt.values.values())[:2] for pt in p.points] == list(
+        itertools.product(*grid.values())
+    )
+    declared = builtin.load("imu").scene.imu
+    for pt in p.points:
+        imu = pt.spec.scene.imu
+        assert imu.rate_hz == pt.values["imu.rate_hz"]
+        assert imu.gyroscope_noise_density == pt.values["imu.gyroscope_noise_density"]
+        assert imu.accelerometer_noise_density == 0.0
+        assert (imu.T_b_i == declared.T_b_i).all() and imu.time_offset_s == declared.time_offset_s
+        assert draws_from_seed(pt.spec) == (imu.gyroscope_noise_density > 0.0)
+
+
+def test_a_grid_can_give_a_scenario_an_imu_and_bad_values_name_the_point():
+    """``imu.*`` on a built-in without ``[imu]`` makes the table (a controlled flight carries
+    it); on a kinematic flight, or above the physics rate, the point is refused by name."""
+    (pt,) = plan({"scenario": "approach", "grid": {"imu.rate_hz": [50.0]}}, "s.toml").points
+    assert pt.spec.scene.imu.rate_hz == 50.0 and pt.spec.scene.imu.noise.is_zero
+    assert "[imu]" in pt.scenario_toml
+    with pytest.raises(SweepError, match=r"grid point 0 \(imu.rate_hz = 50.0\).*needs a flight"):
+        plan({"scenario": "yaw-sweep", "grid": {"imu.rate_hz": [50.0]}}, "s.toml")
+    with pytest.raises(SweepError, match=r"grid point 1 .*imu.rate_hz: must be at most the phys"):
+        plan({"scenario": "imu", "grid": {"imu.rate_hz": [200.0, 400.0]}}, "s.toml")

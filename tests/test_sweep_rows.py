@@ -347,6 +347,7 @@ def test_every_scenario_key_has_a_plain_column():
     tables |= {"timing": schema.TIMING, "checks.0": schema.CHECK, "cones.1": schema.CONE}
     tables |= {"flight.waypoints.2": schema.WAYPOINT, "flight.keyframes.0": schema.KEYFRAME}
     tables |= {"camera.mount_error": schema.MOUNT_ERROR}
+    tables |= {"imu": schema.IMU, "imu.mount_error": schema.IMU_MOUNT_ERROR}
     for prefix, keys in tables.items():
         for k in keys:
             key = f"{prefix}.{k.name}" if prefix else k.name

@@ -195,8 +195,8 @@ def _seedless(plan: SweepPlan) -> str | None:
     n = len(plan.seeds)
     if len(idle) == len(plan.points):
         return (
-            f"no draw depends on the seed: {n} seeds give one result (every [noise] figure "
-            "and timing.jitter_s are zero)"
+            f"no draw depends on the seed: {n} seeds give one result (every [noise] figure, "
+            "every [imu] noise figure and timing.jitter_s are zero)"
         )
     if not idle:
         return None

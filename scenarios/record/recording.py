@@ -68,6 +68,9 @@ docs/CONVENTIONS.md; "in F" is the named transform frame an entity is drawn in):
                                    (``vnav-demo calibrate`` reads these and the detections)
     world/navigation/..., metrics/navigation/...   a navigating flight's plan, map, goal,
                                    contact and clearances (``navigation_views``)
+    world/body/imu..., imu/...     a run with an [imu]: the IMU frame (true and declared
+                                   mounts) and its readings in it, on sim_time at their
+                                   stamps (``imu_views``)
 
 Timelines: ``tick`` (camera tick index) and ``sim_time`` (simulated seconds, on the pose
 clock). Everything about an image, the image itself first, is logged at its tick and at its
@@ -100,6 +103,7 @@ import numpy as np
 import rerun as rr
 
 from scenarios.judge.checks import CheckResult
+from scenarios.record.imu_views import log_imu_frames, send_imu
 from scenarios.record.navigation_views import send_navigation
 from scenarios.record.panel import (
     mount_lines,
@@ -376,6 +380,7 @@ class Recording:
         # and truth at each tick (``navigation_lines``).
         self._state_waits = spec.checks_calibration or isinstance(spec.flight, NavigateFlight)
         _log_static(self.rec, spec, seed, camera, scenery)
+        log_imu_frames(self.rec, spec)
         if self._latency:
             _log_latency_static(self.rec)
 
@@ -442,6 +447,7 @@ class Recording:
             _log_mounts(rec, result.calibration)
             _send_recovered_mount_errors(rec, result)
         send_navigation(rec, result)
+        send_imu(rec, result)
         self._send_waiting_state(result)
         self._log_depth_scale_and_legend(result)
         self._send_layout(result, judged)
@@ -466,12 +472,16 @@ class Recording:
             static=True,
         )
         mounts = result.calibration is not None
+        imu = self._spec.scene.imu
         self.rec.log(
             entity.LEGEND,
             rr.EncodedImage(
                 contents=legend_png(
                     legend_entries(
-                        latency=self._latency, mounts=mounts, navigation=_map_method(result)
+                        latency=self._latency,
+                        mounts=mounts,
+                        navigation=_map_method(result),
+                        imu_declared=imu is not None and not imu.mount_error.is_zero,
                     ),
                     AXES_NOTE,
                 ),
@@ -508,6 +518,7 @@ class Recording:
                 verdict=checks_summary(judged),
                 mounts_T_w_c=shown.T_w_b @ shown.T_b_c if mounts and shown is not None else None,
                 navigation=result.navigation is not None,
+                imu=result.imu is not None,
             )
         )
 

@@ -14,7 +14,9 @@ Everything here is a viewer concern, declared once and shared by the recording
 - ``blueprint``: the default layout; ``eye_for``: where the 3D view looks from, at the tick
   ``shown_tick`` picks; ``legend_entries``: the 3D views' colours, named in a strip over them;
 - ``describe``: the markdown shown beside the recording, with the checks' verdicts
-  (``checks_text``) once the run is judged.
+  (``checks_text``) once the run is judged;
+- a run with an ``[imu]``: its tab (``imu_tab``: ``IMU_SERIES`` beside ``IMU_CHAIN``, the
+  noise-free prediction) and its paragraph (``describe_imu``); ``imu_views`` logs them.
 """
 
 from __future__ import annotations
@@ -52,6 +54,11 @@ __all__ = [
     "EXPOSURE_POSE_COLOR",
     "FRAME",
     "IMAGE_PLANE_M",
+    "IMU_CHAIN",
+    "IMU_CHAIN_COLOR",
+    "IMU_DECLARED_NAME_X_M",
+    "IMU_NAME_Z_M",
+    "IMU_SERIES",
     "KEPT_COLOR",
     "MOUNT_AXIS_LENGTH_M",
     "NEES_CLIP_MARK",
@@ -78,8 +85,11 @@ __all__ = [
     "checks_summary",
     "checks_text",
     "describe",
+    "describe_imu",
     "entity",
     "eye_for",
+    "imu_series_names",
+    "imu_tab",
     "legend_entries",
     "moment",
     "navigation_tab",
@@ -215,6 +225,16 @@ entity = SimpleNamespace(
     NAV_AXIS_DISTANCE="metrics/navigation/axis_distance_m",
     NAV_CLEARANCE_KEPT="metrics/navigation/clearance_m",
     NAV_PLAN_LENGTH="metrics/navigation/plan_length_m",
+    IMU="world/body/imu",
+    IMU_AXES="world/body/imu/axes",
+    IMU_NAME="world/body/imu/name",
+    IMU_DECLARED="world/body/imu_declared",
+    IMU_DECLARED_AXES="world/body/imu_declared/axes",
+    IMU_DECLARED_NAME="world/body/imu_declared/name",
+    IMU_SPECIFIC_FORCE="imu/specific_force_i",
+    IMU_SPECIFIC_FORCE_CHAIN="imu/specific_force_i_noise_free",
+    IMU_ANGULAR_RATE="imu/angular_rate_i",
+    IMU_ANGULAR_RATE_CHAIN="imu/angular_rate_i_noise_free",
     error=_error,
     allowed=_allowed,
     error_recovered=_error_recovered,
@@ -235,7 +255,8 @@ entity = SimpleNamespace(
 ``entity.stream(quantity, series)`` is a plot of the pose stream against the image stamps
 (runs with latency only): ``quantity`` one of ``STREAM_QUANTITIES``, ``series`` one of
 ``STREAM_SERIES``. ``entity.NAV_*``, ``entity.nav_obstacles(method)`` and
-``entity.nav_keep_out(method)`` are a navigating flight's only (``navigation_views``)."""
+``entity.nav_keep_out(method)`` are a navigating flight's only (``navigation_views``);
+``entity.IMU*`` a run with an ``[imu]``'s only (``imu_views``)."""
 
 FRAME = SimpleNamespace(
     WORLD="world",
@@ -244,14 +265,18 @@ FRAME = SimpleNamespace(
     IMAGE="image",
     CAMERA_DECLARED="camera_declared",
     CAMERA_RECOVERED="camera_recovered",
+    IMU="imu",
+    IMU_DECLARED="imu_declared",
 )
 """Named transform frames: ``T_w_b`` maps body into world, ``T_b_c`` camera into body, and the
 pinhole maps the image plane into the camera (docs/CONVENTIONS.md). In a calibrated run two
 more camera frames hang from the body: the mount the estimator was told
 (``T_b_c_declared``) and the one calibration recovered (``T_b_c_recovered``); ``camera`` is
-the true one."""
+the true one. A run with an ``[imu]`` hangs the IMU frame ``imu`` (``T_b_i``, where the
+simulator's IMU sits: the frame of its readings) from the body, and with an
+``[imu.mount_error]`` the mount the estimator is told, ``imu_declared`` (``T_b_i_declared``)."""
 
-AXIS_LENGTH_M = {FRAME.WORLD: 2.0, FRAME.BODY: 1.0, FRAME.CAMERA: 0.5}
+AXIS_LENGTH_M = {FRAME.WORLD: 2.0, FRAME.BODY: 1.0, FRAME.CAMERA: 0.5, FRAME.IMU: 0.3}
 """Drawn axis length per frame: the lengths tell the three frames apart where they overlap."""
 CAMERA_AXES_UI_POINTS = 1.0
 """The camera's axes are thin arrows (``Arrows3D``, this radius on screen) where the world's
@@ -278,15 +303,26 @@ enough that the frustum does not hide the drone in the close-up."""
 DECLARED_MOUNT_COLOR = (255, 200, 0)
 """Yellow: the camera mount the estimator was told, drawn as one-coloured axes (calibrated
 runs); no axis colour is near it."""
+IMU_NAME_Z_M = 0.4
+"""The IMU's name sits on a dot this far along its z axis, m, past the axis' tip (as the
+camera's, ``CAMERA_NAME_Z_M``): the IMU sits centimetres from the body's origin, where the
+body is named.
+"""
+IMU_DECLARED_NAME_X_M = 0.45
+"""The declared IMU mount's name sits on a yellow dot this far along its x axis, m, past the
+axis' tip: its z is within a degree or two of the true IMU's, where that one is named, and the
+middle of an axis is a few centimetres from the body's name."""
 RECOVERED_MOUNT_COLOR = (0, 225, 225)
 """Cyan: the camera mount calibration recovered, drawn as one-coloured axes (calibrated runs)."""
 MOUNT_AXIS_LENGTH_M = {
     FRAME.CAMERA_DECLARED: AXIS_LENGTH_M[FRAME.CAMERA],
     FRAME.CAMERA_RECOVERED: 1.2 * AXIS_LENGTH_M[FRAME.CAMERA],
+    FRAME.IMU_DECLARED: AXIS_LENGTH_M[FRAME.IMU],
 }
 """The declared mount's axes are as long as the true camera's (0.5 m), so that its tips show
 how far it is off; the recovered mount's are longer, so that where they lie on the true axes
-their ends still show beyond them."""
+their ends still show beyond them. The IMU's declared mount (``imu_declared``, yellow too) is as
+long as the true IMU's axes (0.3 m)."""
 
 CONE0_SERIES: tuple[str, ...] = ("world", "body", "camera", "estimate_world")
 """Cone 0's coordinate series: its truth in three frames and its depth-image estimate."""
@@ -332,14 +368,18 @@ AXES_NOTE = "axes x y z: red green blue; body thick, camera thin"
 
 
 def legend_entries(
-    *, latency: bool = False, mounts: bool = False, navigation: str | None = None
+    *,
+    latency: bool = False,
+    mounts: bool = False,
+    navigation: str | None = None,
+    imu_declared: bool = False,
 ) -> list[list[LegendEntry]]:
     """Every colour of the 3D views, in the legend's two rows (``entity.LEGEND``): the truth
     and each method's estimate (``vnav.methods.active_methods``), with ``latency`` the newest-pose
     estimate and with ``mounts`` the declared and recovered camera mounts; then the rays, the
     cones' pins, the depth cloud and the flown path (and ``AXES_NOTE``). A navigating flight
     (``navigation``: the method its map takes) adds its plan, its map's keep-out circles and
-    the contact."""
+    the contact; ``imu_declared`` (an ``[imu.mount_error]``) the IMU's declared mount."""
     estimates = [LegendEntry("truth", TRUTH_COLOR, "dot")]
     estimates += [LegendEntry(m.name, m.color_rgb, "dot") for m in active_methods()]
     if latency:
@@ -361,6 +401,8 @@ def legend_entries(
             LegendEntry("keep-out", map_color(navigation)[0], "line"),
             LegendEntry("contact", CONTACT_COLOR, "line"),
         ]
+    if imu_declared:
+        estimates.append(LegendEntry("IMU declared", DECLARED_MOUNT_COLOR, "line"))
     return [estimates, drawn]
 
 
@@ -392,6 +434,7 @@ def blueprint(
     verdict: str | None = None,
     mounts_T_w_c: np.ndarray | None = None,
     navigation: bool = False,
+    imu: bool = False,
 ) -> rrb.Blueprint:
     """The default layout: images and plots on the left; the world, a close-up of the drone
     and the state panel on the right.
@@ -433,10 +476,14 @@ def blueprint(
         A navigating flight: the lower left panel opens on its tab (``navigation_tab``: the
         true clearance, the drone's distance from the cones' axes, the plan's length), and the
         time panel on ``sim_time`` (the contact falls between two camera ticks).
+    imu : bool
+        The run has an ``[imu]``: the lower left panel opens on its tab (``imu_tab``: the
+        readings in the IMU frame), and the time panel on ``sim_time`` (a reading has no tick);
+        the world view leaves out the IMU's name and declared mount (the close-up shows them).
     """
     if view not in VIEWS:
         raise ValueError(f"view must be one of {list(VIEWS)}, got {view!r}")
-    world = _world_view(eye_w, look_target_w)
+    world = _world_view(eye_w, look_target_w, imu=imu)
     if mounts_T_w_c is not None:
         close_up = mounts_close_up(mounts_T_w_c)
     elif close_up_cone_w is not None:
@@ -455,6 +502,7 @@ def blueprint(
                     latency,
                     recovered_mount=mounts_T_w_c is not None,
                     navigation=navigation,
+                    imu=imu,
                 ),
                 row_shares=[4, 6] if latency else [3, 5],
             ),
@@ -466,14 +514,15 @@ def blueprint(
         rrb.TimePanel(
             state="collapsed",
             play_state="following",
-            timeline="sim_time" if latency or navigation else "tick",
+            timeline="sim_time" if latency or navigation or imu else "tick",
         ),
         collapse_panels=True,
     )
 
 
-def _world_view(eye_w, look_target_w) -> rrb.Spatial3DView:
-    """The world in 3D, its eye at ``eye_w`` looking at ``look_target_w`` (world frame)."""
+def _world_view(eye_w, look_target_w, imu: bool = False) -> rrb.Spatial3DView:
+    """The world in 3D, its eye at ``eye_w`` looking at ``look_target_w`` (world frame); with
+    ``imu``, without the IMU's name and declared mount (centimetres from the body's origin)."""
     eye = None
     if eye_w is not None and look_target_w is not None:
         eye = rrb.EyeControls3D(position=eye_w, look_target=look_target_w, eye_up=[0, 0, 1])
@@ -490,6 +539,7 @@ def _world_view(eye_w, look_target_w) -> rrb.Spatial3DView:
             f"- /{entity.DEPTH}",
             f"- /{entity.CAMERA_NAME}",
             *_NO_MOUNTS,
+            *([f"- /{entity.IMU_NAME}", f"- /{entity.IMU_DECLARED}/**"] if imu else []),
         ],
         eye_controls=eye,
     )
@@ -837,9 +887,11 @@ def _lower_tabs(
     latency: bool,
     recovered_mount: bool = False,
     navigation: bool = False,
+    imu: bool = False,
 ) -> rrb.Tabs:
     """The tabs below the images: ``VIEWS`` first (in order), then the other plots; a
-    navigating flight's tab (``navigation_tab``) after them, shown first.
+    navigating flight's tab (``navigation_tab``) and an IMU's (``imu_tab``) after them, the
+    last of them shown first.
 
     With ``latency`` the error tab shows the lesson of time: the depth_image error beside the
     newest pose's, and the pose stream around the time cursor with each image's exposure and
@@ -883,6 +935,8 @@ def _lower_tabs(
     }
     if navigation:
         extra.append(navigation_tab())
+    if imu:
+        extra.append(imu_tab())
     return rrb.Tabs(
         *[tabs[name] for name in VIEW_NAMES],
         *extra,
@@ -896,7 +950,7 @@ def _lower_tabs(
             ),
             name="naive, range",
         ),
-        active_tab=len(VIEWS) + len(extra) - 1 if navigation else VIEWS[view],
+        active_tab=len(VIEWS) + len(extra) - 1 if navigation or imu else VIEWS[view],
     )
 
 
@@ -925,6 +979,47 @@ def navigation_tab() -> rrb.Vertical:
         row_shares=[4, 4, 3],
         name="navigation",
     )
+
+
+IMU_CHAIN_COLOR = (235, 235, 235)
+"""White: ``vnav.imu``'s noise-free prediction of each IMU reading, drawn thin over the
+readings' x (red), y (green), z (blue)."""
+IMU_SERIES = {
+    entity.IMU_SPECIFIC_FORCE: ("specific force f_i", "m/s^2"),
+    entity.IMU_ANGULAR_RATE: ("angular rate omega_i", "rad/s"),
+}
+"""The IMU's two plots: each reading's quantity and unit, by entity (its noise-free
+prediction's entity is ``IMU_CHAIN[path]``)."""
+IMU_CHAIN = {
+    entity.IMU_SPECIFIC_FORCE: entity.IMU_SPECIFIC_FORCE_CHAIN,
+    entity.IMU_ANGULAR_RATE: entity.IMU_ANGULAR_RATE_CHAIN,
+}
+
+
+def imu_series_names(path: str) -> list[str]:
+    """The three curves of an IMU plot (``IMU_SERIES``) named per axis, each "in the IMU
+    frame"; the noise-free prediction's (``IMU_CHAIN``) say so."""
+    if path in IMU_SERIES:
+        quantity, unit = IMU_SERIES[path]
+        return [f"{quantity} {a} in the IMU frame ({unit})" for a in "xyz"]
+    (reading,) = [p for p, chain in IMU_CHAIN.items() if chain == path]
+    quantity, unit = IMU_SERIES[reading]
+    return [f"{quantity} {a} in the IMU frame, noise-free chain ({unit})" for a in "xyz"]
+
+
+def imu_tab() -> rrb.Vertical:
+    """A run with an ``[imu]``: its readings, in the IMU frame, at their stamps on the IMU's
+    clock (``sim_time``): the specific force over the angular rate, x (red), y (green), z
+    (blue), each with ``vnav.imu``'s noise-free prediction in thin white."""
+    plots = [
+        _series(
+            f"IMU {quantity} ({unit}) in the IMU frame: x (red), y (green), z (blue); "
+            "white: noise-free chain",
+            [path, IMU_CHAIN[path]],
+        )
+        for path, (quantity, unit) in IMU_SERIES.items()
+    ]
+    return rrb.Vertical(*plots, name="IMU")
 
 
 def shown_tick(spec: ScenarioSpec, result: RunResult) -> int:
@@ -1056,6 +1151,8 @@ def describe(spec: ScenarioSpec, seed: int, judged: Sequence[CheckResult] | None
     ]
     if spec.flight.mode == "navigate":
         lines += ["", _describe_navigation(spec)]
+    if spec.scene.imu is not None:
+        lines += ["", describe_imu(spec)]
     if spec.show_at_s is not None:
         lines += [
             "",
@@ -1081,6 +1178,43 @@ def _describe_navigation(spec: ScenarioSpec) -> str:
         "clearance (MuJoCo's distance between the drone's and the cones' geometry: 0 is a "
         "contact), the drone's centre to the nearest cone axis against clearance_m (what the "
         "planner keeps from each *mapped* axis) and the plan's length."
+    )
+
+
+def describe_imu(spec: ScenarioSpec) -> str:
+    """One paragraph on a run's IMU: its frame (mount, declared and true), clock, rate and
+    noise figures in Kalibr's units, and what the recording draws of it."""
+    imu = spec.scene.imu
+    assert imu is not None
+    error = imu.mount_error
+    mount = (
+        f"declared at {list(imu.position_b)} m in the body frame with axes R_b_i = Rz(yaw) "
+        f"Ry(pitch) Rx(roll) of rpy_deg {list(imu.rpy_deg)}"
+    )
+    if error.is_zero:
+        drawn = "its axes (thin, x red, y green, z blue, named **imu** past the tip of z)"
+    else:
+        mount += (
+            f"; the true mount is {error.angle_deg:.2f} deg and {1e3 * error.offset_m:.0f} mm "
+            "off it (T_b_i = T_b_i_declared E, the error in the IMU frame)"
+        )
+        drawn = (
+            "the true IMU's axes (thin, x red, y green, z blue, named **imu (true)**) and the "
+            "declared mount's (**yellow**, named **imu declared**; the estimator is told "
+            "that one)"
+        )
+    noise = imu.noise
+    return (
+        f"IMU: frame `imu`, {mount}. It reads at {imu.rate_hz:g} Hz, stamped on its own clock: "
+        f"t_imu = t_cam + {1e3 * imu.time_offset_s:g} ms (Kalibr's timeshift_cam_imu). Noise "
+        "(Kalibr's model, per axis): accelerometer_noise_density "
+        f"{noise.accelerometer_noise_density:g} m/s^2/sqrt(Hz), accelerometer_random_walk "
+        f"{noise.accelerometer_random_walk:g} m/s^3/sqrt(Hz), gyroscope_noise_density "
+        f"{noise.gyroscope_noise_density:g} rad/s/sqrt(Hz), gyroscope_random_walk "
+        f"{noise.gyroscope_random_walk:g} rad/s^2/sqrt(Hz). Drawn on the body: {drawn}. The "
+        "IMU tab plots each reading, the specific force f_i (+9.81 m/s^2 up at rest) and the "
+        "angular rate omega_i, in the IMU frame, on sim_time at its stamp on the IMU's clock, "
+        "with vnav.imu's noise-free prediction from the body's true motion in thin white."
     )
 
 

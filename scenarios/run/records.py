@@ -407,6 +407,10 @@ class ImuRecord:
         (``sim.imu.imu_discrepancy``), over every physics step of the run.
     steps_checked : int
         The physics states compared (the start and every step after it).
+    accel_chain_i, gyro_chain_i : ndarray, shape (N, 3), or None
+        What ``vnav.imu``'s chain predicts each reading to be without noise (the true motion
+        at the reading's physics step; ``sim.imu.chain_imu_i``): the recording plots it
+        beside the readings. None where not kept.
     """
 
     t_s: np.ndarray
@@ -414,6 +418,8 @@ class ImuRecord:
     gyro_i: np.ndarray
     max_discrepancy: float
     steps_checked: int
+    accel_chain_i: np.ndarray | None = None
+    gyro_chain_i: np.ndarray | None = None
 
 
 @dataclass

@@ -51,7 +51,7 @@ from sim.flight import (
     OrbitTrajectory,
     ReferenceFollower,
 )
-from sim.imu import ImuReading, ImuSampler, imu_discrepancy
+from sim.imu import ImuReading, ImuSampler, chain_imu_i, imu_discrepancy
 from sim.mesh import Scenery, scenery
 from sim.noise import mount_error, noisy_depth, noisy_pose, noisy_rgb
 from sim.render import Renderer
@@ -282,16 +282,20 @@ class _Imu:
             imu, float(world.model.opt.timestep), np.random.default_rng(seq), clock_offset_s
         )
         self.readings: list[ImuReading] = []
+        self.chain: list[tuple[np.ndarray, np.ndarray]] = []
+        """``vnav.imu``'s noise-free prediction of each reading (the recording plots it)."""
         self.max_discrepancy = 0.0
         self.steps_checked = 0
         self(world)  # the start, t = 0
         world.on_step = self
 
     def __call__(self, world: World) -> None:
-        self.max_discrepancy = max(self.max_discrepancy, imu_discrepancy(world))
+        chain = chain_imu_i(world)
+        self.max_discrepancy = max(self.max_discrepancy, imu_discrepancy(world, chain))
         self.steps_checked += 1
         if self.sampler.due(world):
             self.readings.append(self.sampler.sample(world))
+            self.chain.append(chain)
 
     def record(self) -> ImuRecord:
         r = self.readings
@@ -301,6 +305,8 @@ class _Imu:
             gyro_i=np.array([x.gyro_i for x in r]).reshape(-1, 3),
             max_discrepancy=self.max_discrepancy,
             steps_checked=self.steps_checked,
+            accel_chain_i=np.array([f for f, _ in self.chain]).reshape(-1, 3),
+            gyro_chain_i=np.array([w for _, w in self.chain]).reshape(-1, 3),
         )
 
 

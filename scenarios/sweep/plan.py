@@ -244,10 +244,14 @@ def draws_from_seed(spec: ScenarioSpec) -> bool:
 
     The seed feeds every random draw of a run (``scenarios.run.runner``): the pose, image,
     depth and mount noise (``sim.noise``: each drawn only where a figure of that sensor is
-    above zero) and the arrival jitter (``scenarios.run.streams``: only where ``jitter_s`` is
-    above zero). Where none is, every seed gives the same run, number for number.
+    above zero), the arrival jitter (``scenarios.run.streams``: only where ``jitter_s`` is
+    above zero) and an ``[imu]``'s noise (``vnav.imu.ImuNoiseProcess``: only where one of its
+    four figures is above zero). Where none is, every seed gives the same run, number for
+    number.
     """
-    return any(spec.noise.noisy(s) for s in SENSORS) or spec.timing.jitter_s > 0.0
+    imu = spec.scene.imu
+    imu_noisy = imu is not None and not imu.noise.is_zero
+    return any(spec.noise.noisy(s) for s in SENSORS) or spec.timing.jitter_s > 0.0 or imu_noisy
 
 
 def navigates(spec: ScenarioSpec) -> bool:
