@@ -18,7 +18,7 @@ from rosbags.interfaces import QosDurability
 from rosbags.typesys import Stores, get_typestore
 from scipy.spatial.transform import Rotation
 
-from scenarios.export.mcap import TOPICS, McapExporter, estimates_topic
+from scenarios.export.mcap import IMU_TOPIC, TOPICS, McapExporter, estimates_topic
 from scenarios.export.ros2_msgs import msgdef
 from scenarios.run.runner import run_scenario
 from scenarios.scenario import builtin
@@ -101,7 +101,8 @@ def test_the_bag_read_by_rosbags_is_the_run(latency):
     estimates each method's; all stamped at the image's camera-clock stamp plus the whole
     second the 20 ms clock offset needs to keep ROS time positive."""
     spec, keeper, result, exported, path = latency
-    assert exported.written == ("latency.mcap",) and exported.note is None
+    assert exported.written == ("latency.mcap",)
+    assert exported.note == "no /imu: the scenario has no [imu]"
     records = keeper.records
     assert len(records) == len(result.ticks) > 5
     offset_s = spec.timing.camera_clock_offset_s
@@ -236,10 +237,10 @@ def test_the_cones_are_latched_markers_at_the_true_cones(latency):
 def test_the_message_definitions_are_those_of_ros2_humble():
     """Each type's ``ros2msg`` text, dependencies included, is the one the rosbags ROS 2
     Humble type store generates as rosbag2 stores it; the schemas in the file are those."""
-    for type_name in {*TOPICS.values(), "geometry_msgs/msg/PointStamped"}:
+    for type_name in {*TOPICS.values(), "geometry_msgs/msg/PointStamped", IMU_TOPIC[1]}:
         assert msgdef(type_name) == HUMBLE.generate_msgdef(type_name, ros_version=2)[0]
     with pytest.raises(ValueError, match="no ROS 2 message definition"):
-        msgdef("sensor_msgs/msg/Imu")
+        msgdef("sensor_msgs/msg/NavSatFix")
 
 
 def test_rerun_converts_the_bag(latency, tmp_path):

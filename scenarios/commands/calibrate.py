@@ -1,7 +1,8 @@
 """``vnav-demo calibrate FILE.rrd [--out calib.yaml]``: the camera mount and clock offset
 from a recording (``scenarios.record.reader``, ``vnav.calibration``), printed with their
 standard errors and, where the recording holds the truth, their errors; written as Kalibr's
-camchain YAML (``scenarios.export.kalibr``)."""
+camchain YAML (``scenarios.export.kalibr``), referred to the IMU (``T_cam_imu``) when the
+recording's run had one."""
 
 from __future__ import annotations
 
@@ -9,10 +10,10 @@ import argparse
 from pathlib import Path
 
 from scenarios.commands.console import error, say
-from scenarios.export.kalibr import camchain_yaml
+from scenarios.export.kalibr import ImuExtrinsics, camchain_yaml
 from scenarios.judge.calibration import Truth, errors_against
 from scenarios.record.outputs import OutputError, write_atomic
-from scenarios.record.reader import RecordingError, calibration_inputs
+from scenarios.record.reader import RecordingError, calibration_inputs, imu_mount_declared
 from vnav import se3
 from vnav.calibration import CalibrationError, CalibrationResult
 from vnav.camera import PinholeCamera
@@ -20,12 +21,14 @@ from vnav.camera import PinholeCamera
 __all__ = ["command", "to_yaml", "write_yaml"]
 
 
-def to_yaml(result: CalibrationResult, camera: PinholeCamera) -> str:
+def to_yaml(
+    result: CalibrationResult, camera: PinholeCamera, imu: ImuExtrinsics | None = None
+) -> str:
     """The result as Kalibr's camchain YAML (``scenarios.export.kalibr``): ``cam0`` with the
     camera's intrinsics, ``T_cam_body`` (the inverse of ``T_b_c``) and ``timeshift_cam_body``
     (``time_offset_s``), and the project's figures under ``cam0.vnav_sim``: ``T_b_c``,
     ``time_offset_s``, ``reprojection_rms_px``, ``frames_used``, ``observations_used`` and the
-    standard errors."""
+    standard errors; with ``imu``, Kalibr's ``T_cam_imu`` and ``timeshift_cam_imu`` too."""
     return camchain_yaml(
         camera,
         result.T_b_c,
@@ -40,10 +43,16 @@ def to_yaml(result: CalibrationResult, camera: PinholeCamera) -> str:
             "std_translation_m": result.std_translation_m,
             "std_offset_s": result.std_offset_s,
         },
+        imu,
     )
 
 
-def write_yaml(result: CalibrationResult, camera: PinholeCamera, path: str | Path) -> None:
+def write_yaml(
+    result: CalibrationResult,
+    camera: PinholeCamera,
+    path: str | Path,
+    imu: ImuExtrinsics | None = None,
+) -> None:
     """Write ``to_yaml`` to ``path`` completely or not at all
     (``scenarios.record.outputs.write_atomic``).
 
@@ -52,7 +61,7 @@ def write_yaml(result: CalibrationResult, camera: PinholeCamera, path: str | Pat
     scenarios.record.outputs.OutputError
         If the file cannot be written; ``path`` is then as it was.
     """
-    text = to_yaml(result, camera)
+    text = to_yaml(result, camera, imu)
     write_atomic(Path(path), lambda tmp: tmp.write_text(text, encoding="utf-8"))
 
 
@@ -68,6 +77,8 @@ def command(args: argparse.Namespace) -> int:
     try:
         inputs = calibration_inputs(recording)
         solved = inputs.solve()
+        # No camera-IMU calibration yet: the IMU's declared mount (ImuExtrinsics.declared).
+        T_b_i = imu_mount_declared(recording) if out_path is not None else None
     except (RecordingError, CalibrationError) as exc:
         error(f"cannot calibrate: {exc}")
         return 2
@@ -77,7 +88,8 @@ def command(args: argparse.Namespace) -> int:
     say(_table(solved, inputs.truth))
     if out_path is not None:
         try:
-            write_yaml(solved, inputs.camera, out_path)
+            imu = None if T_b_i is None else ImuExtrinsics.declared(T_b_i)
+            write_yaml(solved, inputs.camera, out_path, imu)
         except OutputError as exc:
             error(f"--out {out}: cannot write: {exc.strerror}")
             return 2

@@ -57,13 +57,15 @@ FORMATS: dict[str, Format] = {
         "scenarios.export.euroc:EurocExporter",
         ("{name}.euroc",),
         True,
-        "<name>.euroc/mav0/: the images, depth and ground truth in the EuRoC (ASL) layout",
+        "<name>.euroc/mav0/: the images, depth, ground truth and, with an [imu], the IMU's "
+        "readings in the EuRoC (ASL) layout",
     ),
     "mcap": Format(
         "scenarios.export.mcap:McapExporter",
         ("{name}.mcap",),
         False,
-        "<name>.mcap: the run as ROS 2 messages (Foxglove, ros2 bag)",
+        "<name>.mcap: the run as ROS 2 messages, with an [imu] its readings on /imu "
+        "(Foxglove, ros2 bag)",
     ),
 }
 """Every export format by name: adding a format is one entry here and its module."""

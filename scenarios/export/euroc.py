@@ -12,19 +12,36 @@ SLAM front ends and evo read.
     depth0/data.csv, data/<t_ns>.png    planar z-depth, 16-bit PNG in millimetres (0: no return:
                                         the sky, beyond the far plane or 65.535 m); sensor.yaml
                                         as cam0's, with depth_scale
+    imu0/data.csv                       a scenario with an [imu] only: every reading, stamped on
+                                        the IMU's clock: angular rate w_RS_S (rad/s), then
+                                        specific force a_RS_S (m/s^2), in the IMU frame S, noise
+                                        and bias included
+    imu0/sensor.yaml                    T_BS (the declared IMU mount, the one an estimator is
+                                        told), rate_hz, Kalibr's four noise figures
     state_groundtruth_estimate0/data.csv   the body's true state at each image's stamp:
                                         p_RS_R, q_RS (w, x, y, z), v_RS_R, gyroscope and
-                                        accelerometer biases (zero)
+                                        accelerometer biases
     state_groundtruth_estimate0/sensor.yaml
 
 Frames (docs/CONVENTIONS.md, "Data out"): R is vnav's world (z up), S the state's sensor is
 the body B itself (FLU; in the real dataset B is the IMU's frame, here it is vnav's body
 frame, ``T_BS`` of the ground truth the identity), the camera's S its optical frame (RDF), so
-``T_BS`` of cam0 is ``T_b_c``. Stamps are integer nanoseconds on the camera clock, the
-images' exposure stamps, as in the TUM files (``scenarios.export.tum``); the ground truth is
-given at those same stamps (the pose clock's ``stamp + camera_clock_offset_s``). The depth
-is millimetres (1000 per metre; TUM RGB-D's PNGs use 5000). There is no ``imu0/``: this
-export writes no IMU readings yet (the note says so).
+``T_BS`` of cam0 is ``T_b_c``, and the IMU's S its own frame, so ``T_BS`` of imu0 is
+``T_b_i``: the declared mount (``sim.config.ImuConfig.T_b_i_declared``), as a dataset's
+sensor files carry the calibrated extrinsics, not the truth; the simulator's IMU sits at the
+true mount, off it by the scenario's ``[imu.mount_error]`` (the comment says when).
+
+Clocks: the camera's stamps are integer nanoseconds on the camera clock, the images' exposure
+stamps, as in the TUM files (``scenarios.export.tum``); the ground truth is given at those same
+stamps (the pose clock's ``stamp + camera_clock_offset_s``). The IMU's are on the **IMU's own
+clock**, as it stamped them (``scenarios.run.records.ImuRecord.t_s``; Kalibr's
+``t_imu = t_cam + timeshift_cam_imu``, the scenario's ``[imu] time_offset_s``), not converted
+to the camera's: the real EuRoC rig is hardware-synchronised, this one is not, and the offset
+is in the data for a camera-IMU calibration to find, as it would be in a real unsynchronised
+rig's (imu0's comment gives it). The ground truth's biases are zero without an IMU, or with
+one whose biases do not drift (both random walks zero: its biases stay zero); an IMU's
+drifting biases are not kept by the run, so they are written ``nan`` (unknown), not zero.
+The depth is millimetres (1000 per metre; TUM RGB-D's PNGs use 5000).
 
 The velocity is the simulator's (``scenarios.run.records.TickRecord.v_w_b_mps``): MuJoCo's
 free-joint velocity, or a keyframe flight's segment slope, not a difference of poses.
@@ -45,17 +62,20 @@ import cv2
 import numpy as np
 
 from scenarios.export.base import ExportResult, stamp_ns, write_flushed
+from scenarios.export.kalibr import yaml_float
 from scenarios.run.records import RunResult, TickRecord
 from vnav import quat
 from vnav.camera import PinholeCamera
 
 if TYPE_CHECKING:  # annotations only: importing sim.mesh loads MuJoCo before sim.gl
     from scenarios.scenario.spec import ScenarioSpec
+    from sim.config import ImuConfig
     from sim.mesh import Scenery
 
 __all__ = [
     "DEPTH_SCALE",
     "GROUNDTRUTH_HEADER",
+    "IMU_HEADER",
     "EurocExporter",
     "depth_png_mm",
 ]
@@ -80,6 +100,11 @@ GROUNDTRUTH_HEADER = (
 )
 """The EuRoC ground truth's header, column for column."""
 IMAGES_HEADER = "#timestamp [ns],filename"
+IMU_HEADER = (
+    "#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
+    "a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]"
+)
+"""The EuRoC IMU table's header: the angular rate first, then the specific force."""
 
 
 def depth_png_mm(depth_m: np.ndarray, far_m: float) -> np.ndarray:
@@ -181,9 +206,11 @@ class EurocExporter:
         self._states: list[str] = []
         self._T_b_c_first: np.ndarray | None = None
         self._mount_moved = False
+        self._biases_known = True
 
     def start(self, spec: ScenarioSpec, seed: int, camera: PinholeCamera, scenery: Scenery) -> None:
         self._spec, self._camera, self._seed = spec, camera, seed
+        self._biases_known = _biases_stay_zero(spec)
         self._root = self.staging / f"{spec.name}.euroc"
         mav0 = self._root / "mav0"
         for sub in ("cam0/data", "depth0/data", "state_groundtruth_estimate0"):
@@ -210,7 +237,7 @@ class EurocExporter:
         self._images.append(t_ns)
         if depth_path is not None:
             self._depths.append(t_ns)
-        self._states.append(_state_row(t_ns, record))
+        self._states.append(_state_row(t_ns, record, self._biases_known))
         if self._T_b_c_first is None:
             self._T_b_c_first = record.T_b_c
         elif not np.array_equal(record.T_b_c, self._T_b_c_first):
@@ -281,6 +308,9 @@ class EurocExporter:
         else:
             (mav0 / "depth0" / "data").rmdir()
             (mav0 / "depth0").rmdir()
+        imu = spec.scene.imu
+        if imu is not None:
+            _write_imu(mav0 / "imu0", about, imu, result)
         state = mav0 / "state_groundtruth_estimate0"
         _write_text(state / "data.csv", GROUNDTRUTH_HEADER + "\n" + "".join(self._states))
         _write_text(
@@ -291,13 +321,22 @@ class EurocExporter:
             + _quoted(
                 f"{about}: the simulator's true body state at each image's stamp (camera "
                 "clock); p and v in the world (z up), q the body's attitude (w, x, y, z); "
-                "biases zero (no IMU readings are exported)."
+                + _biases_comment(imu, self._biases_known)
             )
             + "\n\n"
             "# Sensor extrinsics wrt. the body-frame.\n"
             f"T_BS:\n{_matrix_yaml(np.eye(4))}",
         )
-        notes = ["no IMU (imu0/): this export writes no IMU readings yet"]
+        notes = []
+        if imu is None:
+            notes.append("no IMU (imu0/): the scenario has no [imu]")
+        else:
+            notes.append(
+                "imu0/ is stamped on the IMU's clock (t_imu = t_cam + "
+                f"{imu.time_offset_s:g} s), not the camera's"
+            )
+            if not self._biases_known:
+                notes.append("the ground truth's biases are nan: the run keeps no IMU biases")
         if self._mount_moved:
             notes.append("the camera slides in this flight: cam0's T_BS is its first mount")
         if self._images and self._images[0] < 0:
@@ -324,10 +363,74 @@ def _image_table(stamps_ns: list[int]) -> str:
     return IMAGES_HEADER + "\n" + "".join(f"{t},{t}.png\n" for t in stamps_ns)
 
 
-def _state_row(t_ns: int, record: TickRecord) -> str:
-    """One ground-truth row: the body's position, attitude (w first), velocity, zero biases."""
+def _state_row(t_ns: int, record: TickRecord, biases_known: bool = True) -> str:
+    """One ground-truth row: the body's position, attitude (w first), velocity, and the
+    biases: zero where they are known to be (``_biases_stay_zero``), ``nan`` otherwise."""
     p = record.T_w_b[:3, 3]
     x, y, z, w = quat.from_matrix(record.T_w_b[:3, :3])
     v = record.v_w_b_mps if record.v_w_b_mps is not None else np.full(3, np.nan)
-    values = [*p, w, x, y, z, *v, *([0.0] * 6)]
+    values = [*p, w, x, y, z, *v, *([0.0 if biases_known else np.nan] * 6)]
     return f"{t_ns}," + ",".join(f"{float(u):.9f}" for u in values) + "\n"
+
+
+def _biases_stay_zero(spec: ScenarioSpec) -> bool:
+    """Whether the ground truth's biases are known to be zero: no IMU, or one whose biases
+    do not drift (``vnav.imu.ImuNoiseProcess`` starts them at zero)."""
+    imu = spec.scene.imu
+    return imu is None or not (imu.accelerometer_random_walk or imu.gyroscope_random_walk)
+
+
+def _biases_comment(imu: ImuConfig | None, known: bool) -> str:
+    if imu is None:
+        return "biases zero (the scenario has no IMU)."
+    if known:
+        return "biases zero (the IMU's do not drift: both random walks are zero)."
+    return (
+        "biases nan: unknown (the IMU's biases drift from zero and the run does not keep "
+        "them); imu0's readings carry them."
+    )
+
+
+def _write_imu(imu0: Path, about: str, imu: ImuConfig, result: RunResult) -> None:
+    """``imu0/data.csv`` (every reading on the IMU's clock, rad/s then m/s^2, in full) and
+    ``imu0/sensor.yaml`` (the declared mount, the rate, Kalibr's noise figures)."""
+    imu0.mkdir()
+    record = result.imu
+    rows = []
+    if record is not None:
+        for t_s, gyro_i, accel_i in zip(record.t_s, record.gyro_i, record.accel_i, strict=True):
+            values = ",".join(repr(float(v)) for v in (*gyro_i, *accel_i))
+            rows.append(f"{round(float(t_s) * 1e9)},{values}\n")
+    _write_text(imu0 / "data.csv", IMU_HEADER + "\n" + "".join(rows))
+    mount = (
+        "T_BS is the declared mount T_b_i (the IMU frame in the body), the one an estimator is "
+        "told; the simulator's IMU sits at the true mount, off it by the scenario's "
+        "[imu.mount_error]."
+        if not imu.mount_error.is_zero
+        else "T_BS is the mount T_b_i (the IMU frame in the body), declared and true alike."
+    )
+    comment = (
+        f"{about}: the IMU (MuJoCo's accelerometer and gyro at the IMU's site, Kalibr's noise "
+        "model with the figures below, bias included), angular rate w (rad/s) and specific "
+        "force a (m/s^2) in the IMU frame; stamps on the IMU's clock, t_imu = t_cam + "
+        f"{imu.time_offset_s!r} s (Kalibr's timeshift_cam_imu), not synchronised with cam0's. "
+        + mount
+    )
+    _write_text(
+        imu0 / "sensor.yaml",
+        "# General sensor definitions.\n"
+        "sensor_type: imu\n"
+        f"comment: {_quoted(comment)}\n\n"
+        "# Sensor extrinsics wrt. the body-frame.\n"
+        f"T_BS:\n{_matrix_yaml(imu.T_b_i_declared)}"
+        f"rate_hz: {imu.rate_hz:g}\n\n"
+        "# inertial sensor noise model parameters (static)\n"
+        f"gyroscope_noise_density: {yaml_float(imu.gyroscope_noise_density)}"
+        '  # [ rad / s / sqrt(Hz) ]   ( gyro "white noise" )\n'
+        f"gyroscope_random_walk: {yaml_float(imu.gyroscope_random_walk)}"
+        "  # [ rad / s^2 / sqrt(Hz) ] ( gyro bias diffusion )\n"
+        f"accelerometer_noise_density: {yaml_float(imu.accelerometer_noise_density)}"
+        '  # [ m / s^2 / sqrt(Hz) ]   ( accel "white noise" )\n'
+        f"accelerometer_random_walk: {yaml_float(imu.accelerometer_random_walk)}"
+        "  # [ m / s^3 / sqrt(Hz) ]   ( accel bias diffusion )\n",
+    )

@@ -4,13 +4,23 @@ Kalibr describes each camera under ``cam0:``, ``cam1:``...: ``camera_model``, ``
 (``[fu, fv, pu, pv]`` for a pinhole), ``distortion_model`` and ``distortion_coeffs``,
 ``resolution`` (``[width, height]``), ``rostopic``, ``cam_overlaps``, and, calibrated against an
 IMU, ``T_cam_imu`` (IMU to camera coordinates, ``p_cam = T_cam_imu p_imu``) and
-``timeshift_cam_imu`` (``t_imu = t_cam + shift``). vnav-sim has no IMU yet; the camera is
-calibrated against the body's pose stream instead, so the file says so in its key names:
+``timeshift_cam_imu`` (``t_imu = t_cam + shift``). vnav-sim calibrates the camera against the
+body's pose stream, so the file says so in its key names:
 
 - ``T_cam_body``: body to camera coordinates, ``p_cam = T_cam_body p_body``, the inverse of
   the project's ``T_b_c`` (the camera's pose in the body);
 - ``timeshift_cam_body``: ``t_body = t_cam + shift``, with ``t_body`` the pose clock: the
   project's ``time_offset_s`` (``t_pose = t_cam + offset``), same sign.
+
+A run with an IMU (``ImuExtrinsics``) also has Kalibr's own two keys:
+
+- ``T_cam_imu``: IMU to camera coordinates, ``p_cam = T_cam_imu p_imu``, composed through the
+  body: ``inverse(T_b_c) @ T_b_i``, the camera's mount as calibrated and the IMU's as the
+  ``ImuExtrinsics`` give it (the declared mount when there is no camera-IMU calibration);
+- ``timeshift_cam_imu``: ``t_imu = t_cam + shift``, the project's ``[imu] time_offset_s``
+  convention, same sign (0.0, the clocks taken as synchronised, when not calibrated).
+
+``cam0.vnav_sim.imu_extrinsics`` says where the IMU's figures come from.
 
 The project's own figures sit in ``cam0.vnav_sim``, a key no Kalibr reader looks up. Not at the
 top level: Kalibr's ``CameraChainParameters.numCameras()`` counts every top-level key as a
@@ -23,16 +33,52 @@ Numbers are written in full (``repr``) and every float with a decimal point, as 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
 from vnav import se3
 from vnav.camera import PinholeCamera
 
-__all__ = ["IMAGE_TOPIC", "camchain_yaml", "yaml_float"]
+__all__ = ["IMAGE_TOPIC", "ImuExtrinsics", "camchain_yaml", "yaml_float"]
 
 IMAGE_TOPIC = "/camera/image_raw"
 """The image topic of the run's ROS 2 bag (``scenarios.export.mcap``)."""
+
+
+@dataclass(frozen=True)
+class ImuExtrinsics:
+    """The IMU's mount and clock for a camchain's ``T_cam_imu`` and ``timeshift_cam_imu``.
+
+    Attributes
+    ----------
+    T_b_i : ndarray, shape (4, 4)
+        The IMU frame in the body.
+    timeshift_cam_imu_s : float
+        ``t_imu = t_cam + shift``, seconds.
+    source : str
+        Where they come from, one sentence (written as ``cam0.vnav_sim.imu_extrinsics``).
+    """
+
+    T_b_i: np.ndarray
+    timeshift_cam_imu_s: float
+    source: str
+
+    @classmethod
+    def declared(cls, T_b_i_declared: np.ndarray) -> ImuExtrinsics:
+        """No camera-IMU calibration: the declared mount, and the clocks taken as
+        synchronised (a shift of 0.0)."""
+        return cls(
+            np.asarray(T_b_i_declared, dtype=np.float64),
+            0.0,
+            "declared: T_cam_imu uses the IMU's declared mount (no camera-IMU calibration); "
+            "timeshift_cam_imu 0.0 is not calibrated (the clocks taken as synchronised)",
+        )
+
+
+def _quoted(text: str) -> str:
+    """A YAML single-quoted string."""
+    return "'" + text.replace("'", "''") + "'"
 
 
 def yaml_float(value: float) -> str:
@@ -61,9 +107,11 @@ def camchain_yaml(
     camera: PinholeCamera,
     T_b_c: np.ndarray,
     time_offset_s: float,
-    vnav_sim: dict[str, float | int | np.ndarray],
+    vnav_sim: dict[str, float | int | str | np.ndarray],
+    imu: ImuExtrinsics | None = None,
 ) -> str:
-    """The camchain text of one camera calibrated against the body.
+    """The camchain text of one camera calibrated against the body (and, with ``imu``,
+    referred to the IMU as Kalibr does).
 
     Parameters
     ----------
@@ -73,21 +121,44 @@ def camchain_yaml(
         The camera's optical frame in the body (written inverted, as ``T_cam_body``).
     time_offset_s : float
         ``t_pose = t_cam + time_offset_s`` (written as ``timeshift_cam_body``).
-    vnav_sim : dict of str to float, int or ndarray
+    vnav_sim : dict of str to float, int, str or ndarray
         The project's own figures, written under ``cam0.vnav_sim`` in this order (a (4, 4)
-        array as four rows).
+        array as four rows), then, with ``imu``, ``T_b_i`` and ``imu_extrinsics``.
+    imu : ImuExtrinsics, optional
+        The IMU's mount and clock: written as ``T_cam_imu = inverse(T_b_c) @ T_b_i`` and
+        ``timeshift_cam_imu``.
 
     Raises
     ------
     ValueError
-        If ``T_b_c`` is not a rigid transform or a number is not finite.
+        If ``T_b_c`` or ``imu.T_b_i`` is not a rigid transform or a number is not finite.
     """
     T_b_c = se3.check_pose(T_b_c, "T_b_c")
     T_cam_body = se3.invert(T_b_c)
+    if imu is None:
+        head = [
+            "# No IMU: T_cam_body and timeshift_cam_body stand where Kalibr writes T_cam_imu and",
+            "# timeshift_cam_imu, the body (base_link, x forward, y left, z up) in place of the "
+            "IMU.",
+        ]
+        imu_lines = []
+    else:
+        T_b_i = se3.check_pose(imu.T_b_i, "T_b_i")
+        T_cam_imu = T_cam_body @ T_b_i
+        head = [
+            "# T_cam_imu and timeshift_cam_imu refer the camera to the IMU (cam0.vnav_sim.",
+            "# imu_extrinsics says where the IMU's come from); T_cam_body and timeshift_cam_body",
+            "# refer it to the body (base_link, x forward, y left, z up), as it was calibrated.",
+        ]
+        imu_lines = [
+            "  T_cam_imu:  # IMU to camera: p_cam = T_cam_imu p_imu = inverse(T_b_c) T_b_i p_imu",
+            *(f"  - {_row(row)}" for row in T_cam_imu),
+            f"  timeshift_cam_imu: {yaml_float(imu.timeshift_cam_imu_s)}  # t_imu = t_cam + shift",
+        ]
+        vnav_sim = {**vnav_sim, "T_b_i": T_b_i, "imu_extrinsics": imu.source}
     lines = [
         '# Kalibr camchain (ethz-asl/kalibr, wiki "Yaml formats"), written by vnav-sim.',
-        "# No IMU: T_cam_body and timeshift_cam_body stand where Kalibr writes T_cam_imu and",
-        "# timeshift_cam_imu, the body (base_link, x forward, y left, z up) in place of the IMU.",
+        *head,
         "cam0:",
         "  camera_model: pinhole",
         f"  intrinsics: {_row([camera.fx, camera.fy, camera.cx, camera.cy])}  # fu, fv, pu, pv",
@@ -96,13 +167,16 @@ def camchain_yaml(
         f"  resolution: [{int(camera.width)}, {int(camera.height)}]",
         f"  rostopic: {IMAGE_TOPIC}",
         "  cam_overlaps: []",
+        *imu_lines,
         "  T_cam_body:  # body to camera: p_cam = T_cam_body p_body (the inverse of T_b_c)",
         *(f"  - {_row(row)}" for row in T_cam_body),
         f"  timeshift_cam_body: {yaml_float(time_offset_s)}  # t_body = t_cam + shift",
         "  vnav_sim:  # the project's names and figures; no Kalibr reader looks them up",
     ]
     for key, value in vnav_sim.items():
-        if isinstance(value, np.ndarray):
+        if isinstance(value, str):
+            lines.append(f"    {key}: {_quoted(value)}")
+        elif isinstance(value, np.ndarray):
             lines.append(f"    {key}:")
             lines += [f"    - {_row(row)}" for row in np.atleast_2d(value)]
         elif isinstance(value, (int, np.integer)) and not isinstance(value, bool):

@@ -6,7 +6,9 @@ Topics (frames per REP 103 and REP 105, docs/CONVENTIONS.md, "ROS 2 bags (MCAP) 
 - ``/tf`` (``tf2_msgs/msg/TFMessage``): ``map`` -> ``base_link``, the true body pose ``T_w_b``
   at each image;
 - ``/tf_static`` (``tf2_msgs/msg/TFMessage``): ``base_link`` -> ``camera_optical_frame``, the
-  true mount ``T_b_c``, once, latched (transient local);
+  true mount ``T_b_c``, and, with an ``[imu]``, ``base_link`` -> ``imu_link``, the IMU's
+  declared mount ``T_b_i`` (the one an estimator is told; the simulator's IMU sits at the true
+  mount, off it by ``[imu.mount_error]``), in one message, once, latched (transient local);
 - ``/camera/image_raw`` (``sensor_msgs/msg/Image``): the image as rendered, ``rgb8``;
 - ``/camera/camera_info`` (``sensor_msgs/msg/CameraInfo``): ``K``, ``P = [K | 0]``, ``R = I``,
   ``plumb_bob`` with zero distortion;
@@ -15,18 +17,32 @@ Topics (frames per REP 103 and REP 105, docs/CONVENTIONS.md, "ROS 2 bags (MCAP) 
 - ``/cones`` (``visualization_msgs/msg/MarkerArray``): the true cones, one ``TRIANGLE_LIST``
   each (the simulator's meshes), latched;
 - ``/estimates/<method>`` (``geometry_msgs/msg/PointStamped``): each estimate of a cone's
-  base centre, in ``map``.
+  base centre, in ``map``;
+- ``/imu`` (``sensor_msgs/msg/Imu``), a scenario with an ``[imu]`` only: every reading in
+  ``imu_link``, ``angular_velocity`` (rad/s) and ``linear_acceleration`` (the specific force,
+  m/s^2), noise and bias included; no orientation (``orientation`` the identity, ROS 2's
+  default, and ``orientation_covariance[0] = -1``, as the message's definition asks); the
+  other two covariances diagonal, each axis' white-noise variance per reading, Kalibr's
+  discrete model ``density^2 * rate_hz`` (what the simulator draws,
+  ``vnav.imu.ImuNoiseProcess``; the drifting bias is not in it; an IMU without noise has
+  zeros, which ROS reads as "unknown").
 
-A flight that slides the camera on the body (a keyframed ``camera_position_b``) has no
-``/tf_static``: its mount goes on ``/tf`` with the body pose at every image.
+A flight that slides the camera on the body (a keyframed ``camera_position_b``) puts its
+mount on ``/tf`` with the body pose at every image, not on ``/tf_static`` (which then holds
+the IMU's mount alone, or is not written without an IMU).
 
 Stamps: every message of an image (its ``/tf``, its pose, its camera info, its estimates)
-carries the image's exposure stamp on the **camera clock** (as the TUM files do), plus
-``stamp_origin_s``: a whole number of seconds, 0 unless the camera clock reads negative at the
-start of the flight (``camera_clock_offset_s > 0``: ``t_cam = t_pose - offset``), which ROS
-time cannot hold. Each message's MCAP ``log_time`` and ``publish_time`` are that stamp in
-nanoseconds. The file's metadata record ``vnav_sim`` names the scenario, the seed, the clock
-offset and ``stamp_origin_s``.
+carries the image's exposure stamp on the **camera clock** (as the TUM files do), and each
+``/imu`` reading its stamp on the **IMU's clock** (``ImuRecord.t_s``: ``t_imu = t_cam +
+time_offset_s``, Kalibr's ``timeshift_cam_imu``; not converted to the camera's, as an
+unsynchronised rig's driver stamps it, so that the offset is in the bag for a camera-IMU
+calibration to find), both plus ``stamp_origin_s``: a whole number of seconds, 0 unless either
+clock reads negative at the start of the flight (the camera's when ``camera_clock_offset_s >
+0``: ``t_cam = t_pose - offset``; the IMU's when ``camera_clock_offset_s - time_offset_s >
+0``), which ROS time cannot hold. Each message's MCAP ``log_time`` and ``publish_time`` are
+that stamp in nanoseconds (the readings are written after the run, the file's index orders
+them). The file's metadata record ``vnav_sim`` names the scenario, the seed, the clock
+offsets and ``stamp_origin_s``.
 """
 
 from __future__ import annotations
@@ -54,12 +70,23 @@ from scenarios.scenario.spec import KinematicFlight
 from vnav import quat, se3
 
 if TYPE_CHECKING:
-    from scenarios.run.records import RunResult, TickRecord
+    from scenarios.run.records import ImuRecord, RunResult, TickRecord
     from scenarios.scenario.spec import ScenarioSpec
+    from sim.config import ImuConfig
     from sim.mesh import Scenery
     from vnav.camera import PinholeCamera
 
-__all__ = ["FRAME_BODY", "FRAME_CAMERA", "FRAME_MAP", "TOPICS", "McapExporter", "estimates_topic"]
+__all__ = [
+    "FRAME_BODY",
+    "FRAME_CAMERA",
+    "FRAME_IMU",
+    "FRAME_MAP",
+    "IMU_TOPIC",
+    "TOPICS",
+    "McapExporter",
+    "estimates_topic",
+    "imu_covariances",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -69,6 +96,8 @@ FRAME_BODY = "base_link"
 """The body frame ``b`` (FLU): REP 103's ``base_link``."""
 FRAME_CAMERA = "camera_optical_frame"
 """The camera's optical frame ``c`` (x right, y down, z forward): REP 103's ``*_optical_frame``."""
+FRAME_IMU = "imu_link"
+"""The IMU's frame ``i`` (its readings' axes), as ROS drivers name it."""
 
 TOPICS: dict[str, str] = {
     "/tf": "tf2_msgs/msg/TFMessage",
@@ -79,7 +108,10 @@ TOPICS: dict[str, str] = {
     "/ground_truth/pose": "geometry_msgs/msg/PoseStamped",
     "/cones": "visualization_msgs/msg/MarkerArray",
 }
-"""Every fixed topic and its type (``/estimates/<method>``: ``geometry_msgs/msg/PointStamped``)."""
+"""Every fixed topic and its type (``/estimates/<method>``: ``geometry_msgs/msg/PointStamped``;
+``IMU_TOPIC`` with an ``[imu]``)."""
+IMU_TOPIC = ("/imu", "sensor_msgs/msg/Imu")
+"""The IMU's readings: a scenario with an ``[imu]`` only."""
 
 _LATCHED = {"/tf_static", "/cones"}
 _ESTIMATE_TYPE = "geometry_msgs/msg/PointStamped"
@@ -130,6 +162,7 @@ class McapExporter:
         self._origin_ns = 0
         self._depth_ticks = 0
         self._ticks = 0
+        self._spec: ScenarioSpec | None = None
 
     # -- the run -------------------------------------------------------------------------
 
@@ -143,31 +176,46 @@ class McapExporter:
         """
         self.path = self._staging_dir / f"{self._final_name or spec.name}.mcap"
         offset_s = spec.timing.camera_clock_offset_s
-        origin_s = max(0, math.ceil(offset_s))
+        imu = spec.scene.imu
+        # The clock that reads furthest behind at the flight's start sets the origin: the
+        # camera's reads -offset_s there, the IMU's -offset_s + time_offset_s.
+        behind_s = offset_s if imu is None else max(offset_s, offset_s - imu.time_offset_s)
+        origin_s = max(0, math.ceil(behind_s))
         self._origin_ns = origin_s * _NS_PER_S
         self._camera = camera
+        self._spec = spec
         self._file = open(self.path, "xb")  # closed by finish or abort
         self._writer = McapWriter(self._file, compression=self._compression)
         self._writer.start(profile="ros2", library="vnav-sim (mcap, mcap-ros2-support)")
-        self._writer.add_metadata(
-            "vnav_sim",
-            {
-                "scenario": spec.name,
-                "seed": str(seed),
-                "camera_clock_offset_s": repr(offset_s),
-                "stamp_origin_s": str(origin_s),
-                "stamps": "image exposure on the camera clock + stamp_origin_s",
-            },
-        )
+        metadata = {
+            "scenario": spec.name,
+            "seed": str(seed),
+            "camera_clock_offset_s": repr(offset_s),
+            "stamp_origin_s": str(origin_s),
+            "stamps": "image exposure on the camera clock + stamp_origin_s",
+        }
+        if imu is not None:
+            metadata["imu_time_offset_s"] = repr(imu.time_offset_s)
+            metadata["imu_stamps"] = (
+                "reading on the IMU clock (t_imu = t_cam + imu_time_offset_s) + stamp_origin_s"
+            )
+        self._writer.add_metadata("vnav_sim", metadata)
         for topic, type_name in TOPICS.items():
             self._channel(topic, type_name)
+        if imu is not None:
+            self._channel(*IMU_TOPIC)
         # The flight starts at t_pose = 0, which the camera clock reads as -offset.
         stamp_ns = self._stamp_ns(-offset_s)
         moves_camera = isinstance(spec.flight, KinematicFlight) and spec.flight.moves_camera
+        static = []
         if not moves_camera:
             self._T_b_c_static = se3.check_pose(spec.scene.camera.T_b_c, "T_b_c")
-            tf = _transform(stamp_ns, FRAME_BODY, FRAME_CAMERA, self._T_b_c_static)
-            self._write("/tf_static", {"transforms": [tf]}, stamp_ns)
+            static.append(_transform(stamp_ns, FRAME_BODY, FRAME_CAMERA, self._T_b_c_static))
+        if imu is not None:
+            static.append(_transform(stamp_ns, FRAME_BODY, FRAME_IMU, imu.T_b_i_declared))
+        if static:
+            # One message: a latched topic keeps only its last one for a late subscriber.
+            self._write("/tf_static", {"transforms": static}, stamp_ns)
         self._write("/cones", _cone_markers(spec, scenery, stamp_ns), stamp_ns)
 
     def on_tick(self, record: TickRecord, rgb: np.ndarray, depth_m: np.ndarray | None) -> None:
@@ -248,6 +296,9 @@ class McapExporter:
         if self._writer is None or self._file is None:
             raise ValueError("finish before start (or after finish or abort)")
         try:
+            imu = self._spec.scene.imu if self._spec is not None else None
+            if imu is not None and result.imu is not None:
+                self._write_imu(imu, result.imu)
             self._writer.finish()
             self._file.flush()
             os.fsync(self._file.fileno())
@@ -256,9 +307,14 @@ class McapExporter:
             self.abort()
             raise
         self._writer = self._file = None
-        note = None
+        notes = []
         if self._ticks and not self._depth_ticks:
-            note = "no depth images: the run rendered none"
+            notes.append("no depth images: the run rendered none")
+        if result.spec.scene.imu is None:
+            notes.append("no /imu: the scenario has no [imu]")
+        else:
+            notes.append("/imu is stamped on the IMU's clock, not the camera's")
+        note = "; ".join(notes)
         logger.info("wrote %s: %d camera ticks of %s", self.path, self._ticks, result.spec.name)
         return ExportResult(self.name, (self.path.name,), note=note)
 
@@ -272,10 +328,29 @@ class McapExporter:
                 if self.path is not None:
                     self.path.unlink(missing_ok=True)
 
+    def _write_imu(self, imu: ImuConfig, record: ImuRecord) -> None:
+        """Every reading on ``/imu``, stamped on the IMU's clock."""
+        cov_gyro, cov_accel = imu_covariances(imu)
+        no_orientation = [-1.0] + [0.0] * 8
+        for t_s, gyro_i, accel_i in zip(record.t_s, record.gyro_i, record.accel_i, strict=True):
+            stamp_ns = self._stamp_ns(float(t_s))
+            message = {
+                "header": _header(stamp_ns, FRAME_IMU),
+                "orientation": _q((0.0, 0.0, 0.0, 1.0)),
+                "orientation_covariance": no_orientation,
+                "angular_velocity": _xyz(gyro_i),
+                "angular_velocity_covariance": cov_gyro,
+                "linear_acceleration": _xyz(accel_i),
+                "linear_acceleration_covariance": cov_accel,
+            }
+            self._write(IMU_TOPIC[0], message, stamp_ns)
+
     # -- the file ------------------------------------------------------------------------
 
-    def _stamp_ns(self, t_cam_s: float) -> int:
-        return round(t_cam_s * _NS_PER_S) + self._origin_ns
+    def _stamp_ns(self, t_s: float) -> int:
+        """A stamp on the camera's or the IMU's clock, seconds, as written: nanoseconds plus
+        the origin."""
+        return round(t_s * _NS_PER_S) + self._origin_ns
 
     def _channel(self, topic: str, type_name: str) -> None:
         """Register ``topic`` (and its type's schema) once."""
@@ -307,6 +382,24 @@ class McapExporter:
             sequence=self._sequence[topic],
         )
         self._sequence[topic] += 1
+
+
+def imu_covariances(imu: ImuConfig) -> tuple[list[float], list[float]]:
+    """``sensor_msgs/Imu``'s ``angular_velocity_covariance`` and
+    ``linear_acceleration_covariance`` (row major, x, y, z): diagonal, each axis' variance of a
+    reading's white noise in Kalibr's discrete model, ``(density / sqrt(dt))^2 = density^2 *
+    rate_hz`` (``vnav.imu.ImuNoise.white_std``; the drifting bias is not in it).
+
+    Returns
+    -------
+    gyro, accel : list of 9 float
+        (rad/s)^2 and (m/s^2)^2.
+    """
+    std_accel, std_gyro = imu.noise.white_std(1.0 / imu.rate_hz)
+    return (
+        [float(v) for v in np.diag([std_gyro**2] * 3).ravel()],
+        [float(v) for v in np.diag([std_accel**2] * 3).ravel()],
+    )
 
 
 # -- messages, as the dicts mcap-ros2-support encodes -----------------------------------------

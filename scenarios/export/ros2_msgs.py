@@ -49,6 +49,12 @@ MSG_FIELDS: dict[str, str] = {
         "uint32 binning_y\nsensor_msgs/RegionOfInterest roi\n"
     ),
     "sensor_msgs/CompressedImage": "std_msgs/Header header\nstring format\nuint8[] data\n",
+    "sensor_msgs/Imu": (
+        "std_msgs/Header header\ngeometry_msgs/Quaternion orientation\n"
+        "float64[9] orientation_covariance\ngeometry_msgs/Vector3 angular_velocity\n"
+        "float64[9] angular_velocity_covariance\ngeometry_msgs/Vector3 linear_acceleration\n"
+        "float64[9] linear_acceleration_covariance\n"
+    ),
     "visualization_msgs/UVCoordinate": "float32 u\nfloat32 v\n",
     "visualization_msgs/MeshFile": "string filename\nuint8[] data\n",
     "visualization_msgs/Marker": (

@@ -4,7 +4,7 @@ a camera calibration needs (``scenarios.judge.calibration.CalibrationInputs``).
 The entity paths are the recording's (``scenarios.record.viewer.entity``): the pose stream as
 it was sent (``estimator/*``), the detections' keypoints, ``world/cones/truth``, the camera's
 pinhole and, beside them, the truth: the true mount (``world/body/camera``) and the true clock
-offset (``truth``).
+offset (``truth``). A run with an ``[imu]`` also holds the IMU's mounts (``imu_mount_declared``).
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from vnav import quat
 from vnav.camera import PinholeCamera
 from vnav.cone import TRAFFIC_CONE
 
-__all__ = ["RecordingError", "calibration_inputs", "read_rows"]
+__all__ = ["RecordingError", "calibration_inputs", "imu_mount_declared", "read_rows"]
 
 
 class RecordingError(ValueError):
@@ -149,3 +149,30 @@ def calibration_inputs(path: str | Path) -> CalibrationInputs:
         T_b_c_declared=mounts[0] if len(mounts) else np.eye(4),
         truth=truth,
     )
+
+
+def _static_transform(row: dict) -> np.ndarray:
+    """(4, 4) a static ``Transform3D`` row's parent-from-child transform."""
+    T = np.eye(4)
+    T[:3, 3] = row["Transform3D:translation"][0]
+    T[:3, :3] = quat.to_matrix(np.asarray(row["Transform3D:quaternion"][0]), normalize=True)
+    return T
+
+
+def imu_mount_declared(path: str | Path) -> np.ndarray | None:
+    """(4, 4) the IMU's declared mount ``T_b_i`` in a recording of a run with an ``[imu]``: the
+    mount an estimator is told (``world/body/imu_declared``, or ``world/body/imu`` where the
+    scenario has no ``[imu.mount_error]``: declared and true are then one,
+    ``scenarios.record.imu_views``); None for a run without an IMU.
+
+    Raises
+    ------
+    RecordingError
+        If the file is not a readable Rerun recording.
+    """
+    rows = read_rows(Path(path), (entity.IMU, entity.IMU_DECLARED))
+    for key in (entity.IMU_DECLARED, entity.IMU):
+        mounts = [r for r in rows[key] if r.get("Transform3D:translation")]
+        if mounts:
+            return _static_transform(mounts[-1])
+    return None
