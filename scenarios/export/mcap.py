@@ -27,9 +27,9 @@ Topics (frames per REP 103 and REP 105, docs/CONVENTIONS.md, "ROS 2 bags (MCAP) 
   ``vnav.imu.ImuNoiseProcess``; the drifting bias is not in it; an IMU without noise has
   zeros, which ROS reads as "unknown").
 
-A flight that slides the camera on the body (a keyframed ``camera_position_b``) puts its
-mount on ``/tf`` with the body pose at every image, not on ``/tf_static`` (which then holds
-the IMU's mount alone, or is not written without an IMU).
+A flight that slides the camera on the body (a keyframed ``camera_position_b``) has no
+``/tf_static``: its mount goes on ``/tf`` with the body pose at every image (such a flight has
+no dynamics, hence no IMU).
 
 Stamps: every message of an image (its ``/tf``, its pose, its camera info, its estimates)
 carries the image's exposure stamp on the **camera clock** (as the TUM files do), and each
