@@ -119,8 +119,14 @@ def test_pybullet_and_mujoco_see_the_same_cone_pixels(spec, scene):
         assert _iou(object_id == cone_id, np.isin(geoms, ids)) > 0.95, f"cone {i}"
 
 
-@pytest.mark.parametrize("variant", ["pybullet", "vnav-bare"])
-def test_a_variant_renders_every_camera_tick(variant):
+@pytest.mark.parametrize("variant", peers.VARIANTS)
+def test_each_variant_stamps_every_camera_tick(variant):
     out = peers.measure(variant, duration_s=0.3)
     assert out["frames"] == peers.peer_spec(duration_s=0.3).n_ticks == 4
     assert 0.0 < out["loop_s"] < out["run_s"]
+    assert 0.0 < out["loop_cpu_s"] < out["cpu_s"]
+
+
+def test_a_variant_is_one_of_the_four():
+    with pytest.raises(ValueError, match="unknown variant 'gym'"):
+        peers.measure("gym")
