@@ -270,3 +270,24 @@ def test_show_at_s_beyond_the_run_is_refused():
     data["show_at_s"] = -1.0
     with pytest.raises(ScenarioError, match="show_at_s"):
         from_dict(data, where="x.toml")
+
+
+def test_depth_scale_and_legend_are_drawn_once_per_process_as_a_fresh_draw():
+    """The depth scale and the legend are memoised: a second call with equal (not the same)
+    arguments hands out the bytes a fresh draw gives, and other arguments draw another."""
+    from scenarios.record import plots
+    from scenarios.record.viewer import AXES_NOTE, legend_entries
+
+    plots.depth_scale_png.cache_clear()
+    plots._legend_png.cache_clear()
+    first = plots.legend_png(legend_entries(latency=True), AXES_NOTE)
+    again = plots.legend_png(legend_entries(latency=True), AXES_NOTE)
+    assert plots._legend_png.cache_info().hits == 1
+    rows = legend_entries(latency=True)
+    key = tuple(tuple((e.text, tuple(e.color_rgb), e.mark) for e in row) for row in rows)
+    assert again == first == plots._legend_png.__wrapped__(key, AXES_NOTE, 200.0)
+    assert plots.legend_png(legend_entries(latency=False), AXES_NOTE) != first
+    scale = plots.depth_scale_png(7.5, "viridis")
+    assert plots.depth_scale_png(7.5, "viridis") == scale
+    assert plots.depth_scale_png.__wrapped__(7.5, "viridis") == scale
+    assert plots.depth_scale_png(10.0, "viridis") != scale
