@@ -56,20 +56,34 @@ def check_covariance(cov: object, shape: tuple[int, int], name: str = "cov") -> 
         entry) or one not positive semidefinite (an eigenvalue below -1e-9 of the largest),
         naming ``name`` and the problem.
     """
+    a, scale = _checked_symmetric(cov, shape, name)
+    if scale == 0.0:
+        return a
+    _check_semidefinite(float(np.linalg.eigvalsh(a)[0]), scale, name)
+    return a
+
+
+def _checked_symmetric(cov: object, shape: tuple[int, int], name: str) -> tuple[np.ndarray, float]:
+    """``check_covariance`` but for the eigenvalues: ``cov`` as float64, of ``shape``, finite
+    and symmetric, and its largest absolute entry (0 for a zero matrix)."""
     a = _v.check_finite(_v.check_shape(_v.as_float(cov, name), name, shape, batched=False), name)
     # ndarray methods, not np.max: numpy's function wrappers cost more than a 6x6 reduction.
     scale = float(np.abs(a).max()) if a.size else 0.0
     if scale == 0.0:
-        return a
+        return a, scale
     asym = float(np.abs(a - a.T).max())
     if asym > 1e-9 * scale:
         raise ValueError(f"{name} must be symmetric; it differs from its transpose by {asym:.3g}")
-    lowest = float(np.linalg.eigvalsh(a)[0])
+    return a, scale
+
+
+def _check_semidefinite(lowest: float, scale: float, name: str) -> None:
+    """``check_covariance``'s last test: the smallest eigenvalue ``lowest`` of a symmetric
+    matrix whose largest absolute entry is ``scale`` is not below ``-1e-9 scale``."""
     if lowest < -1e-9 * scale:
         raise ValueError(
             f"{name} must be positive semidefinite; its smallest eigenvalue is {lowest:.3g}"
         )
-    return a
 
 
 # ------------------------------------------------------------------------ poses
@@ -426,15 +440,21 @@ def nees(error: object, cov: object, rtol: float = 1e-9) -> tuple[float, int]:
     """
     e = np.asarray(error, dtype=np.float64).reshape(-1)
     n = e.size
-    S = check_covariance(cov, (n, n), "cov")
+    # check_covariance, with its semidefiniteness read off the eigenvalues needed here anyway
+    # (one eigen-decomposition per call, not two: NEES is computed per method and detection).
+    S, scale = _checked_symmetric(cov, (n, n), "cov")
     w, V = np.linalg.eigh(S)
+    if scale != 0.0:
+        _check_semidefinite(float(w[0]), scale, "cov")
     top = float(w[-1])
     if top <= 0.0:
         return (0.0, 0) if not np.any(e) else (math.inf, 0)
     keep = w > rtol * top
     c = V.T @ e
-    outside = float(np.linalg.norm(c[~keep]))
-    if outside > 1e-9 + math.sqrt(rtol) * float(np.linalg.norm(e)):
+    # |x| as np.linalg.norm computes it for a real vector, sqrt(x . x), without its wrapper.
+    outside_c = c[~keep]
+    outside = math.sqrt(float(outside_c.dot(outside_c)))
+    if outside > 1e-9 + math.sqrt(rtol) * math.sqrt(float(e.dot(e))):
         return math.inf, int(keep.sum())
     return float(np.sum(c[keep] ** 2 / w[keep])), int(keep.sum())
 
