@@ -291,3 +291,28 @@ def test_depth_scale_and_legend_are_drawn_once_per_process_as_a_fresh_draw():
     assert plots.depth_scale_png(7.5, "viridis") == scale
     assert plots.depth_scale_png.__wrapped__(7.5, "viridis") == scale
     assert plots.depth_scale_png(10.0, "viridis") != scale
+
+
+def test_ellipsoids_of_a_batch_are_each_ellipsoid_to_the_last_bit():
+    """``ellipsoids_axes`` (one decomposition of a stack) against ``ellipsoid_axes`` one by
+    one: full-rank, ground-plane (rank 2, exact in z), rank-1 and zero covariances, and
+    eigenvector frames of both handednesses."""
+    from scenarios.record.recording import ellipsoid_axes, ellipsoids_axes
+
+    rng = np.random.default_rng(7)
+    covs = []
+    for rank in (3, 3, 2, 2, 1, 0) * 20:
+        A = rng.normal(0.0, rng.uniform(0.01, 1.0), (3, rank))
+        cov = A @ A.T
+        if rank == 2:  # a ground-plane covariance: exact in z
+            cov[2, :] = cov[:, 2] = 0.0
+        covs.append(cov)
+    half_sizes, rotations = ellipsoids_axes(np.array(covs))
+    flipped = 0
+    for cov, h, R in zip(covs, half_sizes, rotations, strict=True):
+        h_one, R_one = ellipsoid_axes(cov.copy())
+        assert np.array_equal(h, h_one) and np.array_equal(R, R_one)
+        flipped += np.linalg.det(np.linalg.eigh(cov)[1]) < 0.0
+    assert 0 < flipped < len(covs)  # both branches ran
+    empty_h, empty_R = ellipsoids_axes(np.zeros((0, 3, 3)))
+    assert empty_h.shape == (0, 3) and empty_R.shape == (0, 3, 3)

@@ -35,6 +35,7 @@ __all__ = [
     "invert",
     "nees",
     "nees_band",
+    "nees_many",
     "nees_p_value",
     "point_from_depth",
     "point_from_ground",
@@ -457,6 +458,51 @@ def nees(error: object, cov: object, rtol: float = 1e-9) -> tuple[float, int]:
     if outside > 1e-9 + math.sqrt(rtol) * math.sqrt(float(e.dot(e))):
         return math.inf, int(keep.sum())
     return float(np.sum(c[keep] ** 2 / w[keep])), int(keep.sum())
+
+
+def nees_many(errors: object, covs: object, rtol: float = 1e-9) -> list[tuple[float, int]]:
+    """``nees`` of each error (M, n) against its covariance (M, n, n): every estimate of a
+    detection at once, the covariances checked and decomposed as one stack. numpy decomposes
+    a stack matrix by matrix with the same LAPACK routine, so each value is ``nees``'s (the
+    reference form) to the last bit; a test compares them.
+
+    Raises
+    ------
+    ValueError
+        As ``nees`` would for the first pair it refuses, with its message.
+    """
+    e = np.asarray(errors, dtype=np.float64)
+    S = np.asarray(covs, dtype=np.float64)
+    if e.ndim != 2 or S.shape != (e.shape[0], e.shape[1], e.shape[1]):
+        raise ValueError(f"errors must be (M, n) and covs (M, n, n); got {e.shape} and {S.shape}")
+    if not len(e):
+        return []
+    # ``check_covariance``'s tests, every matrix at once; on a failure ``nees`` of the pair
+    # raises its own message.
+    scale = np.abs(S).max(axis=(1, 2)) if np.isfinite(S).all() else None
+    bad = scale is None or bool(
+        (np.abs(S - S.transpose(0, 2, 1)).max(axis=(1, 2)) > 1e-9 * scale).any()
+    )
+    if not bad:
+        w, V = np.linalg.eigh(S)
+        bad = bool(((scale != 0.0) & (w[:, 0] < -1e-9 * scale)).any())
+    if bad:
+        return [nees(ei, Si, rtol) for ei, Si in zip(e, S, strict=True)]
+    out = []
+    for ei, wi, Vi in zip(e, w, V, strict=True):  # ``nees`` past its decomposition
+        top = float(wi[-1])
+        if top <= 0.0:
+            out.append((0.0, 0) if not np.any(ei) else (math.inf, 0))
+            continue
+        keep = wi > rtol * top
+        c = Vi.T @ ei
+        outside_c = c[~keep]
+        outside = math.sqrt(float(outside_c.dot(outside_c)))
+        if outside > 1e-9 + math.sqrt(rtol) * math.sqrt(float(ei.dot(ei))):
+            out.append((math.inf, int(keep.sum())))
+        else:
+            out.append((float(np.sum(c[keep] ** 2 / wi[keep])), int(keep.sum())))
+    return out
 
 
 def _wilson_hilferty(k: float) -> tuple[float, float]:

@@ -34,7 +34,7 @@ from vnav.detect import ConeDetection
 from vnav.estimators import NoEstimate
 from vnav.localize import ConeEstimates, Localizer
 from vnav.methods import CONTRACT_DOMAIN, NEWEST_POSE_METHOD
-from vnav.uncertainty import nees
+from vnav.uncertainty import nees, nees_many
 
 __all__ = ["MATCH_GATE_M", "TickTruth", "evaluate_tick", "reevaluate", "with_method"]
 
@@ -404,7 +404,16 @@ def _compare(
     p_c_true = se3.apply(T_c_w, p_true_w)
     range_m = float(np.linalg.norm(p_c_true))
     errors_m = _errors_m(p_true_w, estimates_w)
-    scored = {m: nees(p - p_true_w, covariances_w[m]) for m, p in estimates_w.items()}
+    scored = dict(
+        zip(
+            estimates_w,
+            nees_many(
+                np.array([p - p_true_w for p in estimates_w.values()]).reshape(-1, 3),
+                np.array([covariances_w[m] for m in estimates_w]).reshape(-1, 3, 3),
+            ),
+            strict=True,
+        )
+    )
     nees_by_method = {m: v for m, v in scored.items() if _has_nees(v)}
     in_contract = cone_index in in_view and CONTRACT_DOMAIN.contains_range(range_m)
     return DetectionRecord(
