@@ -316,3 +316,20 @@ def test_ellipsoids_of_a_batch_are_each_ellipsoid_to_the_last_bit():
     assert 0 < flipped < len(covs)  # both branches ran
     empty_h, empty_R = ellipsoids_axes(np.zeros((0, 3, 3)))
     assert empty_h.shape == (0, 3) and empty_R.shape == (0, 3, 3)
+
+
+@pytest.mark.parametrize("shapes", [[(2, 3)] * 7, [(2, 3), (3, 3), (2, 3)], []])
+def test_strips_sent_as_one_array_are_the_strips_sent_one_by_one(shapes):
+    """``_strips`` stacks strips of one shape into one array for Rerun: the Arrow columns
+    are those of the strips given one by one (strips of several shapes stay a list)."""
+    import rerun as rr
+
+    from scenarios.record.recording import _strips
+
+    rng = np.random.default_rng(3)
+    flat = [rng.normal(0.0, 5.0, shape) for shape in shapes]
+    per_tick = [flat[:2], [], flat[2:]]
+    got = list(_strips(per_tick))
+    want = list(rr.LineStrips3D.columns(strips=flat).partition([len(t) for t in per_tick]))
+    assert len(got) == len(want) == 1
+    assert got[0].as_arrow_array().equals(want[0].as_arrow_array())

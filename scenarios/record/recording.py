@@ -1268,9 +1268,16 @@ def _send_detections(send: _Sender, rows: list[_Buffered]) -> None:
 
 
 def _strips(segments: list[list[np.ndarray]]) -> rr.ComponentColumnList:
-    """LineStrips3D columns: one list of (2, 3) segments per tick."""
+    """LineStrips3D columns: one list of (2, 3) segments per tick.
+
+    Strips of one shape go to Rerun as one (N, k, 3) array: it converts that in one piece,
+    where a list of arrays is converted strip by strip (0.2 ms each, 8 per detection), into
+    the same Arrow array (a test compares them)."""
     flat = [s for tick in segments for s in tick]
-    return rr.LineStrips3D.columns(strips=flat).partition([len(t) for t in segments])
+    strips: list[np.ndarray] | np.ndarray = flat
+    if flat and all(np.shape(s) == np.shape(flat[0]) for s in flat):
+        strips = np.array(flat)
+    return rr.LineStrips3D.columns(strips=strips).partition([len(t) for t in segments])
 
 
 def _send_estimates(send: _Sender, rows: list[_Buffered], cones_w: np.ndarray) -> None:
