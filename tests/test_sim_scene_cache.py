@@ -87,9 +87,13 @@ def test_scenes_sharing_one_gl_context_draw_what_their_own_contexts_draw():
         renderers = [scenes.acquire(c)[1] for c in configs[:2]]
         for i in (0, 1, 0, 1):  # the second renderer was made last: its buffer was bound
             image = renderers[i].render(depth=True, segmentation=True)
-            for got, want in zip((image.rgb, image.depth, image.segmentation), expected[i]):
+            for got, want in zip(
+                (image.rgb, image.depth, image.segmentation), expected[i], strict=True
+            ):
                 np.testing.assert_array_equal(got, want)
         image = scenes.acquire(configs[2])[1].render(depth=True, segmentation=True)
         assert len(scenes) == 2 and scenes.builds == 3
-        for got, want in zip((image.rgb, image.depth, image.segmentation), expected[2]):
+        for got, want in zip(
+            (image.rgb, image.depth, image.segmentation), expected[2], strict=True
+        ):
             np.testing.assert_array_equal(got, want)

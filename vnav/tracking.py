@@ -204,9 +204,7 @@ class ApexTracker:
         uv = np.array([r[4] for r in track.rays])
         try:
             # Every pose was checked (``update``) when its ray joined: not checked again.
-            apex = triangulate_checked(
-                self.camera, T, uv, min_parallax_deg=self.min_parallax_deg
-            )
+            apex = triangulate_checked(self.camera, T, uv, min_parallax_deg=self.min_parallax_deg)
         except ValueError:
             return TrackedApex(track.id, None, None, angle, len(track.rays))
         track.apex_w = apex
