@@ -52,6 +52,7 @@ from pathlib import Path
 from scenarios import pipeline
 from scenarios.run.runner import STAGES
 from scenarios.scenario import builtin
+from sim.scene_cache import SceneCache
 
 TARGETS = {
     "overhead_ratio": 0.5,
@@ -88,10 +89,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def _run_one(name: str, out: Path) -> dict:
+def _run_one(name: str, out: Path, scenes: SceneCache | None = None) -> dict:
     spec = builtin.load(name)
     start = time.perf_counter()
-    outcome = pipeline.run(spec, seed=1, out_dir=out)
+    outcome = pipeline.run(spec, seed=1, out_dir=out, scenes=scenes)
     wall_s = time.perf_counter() - start
     result, rrd = outcome.result, outcome.rrd_path
     ticks = len(result.ticks)
@@ -120,7 +121,9 @@ def run(args: argparse.Namespace) -> dict:
     names = getattr(args, "scenario", None) or builtin.names()
     with tempfile.TemporaryDirectory(prefix="vnav-bench-") as tmp:
         start = time.perf_counter()
-        per = {name: _run_one(name, Path(tmp)) for name in names}
+        # One OpenGL context and scene cache for them all, as ``vnav-demo run`` has.
+        with SceneCache(capacity=2) as scenes:
+            per = {name: _run_one(name, Path(tmp), scenes) for name in names}
         all_wall_s = time.perf_counter() - start
     ticks = sum(p["ticks"] for p in per.values())
     total_ms = {

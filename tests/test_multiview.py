@@ -20,6 +20,7 @@ from vnav.multiview import (
     camera_pose_from_points,
     parallax_deg,
     triangulate,
+    triangulate_checked,
 )
 
 CAMERA = PinholeCamera.from_fovy(60.0, 640, 480)
@@ -58,6 +59,23 @@ def test_triangulate_exact_projections(method: str, seed: int) -> None:
     T_w_c = _views(rng, p_w, int(rng.integers(2, 9)), baseline_m=3.0)
     uv = np.array([_project(T, p_w)[0] for T in T_w_c])
     np.testing.assert_allclose(triangulate(CAMERA, T_w_c, uv, method), p_w, atol=1e-9)
+
+
+@pytest.mark.parametrize("method", ["midpoint", "dlt"])
+@pytest.mark.parametrize("seed", range(5))
+def test_triangulate_checked_is_triangulate_on_checked_views(method: str, seed: int) -> None:
+    """Without the views' checks (the tracker's poses were checked as they arrived), the same
+    point to the last bit, with 0.5 px of pixel noise; and the same refusal of views with
+    too little parallax."""
+    rng = np.random.default_rng(300 + seed)
+    p_w = rng.uniform(-5.0, 5.0, 3)
+    T_w_c = _views(rng, p_w, int(rng.integers(2, 9)), baseline_m=3.0)
+    uv = np.array([_project(T, p_w)[0] for T in T_w_c]) + rng.normal(0.0, 0.5, (len(T_w_c), 2))
+    assert np.array_equal(
+        triangulate_checked(CAMERA, T_w_c, uv, method), triangulate(CAMERA, T_w_c, uv, method)
+    )
+    with pytest.raises(ValueError, match="degenerate views"):
+        triangulate_checked(CAMERA, T_w_c, uv, method, min_parallax_deg=179.0)
 
 
 @pytest.mark.parametrize("seed", range(5))

@@ -284,3 +284,66 @@ def test_show_at_s_beyond_the_run_is_refused():
     data["show_at_s"] = -1.0
     with pytest.raises(ScenarioError, match="show_at_s"):
         from_dict(data, where="x.toml")
+
+
+def test_depth_scale_and_legend_are_drawn_once_per_process_as_a_fresh_draw():
+    """The depth scale and the legend are memoised: a second call with equal (not the same)
+    arguments hands out the bytes a fresh draw gives, and other arguments draw another."""
+    from scenarios.record import plots
+    from scenarios.record.viewer import AXES_NOTE, legend_entries
+
+    plots.depth_scale_png.cache_clear()
+    plots._legend_png.cache_clear()
+    first = plots.legend_png(legend_entries(latency=True), AXES_NOTE)
+    again = plots.legend_png(legend_entries(latency=True), AXES_NOTE)
+    assert plots._legend_png.cache_info().hits == 1
+    rows = legend_entries(latency=True)
+    key = tuple(tuple((e.text, tuple(e.color_rgb), e.mark) for e in row) for row in rows)
+    assert again == first == plots._legend_png.__wrapped__(key, AXES_NOTE, 200.0)
+    assert plots.legend_png(legend_entries(latency=False), AXES_NOTE) != first
+    scale = plots.depth_scale_png(7.5, "viridis")
+    assert plots.depth_scale_png(7.5, "viridis") == scale
+    assert plots.depth_scale_png.__wrapped__(7.5, "viridis") == scale
+    assert plots.depth_scale_png(10.0, "viridis") != scale
+
+
+def test_ellipsoids_of_a_batch_are_each_ellipsoid_to_the_last_bit():
+    """``ellipsoids_axes`` (one decomposition of a stack) against ``ellipsoid_axes`` one by
+    one: full-rank, ground-plane (rank 2, exact in z), rank-1 and zero covariances, and
+    eigenvector frames of both handednesses."""
+    from scenarios.record.recording import ellipsoid_axes, ellipsoids_axes
+
+    rng = np.random.default_rng(7)
+    covs = []
+    for rank in (3, 3, 2, 2, 1, 0) * 20:
+        A = rng.normal(0.0, rng.uniform(0.01, 1.0), (3, rank))
+        cov = A @ A.T
+        if rank == 2:  # a ground-plane covariance: exact in z
+            cov[2, :] = cov[:, 2] = 0.0
+        covs.append(cov)
+    half_sizes, rotations = ellipsoids_axes(np.array(covs))
+    flipped = 0
+    for cov, h, R in zip(covs, half_sizes, rotations, strict=True):
+        h_one, R_one = ellipsoid_axes(cov.copy())
+        assert np.array_equal(h, h_one) and np.array_equal(R, R_one)
+        flipped += np.linalg.det(np.linalg.eigh(cov)[1]) < 0.0
+    assert 0 < flipped < len(covs)  # both branches ran
+    empty_h, empty_R = ellipsoids_axes(np.zeros((0, 3, 3)))
+    assert empty_h.shape == (0, 3) and empty_R.shape == (0, 3, 3)
+
+
+@pytest.mark.parametrize("shapes", [[(2, 3)] * 7, [(2, 3), (3, 3), (2, 3)], []])
+def test_strips_sent_as_one_array_are_the_strips_sent_one_by_one(shapes):
+    """``_strips`` stacks strips of one shape into one array for Rerun: the Arrow columns
+    are those of the strips given one by one (strips of several shapes stay a list)."""
+    import rerun as rr
+
+    from scenarios.record.recording import _strips
+
+    rng = np.random.default_rng(3)
+    flat = [rng.normal(0.0, 5.0, shape) for shape in shapes]
+    per_tick = [flat[:2], [], flat[2:]]
+    got = list(_strips(per_tick))
+    want = list(rr.LineStrips3D.columns(strips=flat).partition([len(t) for t in per_tick]))
+    assert len(got) == len(want) == 1
+    assert got[0].as_arrow_array().equals(want[0].as_arrow_array())

@@ -14,6 +14,7 @@ from vnav.uncertainty import (
     invert,
     nees,
     nees_band,
+    nees_many,
     nees_p_value,
     point_from_depth,
     point_from_ground,
@@ -201,6 +202,36 @@ def test_nees_of_a_rank_two_covariance_has_two_dof():
     cov = np.diag([1.0, 4.0, 0.0])
     assert nees([1.0, 2.0, 0.0], cov) == (pytest.approx(2.0), 2)
     assert nees([1.0, 2.0, 0.1], cov)[0] == np.inf
+
+
+def test_nees_of_a_stack_is_nees_pair_by_pair_to_the_last_bit(rng):
+    """``nees_many`` (one decomposition of the stacked covariances) against ``nees`` one pair
+    at a time: covariances of rank 3, 2 (exact in z, with and without an error along z), 1
+    and 0, and the same refusal of a bad covariance."""
+    errors, covs = [], []
+    for rank in (3, 3, 2, 2, 1, 0, 0) * 30:
+        A = rng.normal(0.0, rng.uniform(0.01, 1.0), (3, rank))
+        cov = A @ A.T
+        error = rng.normal(0.0, 0.3, 3)
+        if rank == 2:
+            cov[2, :] = cov[:, 2] = 0.0
+            error[2] *= rng.integers(0, 2)  # in the covariance's range, or off it (inf)
+        if rank == 0 and rng.integers(0, 2):
+            error[:] = 0.0
+        errors.append(error)
+        covs.append(cov)
+    got = nees_many(np.array(errors), np.array(covs))
+    want = [nees(e, c) for e, c in zip(errors, covs, strict=True)]
+    assert got == want
+    assert {v == np.inf for v, _ in want} == {True, False}
+    assert {dof for _, dof in want} == {0, 1, 2, 3}
+    assert nees_many(np.zeros((0, 3)), np.zeros((0, 3, 3))) == []
+    bad = np.array(covs[:3])
+    bad[1] = -np.eye(3)
+    with pytest.raises(ValueError, match="semidefinite"):
+        nees_many(np.array(errors[:3]), bad)
+    with pytest.raises(ValueError, match=r"\(M, n\)"):
+        nees_many(np.array(errors[:3]), np.array(covs[:2]))
 
 
 @pytest.mark.parametrize(

@@ -133,6 +133,26 @@ def triangulate(
     if method not in ("midpoint", "dlt"):
         raise ValueError(f"method must be 'midpoint' or 'dlt', got {method!r}")
     T, px = _check_views(camera, T_w_c, uv)
+    return triangulate_checked(camera, T, px, method, min_parallax_deg)
+
+
+def triangulate_checked(
+    camera: PinholeCamera,
+    T: np.ndarray,
+    px: np.ndarray,
+    method: str = "midpoint",
+    min_parallax_deg: float = MIN_PARALLAX_DEG,
+) -> np.ndarray:
+    """``triangulate`` of views already checked: ``T`` a float64 (N, 4, 4) stack of rigid
+    transforms (``vnav.se3.check_pose`` each), ``px`` finite float64 (N, 2), N >= 2, and
+    ``method`` a valid one. For a caller that keeps checked views and triangulates them again
+    as more arrive (``vnav.tracking.ApexTracker``): the poses are not checked every time.
+
+    Raises
+    ------
+    ValueError
+        As ``triangulate``, but for malformed input.
+    """
     rays = _rays_w(camera, T, px)
     angle = parallax_deg(rays)
     if not angle >= min_parallax_deg:

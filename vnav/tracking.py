@@ -26,7 +26,7 @@ from vnav import se3, so3
 from vnav.camera import PinholeCamera
 from vnav.cone import TRAFFIC_CONE, ConeModel
 from vnav.estimators import NoEstimate
-from vnav.multiview import parallax_deg, triangulate
+from vnav.multiview import parallax_deg, triangulate_checked
 from vnav.observation import Exposure, Observation
 from vnav.sensor_noise import keypoint_std_px
 
@@ -203,7 +203,8 @@ class ApexTracker:
         T = np.array([r[3] for r in track.rays])
         uv = np.array([r[4] for r in track.rays])
         try:
-            apex = triangulate(self.camera, T, uv, min_parallax_deg=self.min_parallax_deg)
+            # Every pose was checked (``update``) when its ray joined: not checked again.
+            apex = triangulate_checked(self.camera, T, uv, min_parallax_deg=self.min_parallax_deg)
         except ValueError:
             return TrackedApex(track.id, None, None, angle, len(track.rays))
         track.apex_w = apex

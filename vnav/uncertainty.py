@@ -35,6 +35,7 @@ __all__ = [
     "invert",
     "nees",
     "nees_band",
+    "nees_many",
     "nees_p_value",
     "point_from_depth",
     "point_from_ground",
@@ -56,20 +57,34 @@ def check_covariance(cov: object, shape: tuple[int, int], name: str = "cov") -> 
         entry) or one not positive semidefinite (an eigenvalue below -1e-9 of the largest),
         naming ``name`` and the problem.
     """
+    a, scale = _checked_symmetric(cov, shape, name)
+    if scale == 0.0:
+        return a
+    _check_semidefinite(float(np.linalg.eigvalsh(a)[0]), scale, name)
+    return a
+
+
+def _checked_symmetric(cov: object, shape: tuple[int, int], name: str) -> tuple[np.ndarray, float]:
+    """``check_covariance`` but for the eigenvalues: ``cov`` as float64, of ``shape``, finite
+    and symmetric, and its largest absolute entry (0 for a zero matrix)."""
     a = _v.check_finite(_v.check_shape(_v.as_float(cov, name), name, shape, batched=False), name)
     # ndarray methods, not np.max: numpy's function wrappers cost more than a 6x6 reduction.
     scale = float(np.abs(a).max()) if a.size else 0.0
     if scale == 0.0:
-        return a
+        return a, scale
     asym = float(np.abs(a - a.T).max())
     if asym > 1e-9 * scale:
         raise ValueError(f"{name} must be symmetric; it differs from its transpose by {asym:.3g}")
-    lowest = float(np.linalg.eigvalsh(a)[0])
+    return a, scale
+
+
+def _check_semidefinite(lowest: float, scale: float, name: str) -> None:
+    """``check_covariance``'s last test: the smallest eigenvalue ``lowest`` of a symmetric
+    matrix whose largest absolute entry is ``scale`` is not below ``-1e-9 scale``."""
     if lowest < -1e-9 * scale:
         raise ValueError(
             f"{name} must be positive semidefinite; its smallest eigenvalue is {lowest:.3g}"
         )
-    return a
 
 
 # ------------------------------------------------------------------------ poses
@@ -426,17 +441,68 @@ def nees(error: object, cov: object, rtol: float = 1e-9) -> tuple[float, int]:
     """
     e = np.asarray(error, dtype=np.float64).reshape(-1)
     n = e.size
-    S = check_covariance(cov, (n, n), "cov")
+    # check_covariance, with its semidefiniteness read off the eigenvalues needed here anyway
+    # (one eigen-decomposition per call, not two: NEES is computed per method and detection).
+    S, scale = _checked_symmetric(cov, (n, n), "cov")
     w, V = np.linalg.eigh(S)
+    if scale != 0.0:
+        _check_semidefinite(float(w[0]), scale, "cov")
     top = float(w[-1])
     if top <= 0.0:
         return (0.0, 0) if not np.any(e) else (math.inf, 0)
     keep = w > rtol * top
     c = V.T @ e
-    outside = float(np.linalg.norm(c[~keep]))
-    if outside > 1e-9 + math.sqrt(rtol) * float(np.linalg.norm(e)):
+    # |x| as np.linalg.norm computes it for a real vector, sqrt(x . x), without its wrapper.
+    outside_c = c[~keep]
+    outside = math.sqrt(float(outside_c.dot(outside_c)))
+    if outside > 1e-9 + math.sqrt(rtol) * math.sqrt(float(e.dot(e))):
         return math.inf, int(keep.sum())
     return float(np.sum(c[keep] ** 2 / w[keep])), int(keep.sum())
+
+
+def nees_many(errors: object, covs: object, rtol: float = 1e-9) -> list[tuple[float, int]]:
+    """``nees`` of each error (M, n) against its covariance (M, n, n): every estimate of a
+    detection at once, the covariances checked and decomposed as one stack. numpy decomposes
+    a stack matrix by matrix with the same LAPACK routine, so each value is ``nees``'s (the
+    reference form) to the last bit; a test compares them.
+
+    Raises
+    ------
+    ValueError
+        As ``nees`` would for the first pair it refuses, with its message.
+    """
+    e = np.asarray(errors, dtype=np.float64)
+    S = np.asarray(covs, dtype=np.float64)
+    if e.ndim != 2 or S.shape != (e.shape[0], e.shape[1], e.shape[1]):
+        raise ValueError(f"errors must be (M, n) and covs (M, n, n); got {e.shape} and {S.shape}")
+    if not len(e):
+        return []
+    # ``check_covariance``'s tests, every matrix at once; on a failure ``nees`` of the pair
+    # raises its own message.
+    scale = np.abs(S).max(axis=(1, 2)) if np.isfinite(S).all() else None
+    bad = scale is None or bool(
+        (np.abs(S - S.transpose(0, 2, 1)).max(axis=(1, 2)) > 1e-9 * scale).any()
+    )
+    if not bad:
+        w, V = np.linalg.eigh(S)
+        bad = bool(((scale != 0.0) & (w[:, 0] < -1e-9 * scale)).any())
+    if bad:
+        return [nees(ei, Si, rtol) for ei, Si in zip(e, S, strict=True)]
+    out = []
+    for ei, wi, Vi in zip(e, w, V, strict=True):  # ``nees`` past its decomposition
+        top = float(wi[-1])
+        if top <= 0.0:
+            out.append((0.0, 0) if not np.any(ei) else (math.inf, 0))
+            continue
+        keep = wi > rtol * top
+        c = Vi.T @ ei
+        outside_c = c[~keep]
+        outside = math.sqrt(float(outside_c.dot(outside_c)))
+        if outside > 1e-9 + math.sqrt(rtol) * math.sqrt(float(ei.dot(ei))):
+            out.append((math.inf, int(keep.sum())))
+        else:
+            out.append((float(np.sum(c[keep] ** 2 / wi[keep])), int(keep.sum())))
+    return out
 
 
 def _wilson_hilferty(k: float) -> tuple[float, float]:

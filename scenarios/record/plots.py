@@ -4,11 +4,14 @@ the legend of the 3D views' colours.
 Rerun's time-series views plot against time only; "how does each method's error grow with
 range" needs range on the x axis, so it is drawn here once per run and logged as an image.
 matplotlib is imported on first use (it costs about half a second), with the Agg backend so
-no display is needed.
+no display is needed. The depth scale and the legend depend on a few values only: a process
+that writes several recordings (``vnav-demo run --all``) draws each once (about 50 and 80 ms)
+and hands out the same bytes after.
 """
 
 from __future__ import annotations
 
+import functools
 import io
 from typing import TYPE_CHECKING
 
@@ -138,8 +141,10 @@ def _range_panel(ax, m: Method, result: RunResult, recovered: RunResult | None) 
         )
 
 
+@functools.lru_cache(maxsize=32)
 def depth_scale_png(depth_max_m: float, colormap: str = "viridis") -> bytes:
-    """A vertical colour bar from 0 (bottom) to ``depth_max_m`` metres (top)."""
+    """A vertical colour bar from 0 (bottom) to ``depth_max_m`` metres (top) (drawn once per
+    process for each pair of arguments)."""
     from matplotlib import colormaps
     from matplotlib.cm import ScalarMappable
     from matplotlib.colors import Normalize
@@ -160,7 +165,17 @@ a 1400-point window, two lines high."""
 def legend_png(rows: list[list[LegendEntry]], note: str, dpi: float = 200.0) -> bytes:
     """A strip naming each colour of the 3D views: one line per row of entries, each a dot or
     a line of its colour before its text, and ``note`` closing the last line; drawn at
-    ``dpi`` so that the viewer's scaling keeps the text sharp."""
+    ``dpi`` so that the viewer's scaling keeps the text sharp (once per process for each
+    legend)."""
+    key = tuple(tuple((e.text, tuple(e.color_rgb), e.mark) for e in row) for row in rows)
+    return _legend_png(key, note, float(dpi))
+
+
+@functools.lru_cache(maxsize=32)
+def _legend_png(
+    rows: tuple[tuple[tuple[str, tuple[int, ...], str], ...], ...], note: str, dpi: float
+) -> bytes:
+    """``legend_png`` of rows of ``(text, color_rgb, mark)``."""
     from matplotlib.lines import Line2D
 
     fig = _figure(*LEGEND_SIZE_IN)
@@ -170,15 +185,15 @@ def legend_png(rows: list[list[LegendEntry]], note: str, dpi: float = 200.0) -> 
             Line2D(
                 [],
                 [],
-                color=np.array(e.color_rgb) / 255.0,
-                marker="o" if e.mark == "dot" else None,
+                color=np.array(color_rgb) / 255.0,
+                marker="o" if mark == "dot" else None,
                 markersize=5.5,
-                linestyle="-" if e.mark == "line" else "none",
+                linestyle="-" if mark == "line" else "none",
                 linewidth=2.0,
             )
-            for e in row
+            for _, color_rgb, mark in row
         ]
-        labels = [e.text for e in row]
+        labels = [text for text, _, _ in row]
         if i == len(rows) - 1:
             handles.append(Line2D([], [], linestyle="none"))
             labels.append(note)
