@@ -10,9 +10,9 @@ about 1e-15).
 
 ``ImuSampler`` takes reading ``j`` after the physics step nearest ``j / rate_hz`` (as the
 pose stream samples the state), moves the gyro's rate to that instant (MuJoCo's is the rate
-of the step just taken, half a step earlier: ``ImuSampler.sample``), adds the noise of ``vnav.imu.ImuNoiseProcess`` (Kalibr's
-model: white noise and a bias random walk per axis, from the run's seed), and stamps it on the
-IMU's clock.
+of the step just taken, half a step earlier: ``ImuSampler.sample``), adds the noise of
+``vnav.imu.ImuNoiseProcess`` (Kalibr's model: white noise and a bias random walk per axis,
+from the run's seed), and stamps it on the IMU's clock.
 """
 
 from __future__ import annotations

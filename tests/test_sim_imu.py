@@ -8,6 +8,7 @@ numbers worked out on paper; the sampler's rate, stamps and noise come from its 
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -189,7 +190,7 @@ def test_the_gyro_reads_the_rate_at_its_stamp_not_half_a_step_before():
     dt = world.model.opt.timestep
     R_w_i, gyro_i = np.array(R_w_i), np.array(gyro_i)
     # The rate over each step, in the IMU axes at its start (exact for a constant rate).
-    step_rate_i = np.array([so3.log(a.T @ b) for a, b in zip(R_w_i[:-1], R_w_i[1:])]) / dt
+    step_rate_i = np.array([so3.log(a.T @ b) for a, b in itertools.pairwise(R_w_i)]) / dt
     central = 0.5 * (step_rate_i[:-1] + step_rate_i[1:])
     lag = np.abs(step_rate_i[:-1] - central).max()  # what half a step's lag costs here
     assert lag > 0.01  # the flight's angular acceleration makes the lag visible
