@@ -14,6 +14,8 @@ import pytest
 
 from benchmarks.calibrate import imu_flight
 from scenarios import pipeline
+from scenarios.judge.imu_calibration import calibrate_imu_run
+from scenarios.run.records import ImuRecord, RunResult
 from scenarios.scenario.spec import from_dict
 from vnav import se3, so3
 
@@ -76,3 +78,11 @@ def test_a_hover_is_refused_for_want_of_excitation(tmp_path):
     assert "not enough excitation" in report["imu_calibration"]["refused"]
     for check in report["checks"]:
         assert check["outcome"] == "no data" and "not enough excitation" in check["reason"], check
+
+
+def test_a_run_without_an_imu_or_images_is_refused_not_crashed():
+    no_imu = RunResult(spec=None, seed=0)
+    assert "has no [imu]" in calibrate_imu_run(no_imu).refused
+    record = ImuRecord(np.zeros(3), np.zeros((3, 3)), np.zeros((3, 3)), 0.0, 3)
+    no_ticks = RunResult(spec=None, seed=0, imu=record)
+    assert "no camera ticks" in calibrate_imu_run(no_ticks).refused

@@ -150,6 +150,8 @@ def calibrate_imu_run(result: RunResult) -> ImuCalibrationRecord:
     camera poses give (unbiased) give the answer."""
     if result.imu is None:
         return ImuCalibrationRecord(refused="the scenario has no [imu]: nothing to calibrate")
+    if not result.ticks:
+        return ImuCalibrationRecord(refused="the run has no camera ticks: nothing to calibrate")
     try:
         first = imu_inputs_from_run(result).solve()
         inputs = imu_inputs_from_run(result, first)
