@@ -204,12 +204,17 @@ def _export_entry(done: ExportResult, staging: Path) -> dict[str, Any]:
 
 def _calibrate_and_judge(spec: ScenarioSpec, result: RunResult) -> list[checks.CheckResult]:
     """Recover the camera mount and clock offset from the run if a check judges them (into
-    ``result.calibration``), then judge every check of ``spec`` (or the default ones)."""
+    ``result.calibration``), and the camera-IMU calibration likewise (into
+    ``result.imu_calibration``), then judge every check of ``spec`` (or the default ones)."""
     start = time.perf_counter()
     if spec.checks_calibration:
         from scenarios.judge.calibration import calibrate_run
 
         result.calibration = calibrate_run(result)
+    if spec.checks_imu_calibration:
+        from scenarios.judge.imu_calibration import calibrate_imu_run
+
+        result.imu_calibration = calibrate_imu_run(result)
     judge_start = time.perf_counter()
     judged = judge(spec, result)
     result.timing_s["calibrate"] = judge_start - start

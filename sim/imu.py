@@ -9,9 +9,10 @@ the site frame (``+g`` up at rest: its spatial accelerations ``cacc``, computed 
 about 1e-15).
 
 ``ImuSampler`` takes reading ``j`` after the physics step nearest ``j / rate_hz`` (as the
-pose stream samples the state), adds the noise of ``vnav.imu.ImuNoiseProcess`` (Kalibr's
-model: white noise and a bias random walk per axis, from the run's seed), and stamps it on the
-IMU's clock.
+pose stream samples the state), moves the gyro's rate to that instant (MuJoCo's is the rate
+of the step just taken, half a step earlier: ``ImuSampler.sample``), adds the noise of
+``vnav.imu.ImuNoiseProcess`` (Kalibr's model: white noise and a bias random walk per axis,
+from the run's seed), and stamps it on the IMU's clock.
 """
 
 from __future__ import annotations
@@ -170,8 +171,18 @@ class ImuSampler:
         return round(world.time_s / self.timestep_s) >= self.next_step
 
     def sample(self, world: World) -> ImuReading:
-        """The next reading, from the world's state now: MuJoCo's sensors plus the noise."""
+        """The next reading, from the world's state now: MuJoCo's sensors, the gyro's moved to
+        the stamp's instant, plus the noise.
+
+        MuJoCo's (semi-implicit Euler) step turns the body by ``exp(omega_{n+1} dt)`` with the
+        rate after the step, so the gyro at step ``n`` reads the rate over the step *before*
+        it, centred half a step early; adding half a step of the angular acceleration the next
+        step applies, ``omega_n + (dt / 2) alpha_n = (omega_n + omega_{n+1}) / 2``, gives the
+        rate at the stamp (the accelerometer's ``(v_{n+1} - v_n) / dt`` is already centred
+        there)."""
         accel_i, gyro_i = mujoco_imu_i(world)
+        # alpha_i = R_i_b alpha_b, row-wise.
+        gyro_i += 0.5 * self.timestep_s * (world.angular_acceleration_b @ world.T_b_i[:3, :3])
         if not self.config.noise.is_zero:
             da, dg = self.process.next()
             accel_i += da

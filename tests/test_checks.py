@@ -15,6 +15,7 @@ from scenarios.run.records import (
     CalibrationRecord,
     Contact,
     DetectionRecord,
+    ImuCalibrationRecord,
     ImuRecord,
     NavigationRecord,
     RunResult,
@@ -118,6 +119,13 @@ def run() -> RunResult:
             10,
             {"rotation_deg": 0.02, "translation_m": 0.004, "time_offset_s": 0.0005},
         ),
+        imu_calibration=ImuCalibrationRecord(
+            T_i_c=np.eye(4),
+            time_offset_s=0.012,
+            reprojection_rms_px=0.5,
+            frames_used=300,
+            errors={"rotation_deg": 0.04, "translation_m": 0.003, "time_offset_s": 0.0002},
+        ),
         ticks=[
             _tick(
                 0,
@@ -203,6 +211,10 @@ FIGURES = {
     "min_clearance": 0.25,
     # the run's IMU record, as given
     "imu_consistent": 3e-15,
+    # the run's camera-IMU calibration record, as given
+    "calibration_imu_rotation": 0.04,
+    "calibration_imu_translation": 0.003,
+    "calibration_imu_time_offset": 0.0002,
 }
 
 
@@ -430,6 +442,24 @@ def test_calibration_checks_without_a_calibration_have_no_data() -> None:
         ),
     ).shown
     assert shown == "0.5 ms (must be <= 1 ms)"
+
+
+def test_camera_imu_calibration_checks_without_one_have_no_data():
+    """A run whose camera-IMU calibration was not made, and one refused: no data, with the
+    reason."""
+    plain = RunResult(spec=None, seed=0, ticks=[_tick(0, [], [])])
+    result = checks.judge(check_kinds.Check("calibration_imu_rotation", 0.1), plain)
+    assert result.outcome is checks.Outcome.NO_DATA and "was not made" in result.reason
+    refused = RunResult(
+        spec=None,
+        seed=0,
+        ticks=[_tick(0, [], [])],
+        imu_calibration=ImuCalibrationRecord(refused="not enough excitation: hovering"),
+    )
+    for kind in ("rotation", "translation", "time_offset"):
+        result = checks.judge(check_kinds.Check(f"calibration_imu_{kind}", 0.1), refused)
+        assert result.outcome is checks.Outcome.NO_DATA, kind
+        assert result.reason == "camera-IMU calibration refused: not enough excitation: hovering"
 
 
 # ------------------------------------------------------- a user's function and the chain

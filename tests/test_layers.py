@@ -143,6 +143,9 @@ def test_no_import_circle():
         ("vnav.navigate", ("mujoco", "rerun", "cv2", "scipy")),
         # The IMU's chain, noise and Allan deviation: numpy only (MuJoCo's sensors are sim's).
         ("vnav.imu", ("mujoco", "rerun", "cv2", "scipy")),
+        # Camera-IMU calibration: numpy and OpenCV; SciPy is its tests' oracle only.
+        ("vnav.imu_calibration", ("mujoco", "rerun", "scipy")),
+        ("scenarios.judge.imu_calibration", ("mujoco", "rerun", "scipy")),
         ("scenarios.scenario.spec", ("mujoco", "rerun")),
         ("scenarios.scenario.builtin", ("mujoco", "rerun")),
         ("scenarios.run.records", ("mujoco", "rerun")),

@@ -8,6 +8,7 @@ numbers worked out on paper; the sampler's rate, stamps and noise come from its 
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -18,6 +19,7 @@ from sim.config import ImuConfig, MountError, SceneConfig
 from sim.flight import Autopilot, MinimumJerkTrajectory
 from sim.imu import ImuSampler, imu_discrepancy, mujoco_imu_i
 from sim.world import World
+from vnav import so3
 from vnav.imu import specific_force_i
 
 G = 9.81
@@ -167,6 +169,32 @@ def test_the_sampler_reads_at_its_rate_on_its_clock():
             np.testing.assert_array_equal(reading.accel_i, mujoco_imu_i(world)[0])
         world.step()
     np.testing.assert_allclose(stamps, 0.25 + np.arange(11) / 50.0, atol=1e-12)
+
+
+def test_the_gyro_reads_the_rate_at_its_stamp_not_half_a_step_before():
+    """MuJoCo's integrator turns the body by ``exp(omega_{n+1} dt)`` from step n to n + 1, so
+    its gyro at step n is the rate over the step *before* (centred half a step, 2.5 ms, early:
+    a camera-IMU calibration finds it in the clock offset). The reading must be the rate at its
+    stamp: the mean of the rates over the steps on either side (central difference of the
+    true IMU attitudes), to the second-order remainder, not the backward one."""
+    rng = np.random.default_rng(12)
+    imu = _random_imu(rng)
+    world = World.from_config(SceneConfig(imu=imu))
+    pilot = _random_flight(world, rng)
+    sampler = ImuSampler(imu, world.model.opt.timestep, np.random.default_rng(0))
+    R_w_i, gyro_i = [], []
+    while world.time_s < 5.0 - 1e-9:
+        pilot.step()
+        R_w_i.append((world.T_w_b @ world.T_b_i)[:3, :3])
+        gyro_i.append(sampler.sample(world).gyro_i)
+    dt = world.model.opt.timestep
+    R_w_i, gyro_i = np.array(R_w_i), np.array(gyro_i)
+    # The rate over each step, in the IMU axes at its start (exact for a constant rate).
+    step_rate_i = np.array([so3.log(a.T @ b) for a, b in itertools.pairwise(R_w_i)]) / dt
+    central = 0.5 * (step_rate_i[:-1] + step_rate_i[1:])
+    lag = np.abs(step_rate_i[:-1] - central).max()  # what half a step's lag costs here
+    assert lag > 0.01  # the flight's angular acceleration makes the lag visible
+    assert np.abs(gyro_i[1:-1] - central).max() < 0.25 * lag
 
 
 def test_the_samplers_noise_has_kalibrs_discrete_sizes_and_follows_the_seed():

@@ -419,6 +419,41 @@ def _calibration_error(run: RunResult, key: str) -> float | NoData:
     return c.errors[key]
 
 
+def _imu_calibration_error(run: RunResult, key: str) -> float | NoData:
+    c = run.imu_calibration
+    if c is None:
+        return NoData(
+            "the run's camera-IMU calibration was not made (a calibration_imu check asks for it)"
+        )
+    if c.refused is not None:
+        return NoData(f"camera-IMU calibration refused: {c.refused}")
+    return c.errors[key]
+
+
+@figure("calibration_imu_rotation")
+def _calibration_imu_rotation(run: RunResult, check: Check) -> float | NoData:
+    """rotation between the camera-IMU rotation R_i_c recovered from the images and the gyro
+    and the true one <= limit (degrees)
+
+    Recovered from the camera's images and the IMU's readings alone
+    (``vnav.imu_calibration``), never from the declared mounts."""
+    return _imu_calibration_error(run, "rotation_deg")
+
+
+@figure("calibration_imu_translation")
+def _calibration_imu_translation(run: RunResult, check: Check) -> float | NoData:
+    """distance between the camera's origin in the IMU frame recovered (t_i_c, from the
+    accelerometer's lever arm) and the true one <= limit_m"""
+    return _imu_calibration_error(run, "translation_m")
+
+
+@figure("calibration_imu_time_offset")
+def _calibration_imu_time_offset(run: RunResult, check: Check) -> float | NoData:
+    """error of the recovered camera-IMU clock offset (Kalibr's timeshift_cam_imu) <= limit
+    (seconds)"""
+    return _imu_calibration_error(run, "time_offset_s")
+
+
 @figure("calibration_rotation")
 def _calibration_rotation(run: RunResult, check: Check) -> float | NoData:
     """rotation between the recovered camera mount and the true one <= limit (degrees)

@@ -25,7 +25,7 @@ import numpy as np
 from scenarios.judge.checks import CheckResult
 from scenarios.run.records import RunResult
 from scenarios.scenario.check_kinds import Unit
-from vnav import metrics
+from vnav import metrics, se3
 from vnav.methods import NEWEST_POSE_METHOD, Method, active_methods
 from vnav.uncertainty import nees_band
 
@@ -61,7 +61,8 @@ wall time (``time_s``: ``calls``, ``total``, ``mean``, ``max``, seconds), its fa
 (``vnav.diagnose.Diagnosis.to_dict``, None without any) and, in a calibrated run, the same
 for its second pass with the recovered mount (``recovered_mount``); its statistics are under
 ``methods`` as a built-in's. Only in the report of a navigating flight: ``navigation``
-(``navigation``)."""
+(``navigation``). Only in the report of a run with a ``calibration_imu_*`` check:
+``imu_calibration`` (``imu_calibration_summary``)."""
 
 
 def _calibration(run: RunResult) -> dict[str, Any] | None:
@@ -157,6 +158,8 @@ def build(
         out["navigation"] = navigation(run)
     if run.imu is not None:  # only with an [imu]: other reports are unchanged
         out["imu"] = imu_summary(run)
+    if run.imu_calibration is not None:  # only when a calibration_imu check asks for it
+        out["imu_calibration"] = imu_calibration_summary(run)
     users = [m for m in active_methods() if m.images == "user"]
     if users:  # only with a user's function: a built-in run's report is unchanged
         out["estimators"] = {m.name: estimator_summary(run, m) for m in users}
@@ -180,6 +183,25 @@ def imu_summary(run: RunResult) -> dict[str, Any]:
         "T_b_i": imu.T_b_i.tolist(),
         "max_discrepancy": record.max_discrepancy,
         "steps_checked": record.steps_checked,
+    }
+
+
+def imu_calibration_summary(run: RunResult) -> dict[str, Any]:
+    """The camera-IMU calibration recovered from the run (``vnav.imu_calibration``): ``T_i_c``
+    and Kalibr's ``T_cam_imu`` (its inverse), the clock offset (``timeshift_cam_imu``), the
+    errors against the truth and the fit's standard errors, or why it was refused."""
+    c = run.imu_calibration
+    assert c is not None
+    return {
+        "refused": c.refused,
+        "T_i_c": None if c.T_i_c is None else c.T_i_c.tolist(),
+        "T_cam_imu": None if c.T_i_c is None else se3.invert(c.T_i_c).tolist(),
+        "timeshift_cam_imu_s": c.time_offset_s,
+        "T_i_c_true": None if c.T_i_c_true is None else c.T_i_c_true.tolist(),
+        "reprojection_rms_px": c.reprojection_rms_px,
+        "frames_used": c.frames_used,
+        "errors": c.errors,
+        "std": c.std,
     }
 
 

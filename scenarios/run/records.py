@@ -26,6 +26,7 @@ __all__ = [
     "Contact",
     "DetectionRecord",
     "ImageTiming",
+    "ImuCalibrationRecord",
     "ImuRecord",
     "NavigationRecord",
     "NavigationTick",
@@ -296,6 +297,41 @@ class CalibrationRecord:
 
 
 @dataclass(frozen=True)
+class ImuCalibrationRecord:
+    """The camera-IMU calibration recovered from the run (``vnav.imu_calibration``), or why it
+    could not be, and its errors against the truth.
+
+    Attributes
+    ----------
+    T_i_c : ndarray, shape (4, 4), or None
+        The recovered camera (optical frame) in the IMU frame (Kalibr's ``T_cam_imu`` is its
+        inverse).
+    time_offset_s : float or None
+        The recovered ``t_imu = t_cam + time_offset_s`` (Kalibr's ``timeshift_cam_imu``).
+    reprojection_rms_px : float or None
+    frames_used : int
+    errors : dict of str to float
+        ``rotation_deg``, ``translation_m``, ``time_offset_s``: absolute errors against the
+        truth (empty when refused).
+    std : dict of str to float
+        The same three's standard errors as the fit gives them (empty when refused).
+    refused : str or None
+        ``vnav.calibration.CalibrationError``'s message when the flight did not determine it.
+    T_i_c_true : ndarray, shape (4, 4), or None
+        The simulator's: ``T_b_i^-1 T_b_c`` of the true mounts.
+    """
+
+    T_i_c: np.ndarray | None = None
+    time_offset_s: float | None = None
+    reprojection_rms_px: float | None = None
+    frames_used: int = 0
+    errors: dict[str, float] = field(default_factory=dict)
+    std: dict[str, float] = field(default_factory=dict)
+    refused: str | None = None
+    T_i_c_true: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
 class Contact:
     """The first contact between the drone and a cone, as MuJoCo found it.
 
@@ -449,6 +485,9 @@ class RunResult:
         A navigating flight's plans and outcome (None for any other flight).
     imu : ImuRecord or None
         The IMU's readings, for a scenario that declares ``[imu]`` (None otherwise).
+    imu_calibration : ImuCalibrationRecord or None
+        The camera-IMU calibration recovered from the run, for a scenario that checks it
+        (``scenarios.pipeline``).
     """
 
     spec: ScenarioSpec
@@ -459,6 +498,7 @@ class RunResult:
     calibration: CalibrationRecord | None = None
     navigation: NavigationRecord | None = None
     imu: ImuRecord | None = None
+    imu_calibration: ImuCalibrationRecord | None = None
 
     @property
     def cones_w(self) -> np.ndarray:

@@ -295,7 +295,12 @@ class _Imu:
         self.steps_checked += 1
         if self.sampler.due(world):
             self.readings.append(self.sampler.sample(world))
-            self.chain.append(chain)
+            # The prediction at the reading's instant: the gyro moved to the stamp as the
+            # sampler moves it (``sim.imu.ImuSampler.sample``).
+            f_i, omega_i = chain
+            dt_s = self.sampler.timestep_s
+            alpha_i = world.angular_acceleration_b @ world.T_b_i[:3, :3]
+            self.chain.append((f_i, omega_i + 0.5 * dt_s * alpha_i))
 
     def record(self) -> ImuRecord:
         r = self.readings

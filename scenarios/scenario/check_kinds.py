@@ -245,6 +245,30 @@ KINDS: dict[str, CheckKind] = _kinds(
         "largest relative difference, over every physics step, between MuJoCo's noise-free "
         "IMU sensors and vnav.imu's specific force and rate from the body's motion <= limit",
     ),
+    CheckKind(
+        "calibration_imu_rotation",
+        _AT_MOST,
+        Unit.DEGREES,
+        False,
+        "rotation between the camera-IMU rotation R_i_c recovered from the images and the gyro "
+        "and the true one <= limit (degrees)",
+    ),
+    CheckKind(
+        "calibration_imu_translation",
+        _AT_MOST,
+        Unit.METRES,
+        False,
+        "distance between the camera's origin in the IMU frame recovered (t_i_c, from the "
+        "accelerometer's lever arm) and the true one <= limit_m",
+    ),
+    CheckKind(
+        "calibration_imu_time_offset",
+        _AT_MOST,
+        Unit.SECONDS,
+        False,
+        "error of the recovered camera-IMU clock offset (Kalibr's timeshift_cam_imu) <= limit "
+        "(seconds)",
+    ),
 )
 """Every check kind, by name. Its figure is ``scenarios.judge.checks.FIGURES[name]``."""
 

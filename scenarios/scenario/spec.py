@@ -248,7 +248,17 @@ class ScenarioSpec:
         """Whether a check judges the camera's calibration (a ``calibration_*`` kind): the
         mount and clock offset are then recovered from the run (``scenarios.pipeline``) and
         the recording shows them."""
-        return any(c.kind.startswith("calibration_") for c in self.checks)
+        return any(
+            c.kind.startswith("calibration_") and not c.kind.startswith("calibration_imu_")
+            for c in self.checks
+        )
+
+    @property
+    def checks_imu_calibration(self) -> bool:
+        """Whether a check judges the camera-IMU calibration (a ``calibration_imu_*`` kind):
+        ``T_i_c`` and the camera-IMU clock offset are then recovered from the run's images and
+        IMU readings (``scenarios.pipeline``)."""
+        return any(c.kind.startswith("calibration_imu_") for c in self.checks)
 
 
 # --------------------------------------------------------------------------------------------
