@@ -18,14 +18,29 @@ Before solving, each detection is matched to a cone: a first mount from PnP on t
 with the most cones (``vnav.multiview``), then, at each round, the apex projected with the
 current estimate, mutual nearest within a gate that narrows as the estimate improves.
 
-After solving, the parameters' standard errors come from ``(J^T J)^-1`` scaled by the residual
-variance (at least the detector's keypoint quantisation): a flight that cannot determine the
-answer (too few cones, no rotation to reveal the clock offset) is refused with what is
-missing, not answered with a guess.
+After solving, the parameters' covariance is the sum of two terms, each for an error the
+other misses (measured on the ``calibration`` built-in: ``(J^T J)^-1`` scaled by the residual
+variance alone put the true error beyond 3 standard errors in 4 flights of 20):
+
+- the apexes' own errors, by the cluster-robust ("sandwich") covariance with each image a
+  cluster, ``(J^T J)^-1 (sum_g J_g^T r_g r_g^T J_g) (J^T J)^-1 G / (G - 1)`` (Cameron & Miller,
+  "A Practitioner's Guide to Cluster-Robust Inference", J. Human Resources 50(2), 2015): an
+  apex's vertical error is four times its horizontal one, and the apexes of one image share its
+  pose; a single residual variance ``sigma^2 (J^T J)^-1`` is wrong on both counts;
+- the intrinsics' error, which no amount of flight averages out, by a consider covariance
+  (Tapley, Schutz & Born, *Statistical Orbit Determination*, 2004, ch. 6): the focal length
+  taken as known but uncertain by ``FOCAL_SCALE_STD``, its effect on the answer
+  ``dx/ds = -(J^T J)^-1 J^T (uv - c)`` (the apexes' pixels scaled about the principal point),
+  ``cov += FOCAL_SCALE_STD^2 dx/ds dx/ds^T``. It mostly widens the camera's translation along
+  its optical axis, which a focal length error mimics (the cones all 6-14 m away).
+
+A flight whose standard errors exceed ``MAX_STD_*`` (too few cones, no rotation to reveal the
+clock offset) is refused with what is missing, not answered with a guess.
 """
 
 from __future__ import annotations
 
+import copy
 import logging
 import math
 from dataclasses import dataclass
@@ -47,9 +62,17 @@ MIN_OBSERVATIONS = 30
 MIN_FRAMES = 5
 """Images with at least one matched apex, at least."""
 
-PIXEL_STD_FLOOR = 0.3
-"""The residual scale assumed at least, px: the detector's apex quantisation (about 0.4 px,
-``vnav.sensor_noise.KEYPOINT_STD_PX``) even when a noise-free fit leaves less."""
+PIXEL_STD_FLOOR = 0.05
+"""The apexes' error assumed at least, px, whatever the residuals (``(J^T J)^-1`` times its
+square is added): a fit whose few residuals happen to cancel is not believed beyond a
+twentieth of a pixel (a rendered apex's horizontal error is about 0.06 px, its vertical 0.25)."""
+
+FOCAL_SCALE_STD = 2e-4
+"""The focal length's relative uncertainty the covariance considers (see the module's
+docstring). Measured on the renderer: at the true mount and offset the re-fitted apexes lie
+1.5e-4 of their distance from the principal point further out than ``PinholeCamera.from_fovy``
+projects them, in u and v alike (a focal length 1.5e-4 short; 20 flights of the
+``calibration`` built-in with random mounts)."""
 
 MAX_STD_ROTATION_DEG = 0.1
 MAX_STD_TRANSLATION_M = 0.01
@@ -92,6 +115,10 @@ class CalibrationResult:
     std_rotation_deg, std_translation_m, std_offset_s : float
         Standard errors: the mount's rotation (the largest over the three axes), its
         translation (likewise) and the offset.
+    covariance : ndarray, shape (7, 7)
+        The covariance of ``[xi, time_offset_s]``: ``xi`` the error of ``T_b_c`` in the camera
+        frame (``T_b_c_true = T_b_c @ exp(xi^)``, translation first, m and rad), the offset in
+        seconds. The standard errors are the square roots of its diagonal.
     """
 
     T_b_c: np.ndarray
@@ -102,6 +129,7 @@ class CalibrationResult:
     std_rotation_deg: float
     std_translation_m: float
     std_offset_s: float
+    covariance: np.ndarray
 
 
 def calibrate_camera(
@@ -319,9 +347,7 @@ class _Problem:
 
     def result(self, x: np.ndarray) -> CalibrationResult:
         r = self.residuals(x)
-        J = _jacobian(self.residuals, x)
         rms = float(np.sqrt(np.mean(r**2) * 2.0))  # per apex: sqrt(du^2 + dv^2)
-        sigma = max(float(np.sqrt(r @ r / max(r.size - 7, 1))), PIXEL_STD_FLOOR)
         if abs(float(x[6])) >= self.max_offset_s - 1e-6:
             # Held at its bound, the offset has no derivative: no standard error to give.
             raise CalibrationError(
@@ -329,11 +355,8 @@ class _Problem:
                 "(the answer reached that bound): it needs rotation or faster motion, or the "
                 "true offset lies beyond the bound (a larger max_offset_s)"
             )
-        try:
-            cov = sigma**2 * np.linalg.inv(J.T @ J)
-            std = np.sqrt(np.maximum(np.diag(cov), 0.0))
-        except np.linalg.LinAlgError:
-            std = np.full(7, np.inf)
+        cov = self.covariance(x, r)
+        std = np.sqrt(np.maximum(np.diag(cov), 0.0))
         std_rot_deg = math.degrees(float(std[3:6].max()))
         std_t_m, std_offset = float(std[:3].max()), float(std[6])
         missing = []
@@ -359,7 +382,30 @@ class _Problem:
             std_rotation_deg=std_rot_deg,
             std_translation_m=std_t_m,
             std_offset_s=std_offset,
+            covariance=cov,
         )
+
+    def covariance(self, x: np.ndarray, r: np.ndarray) -> np.ndarray:
+        """The covariance of ``[xi, offset]`` at the answer ``x`` (``xi`` the mount's error in
+        the answer's camera frame, ``CalibrationResult.covariance``), (7, 7): the image-
+        clustered sandwich plus the floor plus the focal length's consider term (the module's
+        docstring); all inf where ``J^T J`` is singular."""
+        local = copy.copy(self)
+        local.T_b_c_guess = self.T_b_c(x)
+        J = _jacobian(local.residuals, np.r_[np.zeros(6), x[6]])
+        try:
+            A = np.linalg.inv(J.T @ J)
+        except np.linalg.LinAlgError:
+            return np.full((7, 7), np.inf)
+        if not np.isfinite(A).all():
+            return np.full((7, 7), np.inf)
+        scores = np.zeros((self.t.size, 7))
+        np.add.at(scores, self.obs_image, (J * r[:, None]).reshape(-1, 2, 7).sum(axis=1))
+        clusters = max(self.n_frames, 2)
+        meat = scores.T @ scores * (clusters / (clusters - 1.0))
+        projected = (r.reshape(-1, 2) + self.obs_uv - [self.camera.cx, self.camera.cy]).ravel()
+        dx_ds = A @ (J.T @ projected)
+        return A @ meat @ A + PIXEL_STD_FLOOR**2 * A + FOCAL_SCALE_STD**2 * np.outer(dx_ds, dx_ds)
 
 
 _STEPS = np.array([1e-6] * 6 + [1e-4])
