@@ -82,9 +82,11 @@ class CalibrationInputs:
             the solver's search took outside the flight's pose stream (the offset, unknown
             to the images of a short flight, wandered further than the flight lasts).
         """
-        first = self._solve(self.apex_uv)
         if self.detections is None:
-            return first
+            return self._solve(self.apex_uv)
+        # The first pass only starts the second: not refused for its standard errors, which
+        # the detector's biased apexes make larger than the answer's.
+        first = self._solve(self.apex_uv, refuse_undetermined=False)
         return self._solve(self.refitted_apexes(first.T_b_c, first.time_offset_s))
 
     def refitted_apexes(self, T_b_c: np.ndarray, time_offset_s: float) -> list[np.ndarray]:
@@ -111,7 +113,9 @@ class CalibrationInputs:
             apex_uv.append(np.array(points, dtype=np.float64).reshape(-1, 2))
         return apex_uv
 
-    def _solve(self, apex_uv: list[np.ndarray]) -> CalibrationResult:
+    def _solve(
+        self, apex_uv: list[np.ndarray], *, refuse_undetermined: bool = True
+    ) -> CalibrationResult:
         n_poses, n_images = len(self.pose_stamps_s), len(self.image_stamps_cam_s)
         if n_poses < 2:
             raise CalibrationError(
@@ -127,6 +131,7 @@ class CalibrationInputs:
                 apex_uv,
                 self.apex_w,
                 self.T_b_c_declared,
+                refuse_undetermined=refuse_undetermined,
             )
         except ExtrapolationError:
             span_s = float(self.pose_stamps_s[-1] - self.pose_stamps_s[0])
