@@ -19,8 +19,11 @@ with the most cones (``vnav.multiview``), then, at each round, the apex projecte
 current estimate, mutual nearest within a gate that narrows as the estimate improves.
 
 After solving, the parameters' covariance is the sum of two terms, each for an error the
-other misses (measured on the ``calibration`` built-in: ``(J^T J)^-1`` scaled by the residual
-variance alone put the true error beyond 3 standard errors in 4 flights of 20):
+other misses. (Measured over 20 flights of the ``calibration`` built-in with random mounts, at
+20 Hz: ``(J^T J)^-1`` scaled by the residual variance put the truth beyond 3 standard errors
+in 13 of them; at least 0.3 px of residual scale hid that, but left the camera's translation
+along its axis 2.2 standard errors off on average. With these two terms: 20 of 20, every
+parameter's error about 1 standard error RMS.)
 
 - the apexes' own errors, by the cluster-robust ("sandwich") covariance with each image a
   cluster, ``(J^T J)^-1 (sum_g J_g^T r_g r_g^T J_g) (J^T J)^-1 G / (G - 1)`` (Cameron & Miller,
