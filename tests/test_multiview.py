@@ -321,7 +321,7 @@ def test_ippe_second_solution_refused_unless_the_guess_chooses() -> None:
     (OpenCV's ``solvePnPGeneric``) explains them about as well as the best pose (0.21 against
     0.16 px RMS) but lies elsewhere: refused as ambiguous without a guess; a guess at either
     pose gives that one."""
-    from vnav.multiview import _ippe_other, _unambiguous, camera_pose_from_points
+    from vnav.multiview import _ippe_other, camera_pose_from_points, unambiguous_pose
 
     square = np.array([[0.0, 0.0, 0.7], [1.0, 0.0, 0.7], [1.0, 1.0, 0.7], [0.0, 1.0, 0.7]])
     T_w_c = se3.make(np.diag([1.0, -1.0, -1.0]) @ so3.from_rpy(0.3, 0.2, 0.0), [0.5, 0.5, 30.0])
@@ -331,7 +331,7 @@ def test_ippe_second_solution_refused_unless_the_guess_chooses() -> None:
     assert other is not None and other.rms_px < 2.0 * fit.rms_px + 0.5
     matches = {k: k for k in range(4)}
     with pytest.raises(ValueError, match="ambiguous"):
-        _unambiguous(CAMERA, square, uv, fit, matches, None)
+        unambiguous_pose(CAMERA, square, uv, fit, matches, None)
     for pose in (fit, other):
-        chosen, _ = _unambiguous(CAMERA, square, uv, fit, matches, pose.T_w_c)
+        chosen, _ = unambiguous_pose(CAMERA, square, uv, fit, matches, pose.T_w_c)
         np.testing.assert_allclose(chosen.T_w_c, pose.T_w_c, atol=1e-9)

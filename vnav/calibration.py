@@ -58,7 +58,7 @@ import numpy as np
 from vnav import se3, so3
 from vnav.camera import PinholeCamera
 from vnav.frames import FrameBuffer
-from vnav.multiview import camera_pose_from_apexes
+from vnav.multiview import REPROJECTION_GATE_PX, camera_pose_from_apexes, unambiguous_pose
 
 logger = logging.getLogger(__name__)
 
@@ -315,11 +315,17 @@ class _Problem:
         T_w_c_prior = self.buffer.lookup("world", "body", t) @ self.T_b_c_guess
         for prior in (T_w_c_prior, None):
             try:
-                fit, _ = camera_pose_from_apexes(self.camera, self.apex_w, uv, T_w_c_prior=prior)
+                fit, found = camera_pose_from_apexes(
+                    self.camera, self.apex_w, uv, T_w_c_prior=prior
+                )
+                # A cone matched to its neighbour's apex leaves it pixels off; IPPE's second
+                # solution, as good a fit, is chosen by the declared mount or refused.
+                if fit.rms_px >= PNP_RMS_PX or fit.residuals_px.max() > REPROJECTION_GATE_PX:
+                    continue
+                fit, _ = unambiguous_pose(self.camera, self.apex_w, uv, fit, found, T_w_c_prior)
             except ValueError:
                 continue
-            if fit.rms_px < PNP_RMS_PX:
-                return fit.T_w_c
+            return fit.T_w_c
         return None
 
     def match(self, x: np.ndarray, gate_px: float) -> None:

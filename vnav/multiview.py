@@ -43,6 +43,7 @@ __all__ = [
     "camera_pose_from_points",
     "parallax_deg",
     "triangulate",
+    "unambiguous_pose",
 ]
 
 MIN_PARALLAX_DEG = 1.0
@@ -360,12 +361,12 @@ def camera_pose_from_cones(
         guessed = _match(camera, guess, apex_w, uv, GUESS_GATE_PX)
         gated = _gated_fit(camera, apex_w, uv, {k: c for k, (_, c) in guessed.items()})
         if gated is not None:
-            result, found = _unambiguous(camera, apex_w, uv, *gated, guess)
+            result, found = unambiguous_pose(camera, apex_w, uv, *gated, guess)
             return result, {usable[k]: c for k, c in found.items()}
     # Seed with the 4 largest detections (nearest, best measured).
     seeds = sorted(range(len(usable)), key=lambda k: -detections[usable[k]].area_px)[:4]
     result, found = camera_pose_from_apexes(camera, apex_w, uv, seeds)
-    result, found = _unambiguous(camera, apex_w, uv, result, found, T_w_c_guess)
+    result, found = unambiguous_pose(camera, apex_w, uv, result, found, T_w_c_guess)
     return result, {usable[k]: c for k, c in found.items()}
 
 
@@ -424,7 +425,7 @@ def _fit_within_gate(
     return None
 
 
-def _unambiguous(
+def unambiguous_pose(
     camera: PinholeCamera,
     apex_w: np.ndarray,
     uv: np.ndarray,
@@ -432,11 +433,23 @@ def _unambiguous(
     matches: dict[int, int],
     T_w_c_guess: np.ndarray | None,
 ) -> tuple[PnPResult, dict[int, int]]:
-    """``fit``, unless its apexes, all in one plane (cones of one height on flat ground), admit
-    a second pose (IPPE's other solution, Collins & Bartoli 2014) that explains them nearly as
-    well (RMS below ``2 rms + 0.5`` px, the ambiguity rule of ``camera_pose_from_apexes``):
-    then the one nearer the guess if the other is at least twice as far from it, else
-    ValueError (ambiguous)."""
+    """``fit`` of the pixels ``uv`` matched to the map ``apex_w`` as ``matches`` (pixel index
+    -> map index), unless those apexes, all in one plane (cones of one height on flat ground),
+    admit a second pose (IPPE's other solution, Collins & Bartoli 2014) that explains them
+    nearly as well (RMS below ``2 rms + 0.5`` px, the ambiguity rule of
+    ``camera_pose_from_apexes``): then the one nearer the guess ``T_w_c_guess`` if the other
+    is at least twice as far from it.
+
+    Returns
+    -------
+    PnPResult, dict of int to int
+        The pose kept and ``matches``.
+
+    Raises
+    ------
+    ValueError
+        Ambiguous: the second pose fits as well and no guess (or one as near both) chooses.
+    """
     ks = sorted(matches)
     P, px = apex_w[[matches[k] for k in ks]], uv[ks]
     other = _ippe_other(camera, P, px, fit)
