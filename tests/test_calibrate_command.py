@@ -242,3 +242,30 @@ def test_a_truncated_recording_is_refused_in_one_line(tmp_path):
     assert proc.returncode == 2, proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1, proc.stderr
     assert "not a readable Rerun recording" in proc.stderr
+
+
+def test_masks_packed_and_unpacked_are_the_detections():
+    """``pack_masks`` then ``unpack_masks``: each blob's box and mask as they were, the
+    detection made again (``vnav.detect.detection_from_mask``) with the detector's apex on
+    the same blob; bytes cut inside a detection are a ValueError naming it."""
+    from scenarios.record.reader import unpack_masks
+    from scenarios.record.recording import pack_masks
+    from vnav.detect import detect_cones
+
+    rgb = np.zeros((120, 160, 3), dtype=np.uint8)
+    for x0, height in ((30, 40), (100, 25)):  # two orange triangles, apex up
+        for row in range(height):
+            half = row * 8 // height
+            rgb[20 + row, x0 - half : x0 + half + 1] = (255, 90, 0)
+    found = detect_cones(rgb)
+    assert len(found) == 2
+    packed = pack_masks(found)
+    again = unpack_masks(packed, (160, 120))
+    for got, had in zip(again, found, strict=True):
+        assert got.bbox == had.bbox and np.array_equal(got.mask, had.mask)
+        np.testing.assert_array_equal(got.apex_uv, had.apex_uv)
+        np.testing.assert_allclose(got.centroid_uv, had.centroid_uv, atol=1e-9)
+        assert got.touches_border == had.touches_border
+    with pytest.raises(ValueError, match="end inside a detection"):
+        unpack_masks(packed[:-1], (160, 120))
+    assert unpack_masks(pack_masks([]), (160, 120)) == []
