@@ -37,6 +37,7 @@ __all__ = [
     "HsvThresholds",
     "check_detection",
     "detect_cones",
+    "detection_from_mask",
 ]
 
 logger = logging.getLogger(__name__)
@@ -237,6 +238,47 @@ def detect_cones(
     detections.sort(key=lambda d: -d.area_px)
     logger.debug("detect_cones: %d blobs, %d detections", n - 1, len(detections))
     return detections
+
+
+def detection_from_mask(
+    mask: np.ndarray, bbox: tuple[int, int, int, int], image_size: tuple[int, int]
+) -> ConeDetection:
+    """The detection ``detect_cones`` makes of one blob, from the blob alone: its apex, base,
+    centroid and border flag computed from the mask as ``detect_cones`` computes them.
+
+    What a log keeps of a detection (the blob, ``ConeDetection.mask`` and ``bbox``) is enough to
+    make it again, exactly: ``vnav-demo calibrate`` re-fits the apexes of a recording's masks.
+
+    Parameters
+    ----------
+    mask : ndarray, shape (h, w), bool
+        The blob cropped to ``bbox`` (``ConeDetection.mask``).
+    bbox : tuple of int
+        ``(x, y, w, h)`` in the image.
+    image_size : tuple of int
+        ``(width, height)`` of the image, px.
+
+    Returns
+    -------
+    ConeDetection
+
+    Raises
+    ------
+    ValueError
+        If ``mask`` is not (h, w) to match ``bbox``, is empty, or ``bbox`` does not fit the image.
+    """
+    mask = np.asarray(mask, dtype=bool)
+    x, y, w, h = (int(v) for v in bbox)
+    width, height = (int(v) for v in image_size)
+    if mask.shape != (h, w) or not mask.any():
+        raise ValueError(f"mask of shape {mask.shape} must be non-empty and (h, w) = {(h, w)}")
+    if x < 0 or y < 0 or x + w > width or y + h > height:
+        raise ValueError(f"bbox {bbox} does not fit the image {width}x{height}")
+    rows, cols = np.nonzero(mask)
+    # The mean pixel centre, as cv2.connectedComponentsWithStats's centroid.
+    centroid_uv = np.array([cols.mean() + x, rows.mean() + y])
+    touches = x == 0 or y == 0 or x + w == width or y + h == height
+    return _describe_blob(mask, (x, y, w, h), int(rows.size), centroid_uv, touches)
 
 
 def _fit_line(v: np.ndarray, u: np.ndarray) -> tuple[float, float] | None:

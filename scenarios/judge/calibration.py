@@ -1,10 +1,12 @@
 """The camera mount and clock offset recovered from a finished run, compared with its truth.
 
 The inputs are what the estimator had (``vnav.calibration``): the pose stream as it was sent,
-each image's exposure stamp on the camera clock, the apexes the detector found, the cone map
+each image's exposure stamp on the camera clock, the detections (their blobs), the cone map
 and the declared mount; the truth beside them is what the simulator knows and the estimator
 does not (the true mount, the true clock offset). A recording carries the same inputs
-(``scenarios.record.reader.calibration_inputs``).
+(``scenarios.record.reader.calibration_inputs``), blobs included, so that ``vnav-demo
+calibrate`` and the run's own calibration make the same two passes (``CalibrationInputs.solve``)
+on the same numbers.
 """
 
 from __future__ import annotations
@@ -20,7 +22,8 @@ from vnav import so3
 from vnav.calibration import CalibrationError, CalibrationResult, calibrate_camera
 from vnav.camera import PinholeCamera
 from vnav.cone import TRAFFIC_CONE
-from vnav.frames import ExtrapolationError
+from vnav.detect import ConeDetection
+from vnav.frames import ExtrapolationError, FrameBuffer
 from vnav.localize import Localizer
 from vnav.methods import active_methods
 from vnav.plugin import second_pass_methods
@@ -31,6 +34,7 @@ __all__ = [
     "CalibrationInputs",
     "Truth",
     "calibrate_run",
+    "calibration_detections",
     "errors_against",
     "estimate_with_mount",
     "inputs_from_run",
@@ -47,7 +51,13 @@ class Truth:
 
 @dataclass(frozen=True)
 class CalibrationInputs:
-    """Everything ``vnav.calibration.calibrate_camera`` takes, and the truth if known."""
+    """Everything ``vnav.calibration.calibrate_camera`` takes, and the truth if known.
+
+    ``apex_uv`` holds the detector's pose-free apexes (about 0.25 px above the true apex);
+    ``detections``, where given (one list per image, the same detections clear of the
+    border), lets ``solve`` fit each apex again on its blob along the image vertical
+    (``SilhouetteView.apex_keypoint``, unbiased), which needs a mount and an offset first.
+    """
 
     camera: PinholeCamera
     pose_stamps_s: np.ndarray
@@ -57,9 +67,12 @@ class CalibrationInputs:
     apex_w: np.ndarray
     T_b_c_declared: np.ndarray
     truth: Truth | None = None
+    detections: list[list[ConeDetection]] | None = None
 
     def solve(self) -> CalibrationResult:
-        """``calibrate_camera`` on these inputs.
+        """The mount and offset: with ``detections``, two passes (the detector's apexes give a
+        first mount and offset; the apexes fitted again on the blobs under them give the
+        answer); without, the one pass on ``apex_uv``.
 
         Raises
         ------
@@ -69,6 +82,40 @@ class CalibrationInputs:
             the solver's search took outside the flight's pose stream (the offset, unknown
             to the images of a short flight, wandered further than the flight lasts).
         """
+        if self.detections is None:
+            return self._solve(self.apex_uv)
+        # The first pass only starts the second: not refused for its standard errors, which
+        # the detector's biased apexes make larger than the answer's.
+        first = self._solve(self.apex_uv, refuse_undetermined=False)
+        return self._solve(self.refitted_apexes(first.T_b_c, first.time_offset_s))
+
+    def refitted_apexes(self, T_b_c: np.ndarray, time_offset_s: float) -> list[np.ndarray]:
+        """Each image's apexes fitted again on the blobs (``SilhouetteView.apex_keypoint``)
+        seen from ``T_w_b(t_cam + time_offset_s) @ T_b_c``, the pose stream looked up where
+        the calibration puts the exposure; the detector's apex where the fit gives none.
+        An image outside the pose stream keeps the detector's apexes (the solver leaves
+        it out)."""
+        assert self.detections is not None
+        stamps = np.asarray(self.pose_stamps_s, dtype=np.float64)
+        buffer = FrameBuffer(cache_s=max(float(stamps[-1] - stamps[0]) + 1.0, 1.0))
+        buffer.set_transform("world", "body", stamps, self.T_w_b)
+        t_pose = np.asarray(self.image_stamps_cam_s, dtype=np.float64) + time_offset_s
+        apex_uv = []
+        for t, detections, detector_uv in zip(t_pose, self.detections, self.apex_uv, strict=True):
+            if not stamps[0] <= t <= stamps[-1]:
+                apex_uv.append(detector_uv)
+                continue
+            T_w_c = buffer.lookup("world", "body", float(t)) @ T_b_c
+            points = []
+            for d in detections:
+                apex = SilhouetteView(d, self.camera, T_w_c).apex_keypoint(TRAFFIC_CONE)
+                points.append(d.apex_uv if apex is None else apex)
+            apex_uv.append(np.array(points, dtype=np.float64).reshape(-1, 2))
+        return apex_uv
+
+    def _solve(
+        self, apex_uv: list[np.ndarray], *, refuse_undetermined: bool = True
+    ) -> CalibrationResult:
         n_poses, n_images = len(self.pose_stamps_s), len(self.image_stamps_cam_s)
         if n_poses < 2:
             raise CalibrationError(
@@ -81,9 +128,10 @@ class CalibrationInputs:
                 self.pose_stamps_s,
                 self.T_w_b,
                 self.image_stamps_cam_s,
-                self.apex_uv,
+                apex_uv,
                 self.apex_w,
                 self.T_b_c_declared,
+                refuse_undetermined=refuse_undetermined,
             )
         except ExtrapolationError:
             span_s = float(self.pose_stamps_s[-1] - self.pose_stamps_s[0])
@@ -93,61 +141,51 @@ class CalibrationInputs:
             ) from None
 
 
-def inputs_from_run(
-    result: RunResult, camera: PinholeCamera, T_b_c: np.ndarray | None = None
-) -> CalibrationInputs:
-    """The inputs of a finished run (``RunResult.poses`` must be set).
+def calibration_detections(detections: list[ConeDetection]) -> list[ConeDetection]:
+    """The detections calibration uses: those clear of the image border (a cut-off blob's
+    apex may be cut off too)."""
+    return [d for d in detections if not d.touches_border]
 
-    Without ``T_b_c`` each apex is the detector's pose-free ``apex_uv`` (about 0.25 px above
-    the true apex); with it, the unbiased area fit along the image vertical that the body pose
-    and this mount give (``SilhouetteView.apex_keypoint``): ``calibrate_run``'s second pass.
-    """
+
+def inputs_from_run(result: RunResult, camera: PinholeCamera) -> CalibrationInputs:
+    """The inputs of a finished run (``RunResult.poses`` must be set): the detector's apexes
+    and the detections they come from (``calibration_detections``)."""
     if result.poses is None or not result.ticks:
         raise ValueError("the run has no pose stream or no camera ticks to calibrate from")
     stamps = [t.t_s if t.timing is None else t.timing.stamp_cam_s for t in result.ticks]
-    apex_uv = []
-    for t in result.ticks:
-        points = []
-        for d in t.detections:
-            if d.detection.touches_border:
-                continue
-            apex = None
-            if T_b_c is not None:
-                view = SilhouetteView(d.detection, camera, t.T_w_b_est @ T_b_c)
-                apex = view.apex_keypoint(TRAFFIC_CONE)
-            points.append(d.detection.apex_uv if apex is None else apex)
-        apex_uv.append(np.array(points, dtype=np.float64).reshape(-1, 2))
+    detections = [calibration_detections([d.detection for d in t.detections]) for t in result.ticks]
     return CalibrationInputs(
         camera=camera,
         pose_stamps_s=result.poses.stamps_s,
         T_w_b=result.poses.T_w_b,
         image_stamps_cam_s=np.array(stamps),
-        apex_uv=apex_uv,
+        apex_uv=[
+            np.array([d.apex_uv for d in ds], dtype=np.float64).reshape(-1, 2) for ds in detections
+        ],
         apex_w=result.cones_w + np.array([0.0, 0.0, TRAFFIC_CONE.height_m]),
         T_b_c_declared=result.ticks[0].T_b_c_est,
         truth=Truth(result.ticks[0].T_b_c, result.spec.timing.camera_clock_offset_s),
+        detections=detections,
     )
 
 
 def calibrate_run(result: RunResult) -> CalibrationRecord:
     """``vnav.calibration`` on a finished run, compared with its truth.
 
-    Two passes: the detector's pose-free apexes give a first mount; the apexes re-fitted along
-    the image vertical that mount gives (unbiased) give the answer. (A recording holds the
-    detector's apexes only: ``vnav-demo calibrate`` makes the first pass.) Then every tick is
-    estimated again with the recovered mount (``estimate_with_mount``): the estimates after
+    Two passes (``CalibrationInputs.solve``): the detector's pose-free apexes give a first
+    mount and offset; the apexes re-fitted on their blobs under them (unbiased) give the
+    answer, as ``vnav-demo calibrate`` does from the recording. Then every tick is estimated
+    again with the recovered mount (``estimate_with_mount``): the estimates after
     calibration, beside the run's own, made with the declared mount.
     """
     cam = result.spec.scene.camera
     camera = PinholeCamera.from_fovy(cam.fovy_deg, cam.width, cam.height)
-    first_pass = inputs_from_run(result, camera)
+    inputs = inputs_from_run(result, camera)
     mounts = {
-        "T_b_c_declared": first_pass.T_b_c_declared,
-        "T_b_c_true": None if first_pass.truth is None else first_pass.truth.T_b_c,
+        "T_b_c_declared": inputs.T_b_c_declared,
+        "T_b_c_true": None if inputs.truth is None else inputs.truth.T_b_c,
     }
     try:
-        first = first_pass.solve()
-        inputs = inputs_from_run(result, camera, first.T_b_c)
         solved = inputs.solve()
     except CalibrationError as exc:
         return CalibrationRecord(None, None, None, 0, {}, refused=str(exc), **mounts)

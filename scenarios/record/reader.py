@@ -2,9 +2,11 @@
 a camera calibration needs (``scenarios.judge.calibration.CalibrationInputs``).
 
 The entity paths are the recording's (``scenarios.record.viewer.entity``): the pose stream as
-it was sent (``estimator/*``), the detections' keypoints, ``world/cones/truth``, the camera's
+it was sent and every detection's blob (``estimator/*``), ``world/cones/truth``, the camera's
 pinhole and, beside them, the truth: the true mount (``world/body/camera``) and the true clock
-offset (``truth``). A run with an ``[imu]`` also holds the IMU's mounts (``imu_mount_declared``).
+offset (``truth``). The detections are made again from their blobs
+(``vnav.detect.detection_from_mask``), exactly as the run had them. A run with an ``[imu]`` also
+holds the IMU's mounts (``imu_mount_declared``).
 """
 
 from __future__ import annotations
@@ -14,13 +16,20 @@ from pathlib import Path
 
 import numpy as np
 
-from scenarios.judge.calibration import CalibrationInputs, Truth
+from scenarios.judge.calibration import CalibrationInputs, Truth, calibration_detections
 from scenarios.record.viewer import entity
 from vnav import quat
 from vnav.camera import PinholeCamera
 from vnav.cone import TRAFFIC_CONE
+from vnav.detect import ConeDetection, detection_from_mask
 
-__all__ = ["RecordingError", "calibration_inputs", "imu_mount_declared", "read_rows"]
+__all__ = [
+    "RecordingError",
+    "calibration_inputs",
+    "imu_mount_declared",
+    "read_rows",
+    "unpack_masks",
+]
 
 
 class RecordingError(ValueError):
@@ -31,7 +40,7 @@ _CALIBRATION_ENTITIES = (
     entity.POSE_STREAM,
     entity.MOUNT_DECLARED,
     entity.STAMP_CAM,
-    entity.KEYPOINTS,
+    entity.MASKS,
     entity.CAMERA,
     entity.TRUTH,
     entity.TRUTH_VALUES,
@@ -87,8 +96,36 @@ def _transforms(rows: list[dict], key: str) -> tuple[np.ndarray, np.ndarray]:
     return np.array([r[key] for r in rows]), T
 
 
+def unpack_masks(packed: np.ndarray, image_size: tuple[int, int]) -> list[ConeDetection]:
+    """One image's detections made again from ``scenarios.record.recording.pack_masks``'s
+    bytes (``vnav.detect.detection_from_mask``).
+
+    Raises
+    ------
+    ValueError
+        If the bytes end inside a detection or a blob does not fit the image.
+    """
+    packed = np.asarray(packed, dtype=np.uint8).ravel()
+    detections, at = [], 0
+    while at < packed.size:
+        if at + 8 > packed.size:
+            raise ValueError("the masks end inside a detection's box")
+        x, y, w, h = (int(v) for v in packed[at : at + 8].view("<u2"))
+        n_bytes = (w * h + 7) // 8
+        if at + 8 + n_bytes > packed.size:
+            raise ValueError("the masks end inside a detection's blob")
+        bits = np.unpackbits(packed[at + 8 : at + 8 + n_bytes], count=w * h)
+        detections.append(
+            detection_from_mask(bits.reshape(h, w).astype(bool), (x, y, w, h), image_size)
+        )
+        at += 8 + n_bytes
+    return detections
+
+
 def calibration_inputs(path: str | Path) -> CalibrationInputs:
-    """The inputs a recording written by ``vnav-demo run`` carries.
+    """The inputs a recording written by ``vnav-demo run`` carries, with its detections
+    made again from their blobs (``CalibrationInputs.detections``: ``solve`` re-fits their
+    apexes as the run's own calibration does).
 
     Raises
     ------
@@ -100,7 +137,8 @@ def calibration_inputs(path: str | Path) -> CalibrationInputs:
         raise RecordingError(f"{path}: no such file")
     rows = read_rows(path, _CALIBRATION_ENTITIES)
 
-    missing = [p for p in (entity.POSE_STREAM, entity.STAMP_CAM, entity.CAMERA) if not rows[p]]
+    needed = (entity.POSE_STREAM, entity.STAMP_CAM, entity.MASKS, entity.CAMERA)
+    missing = [p for p in needed if not rows[p]]
     if missing:
         raise RecordingError(
             f"{path}: the recording lacks {', '.join(missing)} (written by vnav-demo run of "
@@ -108,18 +146,20 @@ def calibration_inputs(path: str | Path) -> CalibrationInputs:
         )
     stamps_ns, T_w_b = _transforms(rows[entity.POSE_STREAM], "sim_time")
     stamp_rows = sorted((r for r in rows[entity.STAMP_CAM] if "tick" in r), key=lambda r: r["tick"])
-    ticks = [r["tick"] for r in stamp_rows]
-    keypoints = {r["tick"]: r for r in rows[entity.KEYPOINTS] if "tick" in r}
-    apex_uv = []
-    for tick in ticks:
-        positions = np.asarray(
-            keypoints.get(tick, {}).get("Points2D:positions") or [], dtype=np.float64
-        ).reshape(-1, 2)
-        apex_uv.append(positions[0::2] - 0.5)  # apex, base, apex, ...; Rerun's +0.5 undone
     pinhole = next(r for r in rows[entity.CAMERA] if r.get("Pinhole:image_from_camera"))
     K = np.asarray(pinhole["Pinhole:image_from_camera"][0], dtype=np.float64).reshape(3, 3).T
     width, height = (int(v) for v in pinhole["Pinhole:resolution"][0])
     camera = PinholeCamera(K[0, 0], K[1, 1], K[0, 2] - 0.5, K[1, 2] - 0.5, width, height)
+    masks = {r["tick"]: r.get("masks") or [] for r in rows[entity.MASKS] if "tick" in r}
+    detections = []
+    for r in stamp_rows:
+        try:
+            found = unpack_masks(
+                np.asarray(masks.get(r["tick"], []), dtype=np.uint8), (width, height)
+            )
+        except ValueError as exc:
+            raise RecordingError(f"{path}: tick {r['tick']}: {exc}") from None
+        detections.append(calibration_detections(found))
     cones = [r for r in rows[entity.TRUTH] if r.get("Points3D:positions")]
     if not cones:
         raise RecordingError(f"{path}: the recording has no cone map (world/cones/truth)")
@@ -144,10 +184,13 @@ def calibration_inputs(path: str | Path) -> CalibrationInputs:
         pose_stamps_s=stamps_ns * 1e-9,
         T_w_b=T_w_b,
         image_stamps_cam_s=np.array([r["Scalars:scalars"][0] for r in stamp_rows]),
-        apex_uv=apex_uv,
+        apex_uv=[
+            np.array([d.apex_uv for d in ds], dtype=np.float64).reshape(-1, 2) for ds in detections
+        ],
         apex_w=cones_w + np.array([0.0, 0.0, TRAFFIC_CONE.height_m]),
         T_b_c_declared=mounts[0] if len(mounts) else np.eye(4),
         truth=truth,
+        detections=detections,
     )
 
 

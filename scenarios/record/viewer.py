@@ -213,6 +213,7 @@ entity = SimpleNamespace(
     POSE_STREAM="estimator/pose_stream",
     MOUNT_DECLARED="estimator/mount",
     STAMP_CAM="estimator/stamp_cam_s",
+    MASKS="estimator/masks",
     TRUTH_VALUES="truth",
     NAV_PLAN="world/navigation/plan",
     NAV_POSITION_EST="world/navigation/position_est",
