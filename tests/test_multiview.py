@@ -309,11 +309,11 @@ def test_pose_searches_refuse_non_finite_or_degenerate_input_with_value_errors()
 def test_pnp_trajectory_of_the_calibration_builtin_has_no_outlier(builtin_runs) -> None:
     """The built-in ``calibration`` run (its mount 2.4 deg off the declared one, its clock
     30 ms off, so the guessed pose matches some apex to its neighbour's cone): every PnP pose
-    of its trajectory (``scenarios.judge.tum.pnp_trajectory``) within 10 cm and 1 deg of the
+    of its trajectory (``scenarios.export.tum.pnp_trajectory``) within 10 cm and 1 deg of the
     true camera pose (before the reprojection gate, 9 of 91 were 0.2-0.44 m off), and a pose
     for at least 95% of the ticks with 4 cones or more seen whole (the gate refuses, it does
     not give up on every tick)."""
-    from scenarios.judge.tum import pnp_trajectory, truth_trajectory
+    from scenarios.export.tum import pnp_trajectory, truth_trajectory
 
     run = builtin_runs["calibration"]
     cam = run.spec.scene.camera
