@@ -33,6 +33,8 @@ def _result(T_b_c: np.ndarray, time_offset_s: float) -> CalibrationResult:
         std_rotation_deg=3.5e-05,
         std_translation_m=0.000125,
         std_offset_s=2e-06,
+        # [translation (m), rotation (rad), offset (s)] with the standard errors above.
+        covariance=np.diag([1.25e-4**2] * 3 + [math.radians(3.5e-5) ** 2] * 3 + [2e-6**2]),
     )
 
 
