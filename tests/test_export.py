@@ -13,6 +13,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+import yaml
+from evo.core import metrics, sync
+from evo.main_ape import ape
+from evo.tools import file_interface
 
 from scenarios import export, pipeline
 from scenarios.cli import main
@@ -26,7 +30,6 @@ from vnav import quat, se3, so3
 
 def _yaml(path: Path) -> dict:
     """A YAML file read by PyYAML (evo's dependency), as EuRoC readers read sensor.yaml."""
-    yaml = pytest.importorskip("yaml", reason="PyYAML reads the EuRoC sensor files")
     return yaml.safe_load(path.read_text())
 
 
@@ -92,7 +95,6 @@ def _csv(path: Path) -> tuple[str, list[list[str]]]:
 def test_euroc_ground_truth_read_by_evo_is_the_tum_truth(calibration):
     """evo reads the EuRoC ground truth (the body) and the TUM truth (the camera): the body
     pose times cam0's ``T_BS`` is the camera pose, at the same stamps."""
-    file_interface = pytest.importorskip("evo.tools.file_interface", reason="evo reads both")
     mav0 = _mav0(calibration)
     body = file_interface.read_euroc_csv_trajectory(
         str(mav0 / "state_groundtruth_estimate0" / "data.csv")
@@ -240,10 +242,6 @@ def test_report_lists_every_exported_file_with_its_size(calibration):
 def test_pnp_error_statistics_are_evo_apes(calibration):
     """The report's ``pnp_ape_m`` are the numbers ``evo_ape tum truth.tum pnp.tum`` gives
     (evo's own reader, association and APE, no alignment, the translation part)."""
-    pytest.importorskip("evo", reason="the statistics are checked against evo's")
-    from evo.core import metrics, sync
-    from evo.main_ape import ape
-    from evo.tools import file_interface
 
     ref = file_interface.read_tum_trajectory_file(str(calibration.out / "calibration.truth.tum"))
     est = file_interface.read_tum_trajectory_file(str(calibration.out / "calibration.pnp.tum"))

@@ -13,6 +13,7 @@ import dataclasses
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 import yaml
 from rosbags.highlevel import AnyReader
@@ -79,7 +80,6 @@ def test_euroc_imu_table_read_by_pandas_is_the_runs_readings(imu_run):
     """pandas reads ``imu0/data.csv`` (EuRoC's header, column for column): each row is a
     reading of the run, its stamp on the IMU's clock in integer nanoseconds, the angular rate
     then the specific force in the IMU frame, to the last bit."""
-    pd = pytest.importorskip("pandas", reason="pandas reads the table independently")
     path = imu_run.rrd_path.parent / "imu.euroc" / "mav0" / "imu0" / "data.csv"
     assert path.read_text().splitlines()[0] == EUROC_IMU_HEADER
     table = pd.read_csv(path)
