@@ -28,6 +28,7 @@ from scenarios.export.base import ExportResult, write_flushed
 from scenarios.run.records import RunResult, TickRecord
 from vnav import quat
 from vnav.camera import PinholeCamera
+from vnav.metrics import error_stats, position_error
 from vnav.multiview import camera_pose_from_cones
 
 if TYPE_CHECKING:  # annotations only: importing sim.mesh loads MuJoCo before sim.gl
@@ -112,17 +113,9 @@ def ape_statistics(
         ref = T_ref[[index[float(t)] for t in t_est]]
     except KeyError as exc:
         raise ValueError(f"estimate stamp {exc.args[0]} is not a truth stamp") from None
-    e = np.linalg.norm(T_est[:, :3, 3] - ref[:, :3, 3], axis=1)
-    return {
-        "rmse": float(np.sqrt(np.mean(e**2))),
-        "mean": float(np.mean(e)),
-        "median": float(np.median(e)),
-        "std": float(np.std(e)),
-        "min": float(np.min(e)),
-        "max": float(np.max(e)),
-        "sse": float(np.sum(e**2)),
-        "count": len(e),
-    }
+    e = position_error(ref[:, :3, 3], T_est[:, :3, 3])
+    # evo's statistics are vnav.metrics' and the sum of squares.
+    return {**error_stats(e), "sse": float(np.sum(e**2))}
 
 
 class TumExporter:
