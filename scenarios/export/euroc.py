@@ -258,8 +258,7 @@ class EurocExporter:
                 self._pending.popleft().result()
         finally:
             self._writer.shutdown(wait=True, cancel_futures=True)
-        mav0, spec, camera = self._root / "mav0", self._spec, self._camera
-        T_b_c = self._T_b_c_first if self._T_b_c_first is not None else np.eye(4)
+        mav0, spec = self._root / "mav0", self._spec
         about = f"vnav-sim scenario {spec.name}, seed {self._seed}"
         _write_text(
             mav0 / "body.yaml",
@@ -271,6 +270,18 @@ class EurocExporter:
             )
             + "\n",
         )
+        self._write_cameras(mav0, about)
+        imu = spec.scene.imu
+        if imu is not None:
+            _write_imu(mav0 / "imu0", about, imu, result)
+        self._write_ground_truth(mav0 / "state_groundtruth_estimate0", about)
+        return ExportResult("euroc", (self._root.name,), note="; ".join(self._notes()))
+
+    def _write_cameras(self, mav0: Path, about: str) -> None:
+        """``cam0/`` and ``depth0/``: the image tables and the sensors' descriptions (the
+        depth folder removed when the run rendered no depth)."""
+        spec, camera = self._spec, self._camera
+        T_b_c = self._T_b_c_first if self._T_b_c_first is not None else np.eye(4)
         moved = (
             " The camera slides on the body in this flight: T_BS is its mount at the first image."
             if self._mount_moved
@@ -290,28 +301,28 @@ class EurocExporter:
                 "",
             ),
         )
-        if self._depths:
-            _write_text(mav0 / "depth0" / "data.csv", _image_table(self._depths))
-            _write_text(
-                mav0 / "depth0" / "sensor.yaml",
-                _camera_yaml(
-                    "depth",
-                    f"{about}: planar z-depth along the optical axis of cam0 (the same pixels "
-                    "and stamps, the scenario's depth noise included), 16-bit PNG, "
-                    "millimetres; 0 is no return (the sky, the far plane, beyond 65.535 m).",
-                    T_b_c,
-                    spec.camera_rate_hz,
-                    camera,
-                    f"depth_scale: {DEPTH_SCALE:g} # pixel value per metre\n",
-                ),
-            )
-        else:
+        if not self._depths:
             (mav0 / "depth0" / "data").rmdir()
             (mav0 / "depth0").rmdir()
-        imu = spec.scene.imu
-        if imu is not None:
-            _write_imu(mav0 / "imu0", about, imu, result)
-        state = mav0 / "state_groundtruth_estimate0"
+            return
+        _write_text(mav0 / "depth0" / "data.csv", _image_table(self._depths))
+        _write_text(
+            mav0 / "depth0" / "sensor.yaml",
+            _camera_yaml(
+                "depth",
+                f"{about}: planar z-depth along the optical axis of cam0 (the same pixels "
+                "and stamps, the scenario's depth noise included), 16-bit PNG, "
+                "millimetres; 0 is no return (the sky, the far plane, beyond 65.535 m).",
+                T_b_c,
+                spec.camera_rate_hz,
+                camera,
+                f"depth_scale: {DEPTH_SCALE:g} # pixel value per metre\n",
+            ),
+        )
+
+    def _write_ground_truth(self, state: Path, about: str) -> None:
+        """``state_groundtruth_estimate0/``: the body's true state at each image's stamp."""
+        imu = self._spec.scene.imu
         _write_text(state / "data.csv", GROUNDTRUTH_HEADER + "\n" + "".join(self._states))
         _write_text(
             state / "sensor.yaml",
@@ -327,6 +338,10 @@ class EurocExporter:
             "# Sensor extrinsics wrt. the body-frame.\n"
             f"T_BS:\n{_matrix_yaml(np.eye(4))}",
         )
+
+    def _notes(self) -> list[str]:
+        """What the export leaves out or does differently from EuRoC, in words."""
+        imu = self._spec.scene.imu
         notes = []
         if imu is None:
             notes.append("no IMU (imu0/): the scenario has no [imu]")
@@ -341,7 +356,7 @@ class EurocExporter:
             notes.append("the camera slides in this flight: cam0's T_BS is its first mount")
         if self._images and self._images[0] < 0:
             notes.append("the camera clock starts before zero: the first stamps are negative")
-        return ExportResult("euroc", (self._root.name,), note="; ".join(notes))
+        return notes
 
     def abort(self) -> None:
         """Stop the writer (the staging directory is its owner's to remove)."""
