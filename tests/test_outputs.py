@@ -433,3 +433,29 @@ def test_a_run_removes_only_its_own_temporary_files(tmp_path, two_pairs):
     assert sorted(p.name for p in out.iterdir()) == sorted(
         [outputs.LOCK_NAME, "s.json", "s.rrd", *USER_FILES]
     )
+
+
+def test_signals_held_deliver_a_signal_after_the_block_to_the_handler_it_was_for():
+    """A SIGTERM sent inside ``signals_held`` reaches the handler installed before the block,
+    once, after the block's last statement ran; the handler is back in place afterwards."""
+    import signal as signal_module
+
+    from scenarios.record.outputs import signals_held
+
+    events: list[str] = []
+
+    def handler(signum, frame):
+        events.append(f"handled {signal_module.Signals(signum).name}")
+
+    previous = signal_module.signal(signal_module.SIGTERM, handler)
+    try:
+        with signals_held():
+            os.kill(os.getpid(), signal_module.SIGTERM)
+            for _ in range(1000):  # bytecodes enough for a handler to have run, were it free
+                pass
+            events.append("block done")
+        events.append("after")
+        assert events == ["block done", "handled SIGTERM", "after"]
+        assert signal_module.getsignal(signal_module.SIGTERM) is handler
+    finally:
+        signal_module.signal(signal_module.SIGTERM, previous)

@@ -1228,3 +1228,33 @@ def test_a_restarted_sweep_removes_only_the_plots_it_makes(tmp_path, sweep_here)
     assert again.returncode == 1, again.stderr
     assert notes.read_text() == "mine"
     assert sorted(p.name for p in notes.parent.iterdir()) == sorted([*made, notes.name])
+
+
+def test_a_signal_right_after_an_episode_is_journalled_leaves_tables_that_agree(
+    sweep_here, tmp_path, monkeypatch
+):
+    """SIGTERM delivered the instant an episode's journal entry is written (its file renamed
+    into place, the store not yet told): the episode is in the journal, so the partial
+    summary.json and results.parquet count it too. Without holding the signal over the two
+    steps, the handler's exception lands between them and the derived files lag the journal
+    by one episode."""
+    from scenarios.sweep import store as store_module
+
+    (tmp_path / "tiny.toml").write_text(TINY)
+    real_write = store_module._write_text
+    sent = []
+
+    def write_then_signal(path: Path, text: str) -> None:
+        real_write(path, text)
+        if path.parent.name == "episodes" and not sent:
+            sent.append(path.name)
+            os.kill(os.getpid(), signal.SIGTERM)  # handled at the next bytecode, in this thread
+
+    monkeypatch.setattr(store_module, "_write_text", write_then_signal)
+    proc = sweep_here("tiny.toml", "--out", "cut", "--workers", "0", cwd=tmp_path)
+    assert sent and proc.returncode == 128 + signal.SIGTERM, proc.stderr
+    journal = sorted(p.name for p in (tmp_path / "cut" / "episodes").glob("*.json"))
+    assert journal == sent  # stopped right after the first episode
+    partial = json.loads((tmp_path / "cut" / "summary.json").read_text())
+    assert partial["complete"] is False
+    assert partial["episodes"]["done"] == len(journal) == len(rows(tmp_path / "cut"))

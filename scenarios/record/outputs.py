@@ -39,7 +39,9 @@ import logging
 import os
 import re
 import shutil
+import signal
 import stat
+import threading
 import warnings
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
@@ -52,6 +54,7 @@ __all__ = [
     "OutputPair",
     "directory_lock",
     "remove_stale_partials",
+    "signals_held",
     "staging_dir",
     "temp_path",
     "temporary",
@@ -154,6 +157,38 @@ def _fsync(path: Path) -> None:
         os.fsync(fd)
     finally:
         os.close(fd)
+
+
+_HELD_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+@contextlib.contextmanager
+def signals_held() -> Iterator[None]:
+    """SIGINT, SIGTERM and SIGHUP received inside the block take effect at its end.
+
+    For two steps that must not be parted: a file put in place and the record in memory of
+    what it holds (a sweep's journal entry and its episode). A command's handlers raise an
+    exception in the main thread at the next bytecode (``scenarios.commands.common``), which
+    can land between the two. Blocking the signals (``pthread_sigmask``) would not do: any
+    other thread of the process (Ray's, Rerun's) takes the signal instead and Python runs the
+    handler in the main thread all the same. So each is caught here and, once the block is
+    done and the previous handlers are back, sent again (``signal.raise_signal``) to them.
+    Outside the main thread (where handlers cannot be set) the block runs as it is.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught: list[int] = []
+    previous = {s: signal.getsignal(s) for s in _HELD_SIGNALS}
+    for s in _HELD_SIGNALS:
+        signal.signal(s, lambda signum, frame: caught.append(signum))
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+        for signum in dict.fromkeys(caught):  # each once, in the order they came
+            signal.raise_signal(signum)
 
 
 def write_atomic(path: Path, write: Callable[[Path], None]) -> None:

@@ -379,8 +379,12 @@ class SweepStore:
             "estimates": episode.estimates,
         }
         path = self.dir / "episodes" / _episode_file(episode.point, episode.seed)
-        _write_text(path, json.dumps(entry, allow_nan=True))
-        self.episodes[episode.point, episode.seed] = episode
+        text = json.dumps(entry, allow_nan=True)
+        # The journal is the record: a stop between the entry and the dict would leave the
+        # tables and summary written at the stop one episode short of it.
+        with outputs.signals_held():
+            _write_text(path, text)
+            self.episodes[episode.point, episode.seed] = episode
         # Rebuilding costs time in proportion to the rows: at most ~5% of the sweep's.
         if time.monotonic() - self._flushed_at > max(FLUSH_EVERY_S, 20.0 * self._flush_cost_s):
             self.write_tables()
