@@ -258,9 +258,8 @@ def _known_height_pixel_pose_jacobian(
 
     Parameters
     ----------
-    camera : PinholeCamera
-    T_w_c : np.ndarray, shape (4, 4)
-        The camera's believed pose.
+    camera, T_w_c : PinholeCamera, np.ndarray of shape (4, 4)
+        The camera and its believed pose.
     c, a, g : np.ndarray, shape (3,)
         The camera's centre (metres), the apex's and the bottom's unit rays, world frame.
     apex, bottom : np.ndarray, shape (2,)
