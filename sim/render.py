@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from sim import names
-from sim.config import RENDER_QUALITY
+from sim.config import RENDER_QUALITY, RenderQuality
 from sim.gl import create_gl_context, mujoco
 from sim.world import World
 from vnav.camera import PinholeCamera
@@ -187,7 +187,7 @@ class Renderer:
         self._ray_cache: dict[float, np.ndarray] = {}
         self._sky_cache: dict[tuple[float, float], np.ndarray] = {}
 
-    def _open_contexts(self, gl_context: Any, settings: Any) -> None:
+    def _open_contexts(self, gl_context: Any, settings: RenderQuality) -> None:
         """Make (or take and make current) the OpenGL context, then the rendering context.
 
         Parameters
