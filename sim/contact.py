@@ -170,15 +170,7 @@ def cone_clearance(world: World, distmax_m: float = math.inf, drone_geom_ids=Non
     distmax = float(distmax_m)
     if not distmax > 0.0:  # also NaN
         raise ValueError(f"distmax_m must be positive, got {distmax_m!r}")
-    if drone_geom_ids is None:
-        drone = world.drone_geom_ids
-    else:
-        drone = np.asarray(drone_geom_ids, dtype=np.int64).ravel()
-        if drone.size == 0 or not np.isin(drone, world.drone_geom_ids).all():
-            raise ValueError(
-                f"drone_geom_ids must be geom ids of the drone ({world.drone_geom_ids.tolist()}), "
-                f"got {drone.tolist()}"
-            )
+    drone = _drone_geoms(world, drone_geom_ids)
     m, d = world.model, world.data
     cones = world.cone_geom_ids  # (N, 2)
     n_cones = cones.shape[0]
@@ -188,20 +180,9 @@ def cone_clearance(world: World, distmax_m: float = math.inf, drone_geom_ids=Non
     nearest = [-1] * n_cones  # geom id of the nearest drone geom
     if n_cones == 0:
         return ConeClearance(distance, p_drone, p_cone, ())
-    # A lower bound of each pair's signed distance: that of the drone geom's bounding sphere
-    # to the cone geom's bounding box (MuJoCo's geom_aabb, in the geom's frame), the box's
-    # signed distance function at the sphere's centre minus its radius. Distance and
-    # penetration depth are monotone in the shapes, so the pair can be no closer (nor deeper).
+    bound = _distance_lower_bounds(world, drone, cones)
     # The pairs are measured lowest bound first; one whose bound exceeds the best distance so
     # far cannot be the closest.
-    flat = cones.ravel()
-    R_w_g = d.geom_xmat[flat].reshape(-1, 3, 3)  # (2 N, 3, 3)
-    aabb = m.geom_aabb[flat]  # (2 N, 6): centre, half sizes
-    rel_w = d.geom_xpos[drone][None, :, :] - d.geom_xpos[flat][:, None, :]  # (2 N, G, 3)
-    rel_g = np.einsum("kgi,kij->kgj", rel_w, R_w_g) - aabb[:, None, :3]
-    excess = np.abs(rel_g) - aabb[:, None, 3:]
-    sdf = np.linalg.norm(np.maximum(excess, 0.0), axis=-1) + np.minimum(excess.max(axis=-1), 0.0)
-    bound = (sdf - m.geom_rbound[drone][None, :]).reshape(n_cones, 2, drone.size)
     fromto = np.zeros(6)
     for i in range(n_cones):
         b = bound[i].ravel()  # (2 G,): cone geom major
@@ -218,3 +199,66 @@ def cone_clearance(world: World, distmax_m: float = math.inf, drone_geom_ids=Non
                 nearest[i] = g_drone
     names = tuple(m.geom(g).name if g >= 0 else "" for g in nearest)
     return ConeClearance(distance, p_drone, p_cone, names)
+
+
+def _drone_geoms(world: World, drone_geom_ids) -> np.ndarray:
+    """The drone geoms to measure from: all of the drone's by default, else those given.
+
+    Parameters
+    ----------
+    world : World
+    drone_geom_ids : array_like of int or None
+        Geom ids, each one of ``world.drone_geom_ids``; None: all of them.
+
+    Returns
+    -------
+    np.ndarray, shape (G,), int
+        Geom ids.
+
+    Raises
+    ------
+    ValueError
+        If ``drone_geom_ids`` is empty or holds a geom id that is not one of the drone's.
+    """
+    if drone_geom_ids is None:
+        return world.drone_geom_ids
+    drone = np.asarray(drone_geom_ids, dtype=np.int64).ravel()
+    if drone.size == 0 or not np.isin(drone, world.drone_geom_ids).all():
+        raise ValueError(
+            f"drone_geom_ids must be geom ids of the drone ({world.drone_geom_ids.tolist()}), "
+            f"got {drone.tolist()}"
+        )
+    return drone
+
+
+def _distance_lower_bounds(world: World, drone: np.ndarray, cones: np.ndarray) -> np.ndarray:
+    """A lower bound of the signed distance of each drone geom to each cone geom.
+
+    The bound is that of the drone geom's bounding sphere to the cone geom's bounding box
+    (MuJoCo's ``geom_aabb``, in the geom's frame): the box's signed distance function at the
+    sphere's centre minus its radius. Distance and penetration depth are monotone in the
+    shapes, so the pair can be no closer (nor deeper).
+
+    Parameters
+    ----------
+    world : World
+        Its current state places the geoms.
+    drone : np.ndarray, shape (G,), int
+        The drone's geom ids.
+    cones : np.ndarray, shape (N, 2), int
+        Each cone's two geom ids (``world.cone_geom_ids``).
+
+    Returns
+    -------
+    np.ndarray, shape (N, 2, G)
+        Metres, by cone, cone geom, drone geom.
+    """
+    m, d = world.model, world.data
+    flat = cones.ravel()
+    R_w_g = d.geom_xmat[flat].reshape(-1, 3, 3)  # (2 N, 3, 3)
+    aabb = m.geom_aabb[flat]  # (2 N, 6): centre, half sizes
+    rel_w = d.geom_xpos[drone][None, :, :] - d.geom_xpos[flat][:, None, :]  # (2 N, G, 3)
+    rel_g = np.einsum("kgi,kij->kgj", rel_w, R_w_g) - aabb[:, None, :3]
+    excess = np.abs(rel_g) - aabb[:, None, 3:]
+    sdf = np.linalg.norm(np.maximum(excess, 0.0), axis=-1) + np.minimum(excess.max(axis=-1), 0.0)
+    return (sdf - m.geom_rbound[drone][None, :]).reshape(cones.shape[0], 2, drone.size)

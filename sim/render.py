@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from sim import names
-from sim.config import RENDER_QUALITY
+from sim.config import RENDER_QUALITY, RenderQuality
 from sim.gl import create_gl_context, mujoco
 from sim.world import World
 from vnav.camera import PinholeCamera
@@ -75,6 +75,63 @@ def _tan_half_fovy(scene: mujoco.MjvScene) -> float:
     return round((cam.frustum_top - cam.frustum_bottom) / 2.0 / cam.frustum_near, 12)
 
 
+def _image_size(world: World, width: int | None, height: int | None) -> tuple[int, int]:
+    """The rendered image's size: the onboard camera's unless given, checked against the
+    model's off-screen buffer.
+
+    Parameters
+    ----------
+    world : World
+        Its camera's configured size is the default; its model's ``offwidth`` and
+        ``offheight`` the limit.
+    width, height : int or None
+        The size asked for, pixels.
+
+    Returns
+    -------
+    width, height : int
+        Pixels.
+
+    Raises
+    ------
+    ValueError
+        If either is not positive or does not fit the off-screen buffer.
+    """
+    model = world.model
+    width = int(width if width is not None else world.config.camera.width)
+    height = int(height if height is not None else world.config.camera.height)
+    if not 0 < width <= model.vis.global_.offwidth:
+        raise ValueError(
+            f"width must be in [1, {model.vis.global_.offwidth}] (the off-screen buffer), "
+            f"got {width}"
+        )
+    if not 0 < height <= model.vis.global_.offheight:
+        raise ValueError(
+            f"height must be in [1, {model.vis.global_.offheight}] (the off-screen buffer), "
+            f"got {height}"
+        )
+    return width, height
+
+
+def _visual_option(show_drone: bool) -> mujoco.MjvOption:
+    """What a view draws: the drone's geom group or not, and no sites.
+
+    Parameters
+    ----------
+    show_drone : bool
+        Draw ``names.DRONE_GEOM_GROUP`` (external views) or leave it out (the onboard camera:
+        a real camera does not image its own housing).
+
+    Returns
+    -------
+    mujoco.MjvOption
+    """
+    option = mujoco.MjvOption()
+    option.geomgroup[names.DRONE_GEOM_GROUP] = int(show_drone)
+    option.sitegroup[:] = 0
+    return option
+
+
 class Renderer:
     """Renders a ``World``'s cameras off-screen at the configured resolution.
 
@@ -111,24 +168,36 @@ class Renderer:
         self._owns_gl = gl_context is None
         self.world = world
         model = world.model
-        self.width = int(width if width is not None else world.config.camera.width)
-        self.height = int(height if height is not None else world.config.camera.height)
-        if not 0 < self.width <= model.vis.global_.offwidth:
-            raise ValueError(
-                f"width must be in [1, {model.vis.global_.offwidth}] (the off-screen buffer), "
-                f"got {self.width}"
-            )
-        if not 0 < self.height <= model.vis.global_.offheight:
-            raise ValueError(
-                f"height must be in [1, {model.vis.global_.offheight}] (the off-screen buffer), "
-                f"got {self.height}"
-            )
+        self.width, self.height = _image_size(world, width, height)
         quality = quality if quality is not None else world.config.render_quality
         if quality not in RENDER_QUALITY:
             raise ValueError(f"quality must be one of {list(RENDER_QUALITY)}, got {quality!r}")
         self.quality = quality
         settings = RENDER_QUALITY[quality]
+        self._open_contexts(gl_context, settings)
 
+        self._scene = mujoco.MjvScene(model, maxgeom=scene_geoms(model))
+        self._rect = mujoco.MjrRect(0, 0, self.width, self.height)
+        self._rgb = np.empty((self.height, self.width, 3), dtype=np.uint8)
+        self._depth = np.empty((self.height, self.width), dtype=np.float32)
+        self._onboard_option = _visual_option(show_drone=False)
+        self._external_option = _visual_option(show_drone=True)
+
+        self._shadows = settings.shadows
+        self._ray_cache: dict[float, np.ndarray] = {}
+        self._sky_cache: dict[tuple[float, float], np.ndarray] = {}
+
+    def _open_contexts(self, gl_context: Any, settings: RenderQuality) -> None:
+        """Make (or take and make current) the OpenGL context, then the rendering context.
+
+        Parameters
+        ----------
+        gl_context : GLContext or None
+            The caller's context to draw in; None: a new one of the renderer's own.
+        settings : RenderQuality
+            The quality's shadow map size and multisampling (``sim.config.RENDER_QUALITY``).
+        """
+        model = self.world.model
         if gl_context is None:
             self._gl = create_gl_context(self.width, self.height)
         else:
@@ -144,22 +213,6 @@ class Renderer:
             model.vis.quality.shadowsize, model.vis.quality.offsamples = saved
         mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN.value, self._con)
         self._con.readDepthMap = mujoco.mjtDepthMap.mjDEPTH_ZEROFAR
-
-        self._scene = mujoco.MjvScene(model, maxgeom=scene_geoms(model))
-        self._rect = mujoco.MjrRect(0, 0, self.width, self.height)
-        self._rgb = np.empty((self.height, self.width, 3), dtype=np.uint8)
-        self._depth = np.empty((self.height, self.width), dtype=np.float32)
-
-        self._onboard_option = mujoco.MjvOption()
-        self._onboard_option.geomgroup[names.DRONE_GEOM_GROUP] = 0
-        self._onboard_option.sitegroup[:] = 0
-        self._external_option = mujoco.MjvOption()
-        self._external_option.geomgroup[names.DRONE_GEOM_GROUP] = 1
-        self._external_option.sitegroup[:] = 0
-
-        self._shadows = settings.shadows
-        self._ray_cache: dict[float, np.ndarray] = {}
-        self._sky_cache: dict[tuple[float, float], np.ndarray] = {}
 
     # ---------------------------------------------------------------- lifecycle
     def close(self) -> None:
@@ -251,20 +304,11 @@ class Renderer:
         if show_drone is None:
             show_drone = not onboard
         option = self._external_option if show_drone else self._onboard_option
-        model, data = self.world.model, self.world.data
+        data = self.world.data
         self._gl.make_current()
         if not self._owns_gl:  # another renderer in this context may have bound its buffer
             mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN.value, self._con)
-        scene = self._scene
-        mujoco.mjv_updateScene(
-            model, data, option, None, cam, mujoco.mjtCatBit.mjCAT_ALL.value, scene
-        )
-        while scene.ngeom >= scene.maxgeom:  # full: something may be left out; grow, redraw
-            logger.warning("scene geom buffer of %d full: doubled", scene.maxgeom)
-            self._scene = scene = mujoco.MjvScene(model, maxgeom=2 * scene.maxgeom)
-            mujoco.mjv_updateScene(
-                model, data, option, None, cam, mujoco.mjtCatBit.mjCAT_ALL.value, scene
-            )
+        scene = self._update_scene(option, cam)
         scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = self._shadows
         scene.flags[mujoco.mjtRndFlag.mjRND_SEGMENT] = False
         scene.flags[mujoco.mjtRndFlag.mjRND_IDCOLOR] = False
@@ -280,6 +324,34 @@ class Renderer:
         if segmentation:
             seg = self._segmentation(scene)
         return RenderedImage(rgb=rgb, depth=depth_m, segmentation=seg, time_s=float(data.time))
+
+    def _update_scene(self, option: mujoco.MjvOption, cam: mujoco.MjvCamera) -> mujoco.MjvScene:
+        """Draw the current state into the scene, doubling its geom buffer while it is full.
+
+        Parameters
+        ----------
+        option : mujoco.MjvOption
+            Which geom and site groups are drawn (onboard or external).
+        cam : mujoco.MjvCamera
+            The camera the scene is drawn from.
+
+        Returns
+        -------
+        mujoco.MjvScene
+            The renderer's scene (a larger one, kept, if the old one was full).
+        """
+        model, data = self.world.model, self.world.data
+        scene = self._scene
+        mujoco.mjv_updateScene(
+            model, data, option, None, cam, mujoco.mjtCatBit.mjCAT_ALL.value, scene
+        )
+        while scene.ngeom >= scene.maxgeom:  # full: something may be left out; grow, redraw
+            logger.warning("scene geom buffer of %d full: doubled", scene.maxgeom)
+            self._scene = scene = mujoco.MjvScene(model, maxgeom=2 * scene.maxgeom)
+            mujoco.mjv_updateScene(
+                model, data, option, None, cam, mujoco.mjtCatBit.mjCAT_ALL.value, scene
+            )
+        return scene
 
     def _linearize(self, raw: np.ndarray) -> np.ndarray:
         """Reversed-Z depth buffer -> planar z-depth in metres (as mujoco.Renderer does)."""

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from sim import names
-from sim.config import RENDER_QUALITY, SceneConfig
+from sim.config import RENDER_QUALITY, CameraConfig, SceneConfig
 from sim.gl import mujoco
 from vnav import frames, quat, se3
 from vnav.camera import PinholeCamera
@@ -118,7 +118,41 @@ def build_spec(cfg: SceneConfig, cone: ConeModel = TRAFFIC_CONE) -> mujoco.MjSpe
     """
     spec = mujoco.MjSpec.from_file(str(models_dir() / "scene.xml"))
     spec.option.timestep = cfg.timestep_s
+    _set_visual(spec, cfg)
 
+    # The plane is drawn as a grid of quads this many metres wide: 1 m quads over a 400 m
+    # plane cost ~8 ms per 640x480 image on a CPU renderer; 10 m quads cost ~1 ms.
+    ground = spec.geom(names.GROUND_GEOM)
+    ground.size = [cfg.ground_size_m, cfg.ground_size_m, GROUND_GRID_SPACING_M]
+
+    # Drone start pose (the free joint's initial qpos comes from the body pose).
+    drone = spec.body(names.DRONE_BODY)
+    drone.pos = list(cfg.start_position_w)
+    drone.quat = list(quat.xyzw_to_wxyz(np.asarray(cfg.start_quat_xyzw, dtype=np.float64)))
+    _add_cameras(drone, cfg.camera)
+
+    # The IMU site (MuJoCo's accelerometer and gyro read there) at the true mount: the
+    # model's site stays at the body origin when the scene declares no IMU.
+    if cfg.imu is not None:
+        T_b_i = cfg.imu.T_b_i
+        imu = spec.site(names.IMU_SITE)
+        imu.pos = list(T_b_i[:3, 3])
+        imu.quat = list(_mat_to_quat_wxyz(T_b_i[:3, :3]))
+
+    add_cones(spec, cfg.cones_w, cone)
+    return spec
+
+
+def _set_visual(spec: mujoco.MjSpec, cfg: SceneConfig) -> None:
+    """The rendering settings: off-screen buffer, clipping planes in metres, shadows, quality.
+
+    Parameters
+    ----------
+    spec : mujoco.MjSpec
+        The scene, edited in place.
+    cfg : SceneConfig
+        The scene: its camera's image size, clipping distances and render quality.
+    """
     # Off-screen buffer at least as large as the configured image; clipping planes in metres
     # (MuJoCo scales znear/zfar by the model extent, which we fix).
     cam_cfg = cfg.camera
@@ -134,16 +168,18 @@ def build_spec(cfg: SceneConfig, cone: ConeModel = TRAFFIC_CONE) -> mujoco.MjSpe
     spec.visual.quality.shadowsize = quality.shadowsize
     spec.visual.quality.offsamples = quality.offsamples
 
-    # The plane is drawn as a grid of quads this many metres wide: 1 m quads over a 400 m
-    # plane cost ~8 ms per 640x480 image on a CPU renderer; 10 m quads cost ~1 ms.
-    ground = spec.geom(names.GROUND_GEOM)
-    ground.size = [cfg.ground_size_m, cfg.ground_size_m, GROUND_GRID_SPACING_M]
 
-    # Drone start pose (the free joint's initial qpos comes from the body pose).
-    drone = spec.body(names.DRONE_BODY)
-    drone.pos = list(cfg.start_position_w)
-    drone.quat = list(quat.xyzw_to_wxyz(np.asarray(cfg.start_quat_xyzw, dtype=np.float64)))
+def _add_cameras(drone: mujoco.MjsBody, cam_cfg: CameraConfig) -> None:
+    """The onboard camera at its mount and the chase camera, both on the drone's body.
 
+    Parameters
+    ----------
+    drone : mujoco.MjsBody
+        The drone's body in the spec, edited in place.
+    cam_cfg : CameraConfig
+        The onboard camera: its mount ``T_b_c`` (optical frame, ``docs/CONVENTIONS.md``) and
+        its vertical field of view.
+    """
     # Onboard camera: optical R_b_c from the mount, turned into MuJoCo's camera convention.
     R_b_glc = cam_cfg.T_b_c[:3, :3] @ frames.R_GLC_RDF
     drone.add_camera(
@@ -166,17 +202,6 @@ def build_spec(cfg: SceneConfig, cone: ConeModel = TRAFFIC_CONE) -> mujoco.MjSpe
         fovy=50.0,
     )
     chase.mode = mujoco.mjtCamLight.mjCAMLIGHT_TRACK
-
-    # The IMU site (MuJoCo's accelerometer and gyro read there) at the true mount: the
-    # model's site stays at the body origin when the scene declares no IMU.
-    if cfg.imu is not None:
-        T_b_i = cfg.imu.T_b_i
-        imu = spec.site(names.IMU_SITE)
-        imu.pos = list(T_b_i[:3, 3])
-        imu.quat = list(_mat_to_quat_wxyz(T_b_i[:3, :3]))
-
-    add_cones(spec, cfg.cones_w, cone)
-    return spec
 
 
 def add_cones(

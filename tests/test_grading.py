@@ -11,6 +11,7 @@ import textwrap
 import numpy as np
 import pytest
 from helpers import plugin_args
+from user_functions import SHARED, TRANSPOSED
 
 from scenarios.cli import main
 from scenarios.grading import verdict as grading
@@ -20,24 +21,7 @@ DURATION_S = 2.0
 """frame-problem's first 2 s: a hover then the start of its yaw (from 1 s), enough for the
 transposed rotation to be wrong by metres."""
 
-USER_FUNCTIONS = textwrap.dedent("""\
-    import numpy as np
-
-
-    def transposed(obs):
-        # The lecture's classic mistake: R_w_b^T where R_w_b is meant.
-        T_w_b = obs.T_w_b.copy()
-        T_w_b[:3, :3] = T_w_b[:3, :3].T
-        return (T_w_b @ obs.T_b_c @ np.append(obs.p_c, 1.0))[:3]
-
-
-    def raises(obs):
-        raise RuntimeError(f"no idea at t = {obs.t_s:.3f}")
-
-
-    def nothing(obs):
-        return None
-""")
+USER_FUNCTIONS = "import numpy as np\n\n\n" + SHARED
 
 
 @pytest.fixture
@@ -185,7 +169,8 @@ def test_bad_input_is_a_value_error_before_anything_flies(call, message):
 
 # ------------------------------------------------------------------------- the plugin
 
-INNER_TESTS = textwrap.dedent(f"""\
+INNER_TESTS = (
+    textwrap.dedent(f"""\
     import numpy as np
     import pytest
 
@@ -194,10 +179,9 @@ INNER_TESTS = textwrap.dedent(f"""\
     DURATION_S = {DURATION_S}
 
 
-    def transposed(obs):
-        T_w_b = obs.T_w_b.copy()
-        T_w_b[:3, :3] = T_w_b[:3, :3].T
-        return (T_w_b @ obs.T_b_c @ np.append(obs.p_c, 1.0))[:3]
+""")
+    + TRANSPOSED
+    + textwrap.dedent("""\
 
 
     def test_the_reference_passes(vnav_judge):
@@ -218,6 +202,7 @@ INNER_TESTS = textwrap.dedent(f"""\
         verdict = vnav_judge(offset, "frame-problem", seed=1, duration_s=DURATION_S)
         assert verdict.passed, verdict.explain()
 """)
+)
 
 
 @pytest.fixture

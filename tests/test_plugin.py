@@ -16,6 +16,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from user_functions import SHARED
 
 from scenarios import pipeline
 from scenarios.cli import main
@@ -33,7 +34,8 @@ from vnav.plugin import (
 
 DURATION = ["--duration", "2"]
 
-USER_FUNCTIONS = textwrap.dedent("""\
+USER_FUNCTIONS = (
+    textwrap.dedent("""\
     import math
     import time
 
@@ -42,19 +44,9 @@ USER_FUNCTIONS = textwrap.dedent("""\
     from vnav.plugin import reference_estimate
 
 
-    def transposed(obs):
-        # The lecture's classic mistake: R_w_b^T where R_w_b is meant.
-        T_w_b = obs.T_w_b.copy()
-        T_w_b[:3, :3] = T_w_b[:3, :3].T
-        return (T_w_b @ obs.T_b_c @ np.append(obs.p_c, 1.0))[:3]
-
-
-    def raises(obs):
-        raise RuntimeError(f"no idea at t = {obs.t_s:.3f}")
-
-
-    def nothing(obs):
-        return None
+""")
+    + SHARED
+    + textwrap.dedent("""\
 
 
     def quits(obs):
@@ -104,6 +96,7 @@ USER_FUNCTIONS = textwrap.dedent("""\
 
     NOT_A_FUNCTION = 3
 """)
+)
 
 
 @pytest.fixture

@@ -163,6 +163,33 @@ def _known_height_jacobian(
 ) -> np.ndarray:
     """``d p_w / d[apex (u, v), bottom (u, v), rho, phi]`` of ``solve_known_height``, (3, 10).
 
+    The derivatives with respect to the two rays (``_known_height_ray_jacobian``), carried to
+    the pixels and to a left perturbation of ``T_w_c`` (``_known_height_pixel_pose_jacobian``).
+    (``tests/test_covariance.py`` checks this against central differences of the solve.)
+
+    The keypoints are held where the image puts them: they also follow the image of the
+    vertical, which the believed attitude sets, but the apex is a tip and the bottom pixel
+    lies on the axis through it, a second-order effect (re-running the whole estimator on
+    turned poses gave the same Jacobian to 3 digits, except where a step moved a pixel across
+    the apex fit's window: a jump, not a slope).
+    """
+    H, s = cone.height_m, cone.base_axis_distance_m
+    a_t = view.ray(float(apex[0]), float(apex[1]))
+    g_t = view.ray(float(bottom[0]), float(bottom[1]))
+    solution = solve_known_height(view.t, a_t, g_t, H, s)
+    assert solution is not None  # the estimator solved these same rays
+    _, alpha, gamma, _ = solution
+    k_a, J_g = _known_height_ray_jacobian(a_t, g_t, alpha, gamma, H, s)
+    return _known_height_pixel_pose_jacobian(
+        camera, T_w_c, view.t, a_t, g_t, apex, bottom, k_a, J_g
+    )
+
+
+def _known_height_ray_jacobian(
+    a: np.ndarray, g: np.ndarray, alpha: float, gamma: float, H: float, s: float
+) -> tuple[list[float], list[list[float]]]:
+    """The known-height point's derivatives with respect to its apex ray and its bottom ray.
+
     The solve is the least-squares ``A x = r`` with ``A = [a, -g]``, ``x = (alpha, gamma)``,
     ``r = (0, 0, H) + s b`` and ``p = c + gamma g + s b``, ``b`` the horizontal unit of ``g``.
     Differentiating the normal equations ``N x = A^T r`` (``N = A^T A``, residual
@@ -174,29 +201,24 @@ def _known_height_jacobian(
       ``D g = 0``), ``k_g = ((a.g)(s D a + gamma a) + (a.a)(e - gamma g)) / det N`` and
       ``dp/dg = g k_g^T + gamma I + s D``.
 
-    Then a pixel: ``a = r / |r|`` with ``r = R_w_c K^-1 [u, v, 1]`` and ``p`` independent of
-    a ray's length, so ``dp/d(u, v) = J_a [r_0 / fx, r_1 / fy] / |r|`` (``r_i`` the columns of
-    ``R_w_c``); a left perturbation of ``T_w_c``: ``c -> c + rho + phi x c``,
-    ``a -> a + phi x a``, ``g -> g + phi x g``, so ``dp/drho = I`` and
-    ``dp/dphi = -(c^ + J_a a^ + J_g g^)``. (``tests/test_covariance.py`` checks this against
-    central differences of the solve.)
+    Parameters
+    ----------
+    a, g : np.ndarray, shape (3,)
+        The apex's and the bottom's unit rays, world frame.
+    alpha, gamma : float
+        The solve's lengths along ``a`` and ``g``, metres.
+    H, s : float
+        The cone's height and the distance of its base's bottom point from its axis, metres.
 
-    The keypoints are held where the image puts them: they also follow the image of the
-    vertical, which the believed attitude sets, but the apex is a tip and the bottom pixel
-    lies on the axis through it, a second-order effect (re-running the whole estimator on
-    turned poses gave the same Jacobian to 3 digits, except where a step moved a pixel across
-    the apex fit's window: a jump, not a slope).
+    Returns
+    -------
+    k_a : list of float, 3 items
+        ``d gamma / da``: ``dp/da = g k_a^T``.
+    J_g : list of 3 lists of 3 floats
+        ``dp/dg``, row major.
     """
-    H, s = cone.height_m, cone.base_axis_distance_m
-    c = view.t
-    a_t = view.ray(float(apex[0]), float(apex[1]))
-    g_t = view.ray(float(bottom[0]), float(bottom[1]))
-    solution = solve_known_height(c, a_t, g_t, H, s)
-    assert solution is not None  # the estimator solved these same rays
-    _, alpha, gamma, _ = solution
     # In plain floats: some 200 operations, where numpy would pay its per-call cost on ~30
     # arrays of 3 to 9 numbers.
-    a, g = a_t, g_t
     norm_h = math.hypot(g[0], g[1])
     bx, by = g[0] / norm_h, g[1] / norm_h
     r = (s * bx, s * by, H)
@@ -212,11 +234,47 @@ def _known_height_jacobian(
     for i in range(2):
         for j in range(2):
             J_g[i][j] += sD[i][j]
+    return k_a, J_g
+
+
+def _known_height_pixel_pose_jacobian(
+    camera: PinholeCamera,
+    T_w_c: np.ndarray,
+    c: np.ndarray,
+    a: np.ndarray,
+    g: np.ndarray,
+    apex: np.ndarray,
+    bottom: np.ndarray,
+    k_a: list[float],
+    J_g: list[list[float]],
+) -> np.ndarray:
+    """The rays' derivatives carried to the two pixels and to a perturbation of ``T_w_c``.
+
+    A pixel: ``a = r / |r|`` with ``r = R_w_c K^-1 [u, v, 1]`` and ``p`` independent of a
+    ray's length, so ``dp/d(u, v) = J_a [r_0 / fx, r_1 / fy] / |r|`` (``r_i`` the columns of
+    ``R_w_c``); a left perturbation of ``T_w_c``: ``c -> c + rho + phi x c``,
+    ``a -> a + phi x a``, ``g -> g + phi x g``, so ``dp/drho = I`` and
+    ``dp/dphi = -(c^ + J_a a^ + J_g g^)``.
+
+    Parameters
+    ----------
+    camera, T_w_c : PinholeCamera, np.ndarray of shape (4, 4)
+        The camera and its believed pose.
+    c, a, g : np.ndarray, shape (3,)
+        The camera's centre (metres), the apex's and the bottom's unit rays, world frame.
+    apex, bottom : np.ndarray, shape (2,)
+        The two keypoints, pixels.
+    k_a, J_g : list
+        The rays' derivatives (``_known_height_ray_jacobian``).
+
+    Returns
+    -------
+    np.ndarray, shape (3, 10)
+        ``d p_w / d[apex (u, v), bottom (u, v), rho, phi]``.
+    """
     # The unit ray a = r / |r| of r = R_w_c K^-1 [u, v, 1]: p does not depend on a ray's
     # length, so dp/dr = (dp/da) / |r|.
-    (r00, r01, _, _), (r10, r11, _, _), (r20, r21, _, _), _ = T_w_c.tolist()
-    col_u = (r00 / camera.fx, r10 / camera.fx, r20 / camera.fx)
-    col_v = (r01 / camera.fy, r11 / camera.fy, r21 / camera.fy)
+    col_u, col_v = _pixel_ray_steps(camera, T_w_c)
     n_a, n_b = _pixel_ray_length(camera, apex), _pixel_ray_length(camera, bottom)
     apex_u, apex_v = _dot(k_a, col_u) / n_a, _dot(k_a, col_v) / n_a
     k_a_x_a = _cross(k_a, a)
@@ -239,6 +297,29 @@ def _known_height_jacobian(
             + [-(skew_c[i][j] + g[i] * k_a_x_a[j] + turn[j]) for j in range(3)]
         )
     return np.array(rows)
+
+
+def _pixel_ray_steps(
+    camera: PinholeCamera, T_w_c: np.ndarray
+) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """How a pixel's ray ``r = R_w_c K^-1 [u, v, 1]`` moves per pixel in u and in v.
+
+    Parameters
+    ----------
+    camera : PinholeCamera
+    T_w_c : np.ndarray, shape (4, 4)
+        The camera's pose.
+
+    Returns
+    -------
+    col_u, col_v : tuple of 3 floats
+        ``dr/du = r_0 / fx`` and ``dr/dv = r_1 / fy`` (``r_i`` the columns of ``R_w_c``),
+        world frame.
+    """
+    (r00, r01, _, _), (r10, r11, _, _), (r20, r21, _, _), _ = T_w_c.tolist()
+    col_u = (r00 / camera.fx, r10 / camera.fx, r20 / camera.fx)
+    col_v = (r01 / camera.fy, r11 / camera.fy, r21 / camera.fy)
+    return col_u, col_v
 
 
 def _dot(x: Sequence[float], y: Sequence[float]) -> float:

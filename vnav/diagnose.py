@@ -659,6 +659,47 @@ def diagnose(
         a finite number > 0.
     """
     tol = _tolerance(tolerance_m)
+    p_c, T_w_b, T_b_c, p_w_user, newest = _diagnose_inputs(
+        p_c, T_w_b, T_b_c, p_w_user, T_w_b_newest
+    )
+    has = ~np.isnan(p_w_user[:, 0])
+    n_est = int(has.sum())
+    if n_est == 0:
+        return _no_estimates(tol)
+    # Only the observations with an estimate are tested (and paid for).
+    chain = _chain(p_c[has], T_w_b[has], T_b_c[has], None if newest is None else newest[has])
+    return _verdict(_residuals(chain, p_w_user[has]), tol, n_est)
+
+
+def _diagnose_inputs(
+    p_c: ArrayLike,
+    T_w_b: ArrayLike,
+    T_b_c: ArrayLike,
+    p_w_user: ArrayLike,
+    T_w_b_newest: ArrayLike | None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+    """``diagnose``'s observations, checked and shaped: one row (or pose) per observation.
+
+    Parameters
+    ----------
+    p_c, T_w_b, T_b_c, p_w_user, T_w_b_newest
+        As ``diagnose`` takes them.
+
+    Returns
+    -------
+    p_c : np.ndarray, shape (N, 3)
+    T_w_b : np.ndarray, shape (N, 4, 4)
+    T_b_c : np.ndarray, shape (N, 4, 4)
+    p_w_user : np.ndarray, shape (N, 3)
+        Rows of NaN where the user gave no estimate.
+    newest : np.ndarray, shape (N, 4, 4), or None
+        Without ``T_w_b_newest``, None.
+
+    Raises
+    ------
+    ValueError
+        As ``diagnose`` says, and if ``p_c`` holds no observation.
+    """
     p_c = _points(p_c, "p_c", None, nan_rows=False)
     n = p_c.shape[0]
     if n == 0:
@@ -669,14 +710,25 @@ def diagnose(
     newest = None
     if T_w_b_newest is not None:
         newest = _poses(T_w_b_newest, "T_w_b_newest", n, single=False, nan_rows=True)
+    return p_c, T_w_b, T_b_c, p_w_user, newest
 
-    has = ~np.isnan(p_w_user[:, 0])
-    n_est = int(has.sum())
-    if n_est == 0:
-        return _no_estimates(tol)
-    # Only the observations with an estimate are tested (and paid for).
-    chain = _chain(p_c[has], T_w_b[has], T_b_c[has], None if newest is None else newest[has])
-    user = p_w_user[has]
+
+def _residuals(chain: Chain, user: np.ndarray) -> dict[str, float]:
+    """Each hypothesis's residual: its largest distance from the user's estimates.
+
+    Parameters
+    ----------
+    chain : Chain
+        The observations with an estimate.
+    user : np.ndarray, shape (M, 3)
+        The user's estimates of those, metres.
+
+    Returns
+    -------
+    dict of str to float
+        Metres, by hypothesis name (``inf`` where a prediction is NaN); a hypothesis that
+        cannot be tried (no newest pose) is left out.
+    """
     residuals: dict[str, float] = {}
     for h in HYPOTHESES:
         predicted = h.predict(chain)
@@ -684,7 +736,7 @@ def diagnose(
             continue
         d = np.linalg.norm(predicted - user, axis=1)
         residuals[h.name] = float(np.max(np.where(np.isnan(d), np.inf, d)))
-    return _verdict(residuals, tol, n_est)
+    return residuals
 
 
 def _no_estimates(tol: float) -> Diagnosis:

@@ -470,6 +470,56 @@ class _Track:
         self.view = _Samples(lo, hi, times, rows, steps, stamps, comps, segments)
 
 
+def _stamped_samples(
+    parent: str, child: str, t_s: ArrayLike, T_parent_child: ArrayLike
+) -> tuple[FloatArray, FloatArray]:
+    """``FrameBuffer.set_transform``'s samples, checked: stamps and their transforms.
+
+    Parameters
+    ----------
+    parent, child : str
+        The edge's frame names (for the messages).
+    t_s : float or array_like, shape (N,)
+        Stamps, seconds.
+    T_parent_child : array_like, shape (4, 4) or (N, 4, 4)
+        One transform per stamp.
+
+    Returns
+    -------
+    t : ndarray, shape (N,)
+        The stamps, seconds (one for a float).
+    T : ndarray, shape (4, 4) or (N, 4, 4)
+        The transforms, as given.
+
+    Raises
+    ------
+    ValueError
+        If ``t_s`` has more than one dimension, a stamp is not finite or not increasing, the
+        shapes do not match, or a transform is not rigid.
+    """
+    t = np.asarray(t_s, dtype=np.float64)
+    scalar = t.ndim == 0
+    if t.ndim > 1:
+        raise ValueError(f"t_s must be a float or a 1-D array; got shape {t.shape}")
+    t = t.reshape(-1)
+    T = se3.check_transform(T_parent_child, f"T_{parent}_{child}")
+    expected = (4, 4) if scalar else (len(t), 4, 4)
+    if T.shape != expected:
+        raise ValueError(
+            f"T_{parent}_{child} must have shape {expected} for "
+            f"{'one stamp' if scalar else f'{len(t)} stamps'}; got shape {T.shape}"
+        )
+    if not np.all(np.isfinite(t)):
+        raise ValueError(f"stamps of edge {parent!r} -> {child!r} must be finite; got {t}")
+    if len(t) > 1 and np.any(np.diff(t) <= 0.0):
+        k = int(np.argmax(np.diff(t) <= 0.0))
+        raise ValueError(
+            f"stamps of edge {parent!r} -> {child!r} must increase; got "
+            f"{float(t[k])!r} then {float(t[k + 1])!r} s"
+        )
+    return t, T
+
+
 class FrameBuffer(_Graph):
     """A time-stamped frame graph: static edges and edges with a history of stamped poses.
 
@@ -571,26 +621,7 @@ class FrameBuffer(_Graph):
             )
         if child not in self._tracks or self._parents.get(child) != parent:
             self._check_new_edge(parent, child, "build a new FrameBuffer to re-parent it")
-        t = np.asarray(t_s, dtype=np.float64)
-        scalar = t.ndim == 0
-        if t.ndim > 1:
-            raise ValueError(f"t_s must be a float or a 1-D array; got shape {t.shape}")
-        t = t.reshape(-1)
-        T = se3.check_transform(T_parent_child, f"T_{parent}_{child}")
-        expected = (4, 4) if scalar else (len(t), 4, 4)
-        if T.shape != expected:
-            raise ValueError(
-                f"T_{parent}_{child} must have shape {expected} for "
-                f"{'one stamp' if scalar else f'{len(t)} stamps'}; got shape {T.shape}"
-            )
-        if not np.all(np.isfinite(t)):
-            raise ValueError(f"stamps of edge {parent!r} -> {child!r} must be finite; got {t}")
-        if len(t) > 1 and np.any(np.diff(t) <= 0.0):
-            k = int(np.argmax(np.diff(t) <= 0.0))
-            raise ValueError(
-                f"stamps of edge {parent!r} -> {child!r} must increase; got "
-                f"{float(t[k])!r} then {float(t[k + 1])!r} s"
-            )
+        t, T = _stamped_samples(parent, child, t_s, T_parent_child)
         track = self._tracks.get(child)
         newest = None if track is None or not len(track) else track.view.times[track.view.hi - 1]
         if newest is not None and len(t) and t[0] <= newest:
@@ -670,19 +701,52 @@ class FrameBuffer(_Graph):
         if (source_time_s is None) != (fixed is None):
             raise ValueError("time travel needs both source_time_s and fixed (or neither)")
         if fixed is None:
-            t = None if t_s is None else self._times(t_s, "t_s")
-            if isinstance(t, np.ndarray) and t.size > 1 and np.any(t[1:] < t[:-1]):
-                # Sorted times search faster (see _at); the result is put back in order.
-                order = np.argsort(t)
-                back = np.empty_like(order)
-                back[order] = np.arange(len(order))
-                pose = self._pose(target, source, t[order])
-                return _matrix(
-                    tuple(np.take(np.broadcast_to(c, t.shape), back) for c in pose), t.shape
-                )
-            return _matrix(self._pose(target, source, t), () if t is None else np.shape(t))
+            return self._lookup_at(target, source, t_s)
         if t_s is None:
             raise ValueError("time travel needs t_s, the target's time")
+        return self._lookup_time_travel(target, source, t_s, source_time_s, fixed)
+
+    def _lookup_at(self, target: str, source: str, t_s: ArrayLike | None) -> FloatArray:
+        """``T_target_source`` with both frames at ``t_s`` (``lookup`` without time travel).
+
+        Parameters
+        ----------
+        target, source : str
+            Registered frame names.
+        t_s : float or array_like, shape (N,), or None
+            Seconds, in any order; None only if every edge on the path is static.
+
+        Returns
+        -------
+        ndarray, shape (4, 4), or (N, 4, 4) for an array of times
+            In the order of ``t_s``.
+        """
+        t = None if t_s is None else self._times(t_s, "t_s")
+        if isinstance(t, np.ndarray) and t.size > 1 and np.any(t[1:] < t[:-1]):
+            # Sorted times search faster (see _at); the result is put back in order.
+            order = np.argsort(t)
+            back = np.empty_like(order)
+            back[order] = np.arange(len(order))
+            pose = self._pose(target, source, t[order])
+            return _matrix(tuple(np.take(np.broadcast_to(c, t.shape), back) for c in pose), t.shape)
+        return _matrix(self._pose(target, source, t), () if t is None else np.shape(t))
+
+    def _lookup_time_travel(
+        self, target: str, source: str, t_s: ArrayLike, source_time_s: ArrayLike, fixed: str
+    ) -> FloatArray:
+        """``T_target_fixed(t_s) T_fixed_source(source_time_s)`` (``lookup``'s time travel).
+
+        Parameters
+        ----------
+        target, source, fixed : str
+            Registered frame names; ``fixed`` is assumed not to move between the two times.
+        t_s, source_time_s : float or array_like, shape (N,)
+            The target's and the source's times, seconds; broadcast against each other.
+
+        Returns
+        -------
+        ndarray, shape (4, 4), or (N, 4, 4) for an array of times
+        """
         t_target, t_source = np.broadcast_arrays(
             self._times(t_s, "t_s"), self._times(source_time_s, "source_time_s")
         )

@@ -169,21 +169,19 @@ def localize(
         Left-perturbation covariances of the body pose and of the camera mount
         (docs/CONVENTIONS.md, "Uncertainty"); default zero (known exactly).
     with_covariance : bool
-        False skips the covariances (``cov_w_by_method`` is then empty): for a caller that
-        only wants the points.
+        False skips the covariances (``cov_w_by_method`` then empty), for the points alone.
 
     Returns
     -------
     ConeEstimates
         A method's entry is None when it gives no estimate (see each ``estimate_from_*`` in
-        ``vnav.estimators``), and ``no_estimate`` says why. Every entry is None when the
-        detection touches the image border (``touches_border``, ``NoEstimate.BORDER``): part of
-        the cone may be outside the image (apex or base missing, the depth-image axis fit
-        unconstrained), and no estimate is better than a wrong one. Inputs are still validated
-        first. The naive estimate is built from the best one (``ConeEstimates.best``) in camera
-        coordinates. Every estimate comes with its covariance (``cov_w_by_method``): the
-        camera pose's (``cov_T_w_b`` and ``cov_T_b_c`` composed), the keypoints' and the
-        depth's, first order (``vnav.covariance``).
+        ``vnav.estimators``), and ``no_estimate`` says why. Every entry is None when the detection
+        touches the image border (``touches_border``, ``NoEstimate.BORDER``): part of the cone may
+        be outside the image (apex or base missing, the depth-image axis fit unconstrained), and no
+        estimate is better than a wrong one; inputs are still validated first. The naive estimate is
+        built from the best one (``ConeEstimates.best``) in camera coordinates. Every estimate has
+        its covariance (``cov_w_by_method``): the camera pose's (``cov_T_w_b`` and ``cov_T_b_c``
+        composed), the keypoints' and the depth's, first order (``vnav.covariance``).
 
     Raises
     ------

@@ -327,10 +327,7 @@ def camera_pose_from_cones(
     map seen from where the symmetry holds) is refused rather than guessed.
 
     With exactly 3 cones seen (three apexes admit up to four poses), each also gives its base
-    plate's near bottom edge on the line of sight, seen at ``base_uv``: ``cone_w - s b`` with
-    ``s = ConeModel.base_axis_distance_m`` and ``b`` the horizontal bearing from the camera,
-    which the pose sets; solved from the cones' centres first, then once more with the edges
-    the first pose gives. The 3 cones must not stand on one line.
+    plate's near bottom edge (``_pose_from_three_cones``); they must not stand on one line.
 
     Parameters
     ----------
@@ -358,16 +355,9 @@ def camera_pose_from_cones(
         Fewer than 3 usable detections or cones, 3 cones on one line, no pose that explains
         the detections, or an ambiguous match.
     """
-    C = np.asarray(cones_w, dtype=np.float64)
-    if C.ndim != 2 or C.shape[1] != 3:
-        raise ValueError(f"cones_w must have shape (M, 3), got {C.shape}")
-    if not np.isfinite(C).all():
-        raise ValueError("cones_w must be finite; it holds NaN or inf")
+    C = _cone_map(cones_w)
     apex_w = C + np.array([0.0, 0.0, cone.height_m])
-    usable = [i for i, d in enumerate(detections) if not d.touches_border]
-    for i in usable:
-        if not np.isfinite([*detections[i].apex_uv, *detections[i].base_uv]).all():
-            raise ValueError(f"detections[{i}]: apex_uv and base_uv must be finite")
+    usable = _usable_detections(detections)
     if len(usable) == 3 and len(C) >= 3:
         return _pose_from_three_cones(camera, C, detections, usable, cone)
     if len(usable) < 4 or len(C) < 4:
@@ -376,18 +366,136 @@ def camera_pose_from_cones(
             f"clear of the border and {len(C)} cones in the map"
         )
     uv = np.array([detections[i].apex_uv for i in usable])
-    if T_w_c_guess is not None:
-        guess = se3.check_pose(T_w_c_guess, "T_w_c_guess")
-        guessed = _match(camera, guess, apex_w, uv, GUESS_GATE_PX)
-        gated = _gated_fit(camera, apex_w, uv, {k: c for k, (_, c) in guessed.items()})
-        if gated is not None:
-            result, found = unambiguous_pose(camera, apex_w, uv, *gated, guess)
-            return result, {usable[k]: c for k, c in found.items()}
-    # Seed with the 4 largest detections (nearest, best measured).
-    seeds = sorted(range(len(usable)), key=lambda k: -detections[usable[k]].area_px)[:4]
-    result, found = camera_pose_from_apexes(camera, apex_w, uv, seeds)
-    result, found = unambiguous_pose(camera, apex_w, uv, result, found, T_w_c_guess)
+    areas_px = [detections[i].area_px for i in usable]
+    result, found = _pose_from_apexes(camera, apex_w, uv, areas_px, T_w_c_guess)
     return result, {usable[k]: c for k, c in found.items()}
+
+
+def _pose_from_apexes(
+    camera: PinholeCamera,
+    apex_w: np.ndarray,
+    uv: np.ndarray,
+    areas_px: list[int],
+    T_w_c_guess: np.ndarray | None,
+) -> tuple[PnPResult, dict[int, int]]:
+    """``camera_pose_from_cones`` for 4 or more apexes: matched by a rough pose, else searched.
+
+    Parameters
+    ----------
+    camera : PinholeCamera
+    apex_w : ndarray, shape (M, 3)
+        The map's cone apexes, world frame, metres, M >= 4.
+    uv : ndarray, shape (N, 2)
+        The usable detections' apexes, pixels, N >= 4.
+    areas_px : list of int
+        Their detections' areas, pixels: the 4 largest (nearest, best measured) seed the
+        search.
+    T_w_c_guess : ndarray, shape (4, 4), optional
+        A rough pose (``_pose_from_guess``); the search runs only when it matches too few.
+
+    Returns
+    -------
+    PnPResult
+        The pose refined on every matched apex.
+    matches : dict of int to int
+        Index into ``uv`` -> cone index.
+
+    Raises
+    ------
+    ValueError
+        No pose that explains the detections, or an ambiguous match.
+    """
+    if T_w_c_guess is not None:
+        posed = _pose_from_guess(camera, apex_w, uv, T_w_c_guess)
+        if posed is not None:
+            return posed
+    # Seed with the 4 largest detections (nearest, best measured).
+    seeds = sorted(range(len(uv)), key=lambda k: -areas_px[k])[:4]
+    result, found = camera_pose_from_apexes(camera, apex_w, uv, seeds)
+    return unambiguous_pose(camera, apex_w, uv, result, found, T_w_c_guess)
+
+
+def _cone_map(cones_w: object) -> np.ndarray:
+    """The map's cone base centres, checked.
+
+    Parameters
+    ----------
+    cones_w : array_like, shape (M, 3)
+        Metres, world frame.
+
+    Returns
+    -------
+    ndarray, shape (M, 3), float64
+
+    Raises
+    ------
+    ValueError
+        If the shape is not (M, 3), or a coordinate is NaN or inf.
+    """
+    C = np.asarray(cones_w, dtype=np.float64)
+    if C.ndim != 2 or C.shape[1] != 3:
+        raise ValueError(f"cones_w must have shape (M, 3), got {C.shape}")
+    if not np.isfinite(C).all():
+        raise ValueError("cones_w must be finite; it holds NaN or inf")
+    return C
+
+
+def _usable_detections(detections: Sequence[ConeDetection]) -> list[int]:
+    """The indices of the detections clear of the image border, their keypoints checked.
+
+    Parameters
+    ----------
+    detections : sequence of ConeDetection
+
+    Returns
+    -------
+    list of int
+        In order.
+
+    Raises
+    ------
+    ValueError
+        If a usable detection's ``apex_uv`` or ``base_uv`` is not finite.
+    """
+    usable = [i for i, d in enumerate(detections) if not d.touches_border]
+    for i in usable:
+        if not np.isfinite([*detections[i].apex_uv, *detections[i].base_uv]).all():
+            raise ValueError(f"detections[{i}]: apex_uv and base_uv must be finite")
+    return usable
+
+
+def _pose_from_guess(
+    camera: PinholeCamera, apex_w: np.ndarray, uv: np.ndarray, T_w_c_guess: np.ndarray
+) -> tuple[PnPResult, dict[int, int]] | None:
+    """The pose from the apexes a rough pose matches (mutual nearest within ``GUESS_GATE_PX``).
+
+    Parameters
+    ----------
+    camera : PinholeCamera
+    apex_w : ndarray, shape (M, 3)
+        The map's cone apexes, world frame, metres.
+    uv : ndarray, shape (N, 2)
+        The usable detections' apexes, pixels.
+    T_w_c_guess : ndarray, shape (4, 4)
+        The rough pose.
+
+    Returns
+    -------
+    (PnPResult, dict of int to int) or None
+        The pose and its matches (index into ``uv`` -> cone index); None when fewer than 4
+        apexes match or their fit fails the gate (``_gated_fit``).
+
+    Raises
+    ------
+    ValueError
+        If ``T_w_c_guess`` is not a pose, or the match is ambiguous (``unambiguous_pose``).
+    """
+    guess = se3.check_pose(T_w_c_guess, "T_w_c_guess")
+    guessed = _match(camera, guess, apex_w, uv, GUESS_GATE_PX)
+    gated = _gated_fit(camera, apex_w, uv, {k: c for k, (_, c) in guessed.items()})
+    if gated is None:
+        return None
+    return unambiguous_pose(camera, apex_w, uv, *gated, guess)
 
 
 def _gated_fit(
@@ -531,7 +639,14 @@ def _pose_from_three_cones(
     usable: list[int],
     cone: ConeModel,
 ) -> tuple[PnPResult, dict[int, int]]:
-    """``camera_pose_from_cones`` for exactly 3 detections: apexes and base edges."""
+    """``camera_pose_from_cones`` for exactly 3 detections: apexes and base edges.
+
+    Three apexes admit up to four poses: each cone also gives its base plate's near bottom
+    edge on the line of sight, seen at ``base_uv``: ``cone_w - s b`` with
+    ``s = ConeModel.base_axis_distance_m`` and ``b`` the horizontal bearing from the camera,
+    which the pose sets; solved from the cones' centres first, then once more with the edges
+    the first pose gives. The 3 cones must not stand on one line.
+    """
     apex_uv = np.array([detections[i].apex_uv for i in usable])
     base_uv = np.array([detections[i].base_uv for i in usable])
     px = np.concatenate([apex_uv, base_uv])

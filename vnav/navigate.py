@@ -446,18 +446,9 @@ def plan_path(
     goal = _validate.vector(goal_xy_w, "goal_xy_w", 2, batched=False)
     centres = _points(centres_xy_w, "centres_xy_w")
     r = _positive(clearance_m, "clearance_m")
-    step_deg = _positive(max_arc_step_deg, "max_arc_step_deg")
-    if step_deg > 45.0:
-        raise ValueError(f"max_arc_step_deg must be at most 45, got {max_arc_step_deg!r}")
+    step_deg = _arc_step_deg(max_arc_step_deg)
     eps_m = _REL_EPS * r
-    to_goal = np.hypot(*(goal - centres).T) if len(centres) else np.zeros(0)
-    inside = np.flatnonzero(to_goal < r - eps_m)
-    if len(inside):
-        k = int(inside[np.argmin(to_goal[inside])])
-        raise ValueError(
-            f"goal_xy_w {goal.tolist()} is inside the keep-out disc of obstacle {k} at "
-            f"{centres[k].tolist()}: {to_goal[k]:.3f} m from its axis, clearance_m is {r}"
-        )
+    _check_goal_outside(goal, centres, r, eps_m)
     centres = _distinct(centres, eps_m)
     head: list[np.ndarray] = []
     if len(centres) and (np.hypot(*(start - centres).T) < r - eps_m).any():
@@ -469,6 +460,57 @@ def plan_path(
     route = _shortest(graph, r)
     path = _polyline(route, graph, centres, r, math.radians(step_deg), eps_m)
     return _drop_repeats(np.vstack([*head, path]))
+
+
+def _arc_step_deg(max_arc_step_deg: float) -> float:
+    """``plan_path``'s largest angle between the tangents that replace an arc, checked.
+
+    Parameters
+    ----------
+    max_arc_step_deg : float
+        Degrees.
+
+    Returns
+    -------
+    float
+        Degrees, in (0, 45].
+
+    Raises
+    ------
+    ValueError
+        If it is not a finite number in (0, 45].
+    """
+    step_deg = _positive(max_arc_step_deg, "max_arc_step_deg")
+    if step_deg > 45.0:
+        raise ValueError(f"max_arc_step_deg must be at most 45, got {max_arc_step_deg!r}")
+    return step_deg
+
+
+def _check_goal_outside(goal: np.ndarray, centres: np.ndarray, r: float, eps_m: float) -> None:
+    """Refuse a goal inside a keep-out disc: no path could end there.
+
+    Parameters
+    ----------
+    goal : ndarray, shape (2,)
+        World x and y, metres.
+    centres : ndarray, shape (M, 2)
+        The cones' axes, metres.
+    r, eps_m : float
+        The discs' radius (``clearance_m``) and the rounding allowed, metres.
+
+    Raises
+    ------
+    ValueError
+        Naming the nearest obstacle whose disc holds the goal, its index and centre.
+    """
+    to_goal = np.hypot(*(goal - centres).T) if len(centres) else np.zeros(0)
+    inside = np.flatnonzero(to_goal < r - eps_m)
+    if len(inside):
+        k = int(inside[np.argmin(to_goal[inside])])
+        raise ValueError(
+            f"goal_xy_w {goal.tolist()} is inside the keep-out disc of obstacle {k} at "
+            f"{centres[k].tolist()}: {to_goal[k]:.3f} m from its axis, clearance_m is {r}"
+        )
 
 
 def path_length_m(path_xy_w: ArrayLike) -> float:
@@ -559,6 +601,52 @@ def follow_path(
     ValueError
         An input of the wrong shape, not finite, or out of range.
     """
+    path, p, lookahead_m = _follow_inputs(
+        path_xy_w, p_w, altitude_m, speed_mps, lookahead_m, yaw_still_rad
+    )
+    carrot = _carrot(path, p, lookahead_m)
+    if carrot is None:
+        p_ref = np.array([path[-1, 0], path[-1, 1], float(altitude_m)])
+        return PathReference(p_ref, np.zeros(3), float(yaw_still_rad), 0.0)
+    xy, direction, remaining = carrot
+    speed = speed_mps * min(1.0, remaining / lookahead_m)
+    return PathReference(
+        p_w=np.array([xy[0], xy[1], float(altitude_m)]),
+        v_w=np.array([speed * direction[0], speed * direction[1], 0.0]),
+        yaw_rad=math.atan2(direction[1], direction[0]),
+        remaining_m=float(remaining),
+    )
+
+
+def _follow_inputs(
+    path_xy_w: ArrayLike,
+    p_w: ArrayLike,
+    altitude_m: float,
+    speed_mps: float,
+    lookahead_m: float,
+    yaw_still_rad: float,
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """``follow_path``'s inputs, checked.
+
+    Parameters
+    ----------
+    path_xy_w, p_w, altitude_m, speed_mps, lookahead_m, yaw_still_rad
+        As ``follow_path`` takes them.
+
+    Returns
+    -------
+    path : ndarray, shape (K, 2)
+        Waypoints, metres, K >= 1.
+    p : ndarray, shape (2,)
+        The drone's x and y, metres.
+    lookahead_m : float
+        Metres, > 0.
+
+    Raises
+    ------
+    ValueError
+        An input of the wrong shape, not finite, or out of range.
+    """
     path = _points(path_xy_w, "path_xy_w")
     if not len(path):
         raise ValueError("path_xy_w must hold at least one waypoint; got none")
@@ -571,14 +659,39 @@ def follow_path(
             raise ValueError(f"{name} must be a finite number, got {value!r}")
     if isinstance(speed_mps, bool) or not (math.isfinite(speed_mps) and speed_mps >= 0.0):
         raise ValueError(f"speed_mps must be a finite number >= 0, got {speed_mps!r}")
-    lookahead_m = _positive(lookahead_m, "lookahead_m")
+    return path, p, _positive(lookahead_m, "lookahead_m")
 
+
+def _carrot(
+    path: np.ndarray, p: np.ndarray, lookahead_m: float
+) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """The point ``lookahead_m`` along the path past the drone's nearest point, or the goal.
+
+    Parameters
+    ----------
+    path : ndarray, shape (K, 2)
+        Waypoints, metres.
+    p : ndarray, shape (2,)
+        The drone's x and y, metres.
+    lookahead_m : float
+        Metres, > 0.
+
+    Returns
+    -------
+    xy : ndarray, shape (2,)
+        The carrot, metres.
+    direction : ndarray, shape (2,)
+        The path's unit direction there.
+    remaining : float
+        Path length from the drone's nearest point to the goal, metres.
+
+    None when the path has no length.
+    """
     seg = np.diff(path, axis=0)
     seg_len = np.hypot(seg[:, 0], seg[:, 1])
     moving = seg_len > 0.0
     if not moving.any():
-        p_ref = np.array([path[-1, 0], path[-1, 1], float(altitude_m)])
-        return PathReference(p_ref, np.zeros(3), float(yaw_still_rad), 0.0)
+        return None
     seg, seg_len, starts = seg[moving], seg_len[moving], path[:-1][moving]
     cum = np.concatenate([[0.0], np.cumsum(seg_len)])
     t = np.clip(np.einsum("kd,kd->k", p - starts, seg) / seg_len**2, 0.0, 1.0)
@@ -589,11 +702,4 @@ def follow_path(
     k = min(int(np.searchsorted(cum, s_carrot, side="right")) - 1, len(seg) - 1)
     direction = seg[k] / seg_len[k]
     xy = starts[k] + (s_carrot - cum[k]) * direction
-    remaining = total - s_drone
-    speed = speed_mps * min(1.0, remaining / lookahead_m)
-    return PathReference(
-        p_w=np.array([xy[0], xy[1], float(altitude_m)]),
-        v_w=np.array([speed * direction[0], speed * direction[1], 0.0]),
-        yaw_rad=math.atan2(direction[1], direction[0]),
-        remaining_m=float(remaining),
-    )
+    return xy, direction, total - s_drone

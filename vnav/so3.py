@@ -1035,11 +1035,27 @@ def to_rpy(R: ArrayLike, *, warn: bool = True, atol: float = 1e-9) -> FloatArray
     pitch = np.arctan2(-R20, cy * R00 + sy * R10)
     pitch = np.where(locked, np.copysign(np.pi / 2, -R20), pitch)
     if warn and np.any(locked):
-        warnings.warn(
-            f"gimbal lock: pitch is +-90 deg for {int(np.count_nonzero(locked))} rotation(s); "
-            "only yaw -+ roll is defined there, so roll was set to 0 "
-            "(pass warn=False to silence, or use so3.gimbal_locked)",
-            GimbalLockWarning,
-            stacklevel=2,
-        )
+        _warn_gimbal_lock(int(np.count_nonzero(locked)))
     return np.stack([roll, pitch, yaw], axis=-1)
+
+
+def _warn_gimbal_lock(n_locked: int) -> None:
+    """Emit ``to_rpy``'s ``GimbalLockWarning``, pointing at ``to_rpy``'s caller.
+
+    Parameters
+    ----------
+    n_locked : int
+        How many of the rotations are at gimbal lock.
+
+    Warns
+    -----
+    GimbalLockWarning
+        Always.
+    """
+    warnings.warn(
+        f"gimbal lock: pitch is +-90 deg for {n_locked} rotation(s); "
+        "only yaw -+ roll is defined there, so roll was set to 0 "
+        "(pass warn=False to silence, or use so3.gimbal_locked)",
+        GimbalLockWarning,
+        stacklevel=3,  # this function, to_rpy, its caller
+    )

@@ -396,13 +396,7 @@ def point_from_ground_unchecked(
     (r00, r01, r02, tx), (r10, r11, r12, ty), (r20, r21, r22, tz), _ = T_w_c.tolist()
     x, y = (u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy
     dx, dy, dz = r00 * x + r01 * y + r02, r10 * x + r11 * y + r12, r20 * x + r21 * y + r22
-    if not tz > 0.0:
-        raise ValueError(f"the camera must be above the ground z = 0, got z = {tz:.6g} m")
-    if not dz < -1e-9 * math.sqrt(dx * dx + dy * dy + dz * dz):
-        raise ValueError(
-            f"the ray through pixel ({u:g}, {v:g}) does not reach the ground "
-            f"(its world z component is {dz:.3g}, not negative)"
-        )
+    _check_reaches_ground(tz, (dx, dy, dz), u, v)
     lam = -tz / dz
     px, py = tx + lam * dx, ty + lam * dy
     # J = P [lam r_0 / fx, lam r_1 / fy, I, -p^] with P = I - d e_z^T / d_z, the projection
@@ -421,6 +415,33 @@ def point_from_ground_unchecked(
     )
     J_uv, J_xi = J[:, :2], J[:, 2:]
     return np.array([px, py, 0.0]), J_uv @ cov_uv @ J_uv.T + J_xi @ cov_T_w_c @ J_xi.T
+
+
+def _check_reaches_ground(tz: float, d_w: tuple[float, float, float], u: float, v: float) -> None:
+    """Refuse a camera that is not above the ground, or a ray that does not point down to it.
+
+    Parameters
+    ----------
+    tz : float
+        The camera's height, metres.
+    d_w : tuple of 3 floats
+        The pixel's ray, world frame (any length).
+    u, v : float
+        The pixel (for the message).
+
+    Raises
+    ------
+    ValueError
+        If ``tz`` is not positive, or the ray's z is not negative (to a relative ``1e-9``).
+    """
+    dx, dy, dz = d_w
+    if not tz > 0.0:
+        raise ValueError(f"the camera must be above the ground z = 0, got z = {tz:.6g} m")
+    if not dz < -1e-9 * math.sqrt(dx * dx + dy * dy + dz * dz):
+        raise ValueError(
+            f"the ray through pixel ({u:g}, {v:g}) does not reach the ground "
+            f"(its world z component is {dz:.3g}, not negative)"
+        )
 
 
 # ------------------------------------------------------------------------ consistency

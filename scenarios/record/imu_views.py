@@ -28,6 +28,8 @@ column batch each. A run without ``[imu]`` logs none of it. The plots' tab is
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import rerun as rr
 
@@ -48,6 +50,9 @@ from scenarios.record.viewer import (
 from scenarios.run.records import RunResult
 from scenarios.scenario.spec import ScenarioSpec
 from vnav import quat
+
+if TYPE_CHECKING:
+    from sim.config import ImuConfig
 
 __all__ = ["IMU_CHAIN_LINE_WIDTH", "IMU_LINE_WIDTH", "log_imu_frames", "send_imu"]
 
@@ -75,6 +80,23 @@ def log_imu_frames(rec: rr.RecordingStream, spec: ScenarioSpec) -> None:
     if imu is None:
         return
     declared = not imu.mount_error.is_zero
+    _log_true_imu(rec, imu, declared)
+    if declared:
+        _log_declared_imu(rec, imu)
+
+
+def _log_true_imu(rec: rr.RecordingStream, imu: ImuConfig, declared: bool) -> None:
+    """The IMU's true mount on the body, with its axes and its name past its z axis' tip.
+
+    Parameters
+    ----------
+    rec : rerun.RecordingStream
+        The recording, logged to statically.
+    imu : ImuConfig
+        The IMU: its true mount ``T_b_i``.
+    declared : bool
+        A declared mount is drawn beside it: the name then says "imu (true)".
+    """
     rec.log(entity.IMU, _mount_transform(imu.T_b_i, FRAME.IMU), static=True)
     for path in (entity.IMU_AXES, entity.IMU_NAME):
         rec.log(path, rr.CoordinateFrame(FRAME.IMU), static=True)
@@ -98,8 +120,18 @@ def log_imu_frames(rec: rr.RecordingStream, spec: ScenarioSpec) -> None:
         ),
         static=True,
     )
-    if not declared:
-        return
+
+
+def _log_declared_imu(rec: rr.RecordingStream, imu: ImuConfig) -> None:
+    """The IMU's declared mount on the body, in yellow, with its axes and name.
+
+    Parameters
+    ----------
+    rec : rerun.RecordingStream
+        The recording, logged to statically.
+    imu : ImuConfig
+        The IMU: its declared mount ``T_b_i_declared``.
+    """
     rec.log(
         entity.IMU_DECLARED,
         _mount_transform(imu.T_b_i_declared, FRAME.IMU_DECLARED),

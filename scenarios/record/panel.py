@@ -271,6 +271,60 @@ def navigation_lines(
     return [*lines, f"outcome   {navigation_outcome(nav)}"]
 
 
+def _cone0_lines(record: TickRecord, cone0_w: np.ndarray) -> list[str]:
+    """Cone 0 through the chain ``p_w = T_w_b T_b_c p_c``, and the naive mistake beside it.
+
+    Parameters
+    ----------
+    record : TickRecord
+        The tick (its true poses).
+    cone0_w : ndarray, shape (3,)
+        Cone 0's true base centre in the world, metres.
+
+    Returns
+    -------
+    list of str
+        Four lines: camera, body, world coordinates, the naive sum.
+    """
+    p = record.coordinates_of(cone0_w)
+    return [
+        f"cone 0  p_c               {_vector(p['camera'])}  camera: x right, y down, z fwd",
+        f"        p_b = T_b_c p_c   {_vector(p['body'])}  body: x fwd, y left, z up",
+        f"        p_w = T_w_b p_b   {_vector(p['world'])}  world: z up",
+        f"naive   t_w_b + p_c       {_vector(naive(p['camera'], record.T_w_b[:3, 3]))}"
+        "  wrong: p_c is not a world offset",
+    ]
+
+
+def _attitude_lines(record: TickRecord, quat_xyzw: np.ndarray) -> list[str]:
+    """``R_w_b`` three ways: roll, pitch, yaw (with the gimbal lock), quaternion, axis-angle.
+
+    Parameters
+    ----------
+    record : TickRecord
+        The tick (its true attitude and gimbal-lock flag).
+    quat_xyzw : ndarray, shape (4,)
+        The attitude as plotted (the sign that keeps the plot continuous).
+
+    Returns
+    -------
+    list of str
+        Three lines.
+    """
+    roll, pitch, yaw = np.degrees(record.rpy_rad)
+    axis, angle = quat.to_axis_angle(quat_xyzw, normalize=True)
+    lock = "LOCKED: only yaw - roll is defined" if record.gimbal_locked else "no"
+    flipped = quat_xyzw[3] < 0.0
+    return [
+        f"R_w_b   roll {_number(roll, 1, 6)}  pitch {_number(pitch, 1, 6)}  "
+        f"yaw {_number(yaw, 1, 6)} deg    gimbal lock: {lock}",
+        f"        quaternion xyzw {_vector(quat_xyzw, 3, 6)}"
+        + ("  (w < 0: -q is the same rotation)" if flipped else ""),
+        f"        axis-angle  axis {_axis(axis, angle)}  angle "
+        f"{_number(math.degrees(angle), 1, 6)} deg  (R = I + sin(a) K + (1 - cos(a)) K^2)",
+    ]
+
+
 def state_text(
     record: TickRecord,
     quat_xyzw: np.ndarray,
@@ -304,29 +358,8 @@ def state_text(
     if navigation is not None:
         lines += ["", *navigation]
 
-    p = record.coordinates_of(cone0_w)
-    lines += [
-        "",
-        f"cone 0  p_c               {_vector(p['camera'])}  camera: x right, y down, z fwd",
-        f"        p_b = T_b_c p_c   {_vector(p['body'])}  body: x fwd, y left, z up",
-        f"        p_w = T_w_b p_b   {_vector(p['world'])}  world: z up",
-        f"naive   t_w_b + p_c       {_vector(naive(p['camera'], T_w_b[:3, 3]))}"
-        "  wrong: p_c is not a world offset",
-    ]
-
-    roll, pitch, yaw = np.degrees(record.rpy_rad)
-    axis, angle = quat.to_axis_angle(quat_xyzw, normalize=True)
-    lock = "LOCKED: only yaw - roll is defined" if record.gimbal_locked else "no"
-    flipped = quat_xyzw[3] < 0.0
-    lines += [
-        "",
-        f"R_w_b   roll {_number(roll, 1, 6)}  pitch {_number(pitch, 1, 6)}  "
-        f"yaw {_number(yaw, 1, 6)} deg    gimbal lock: {lock}",
-        f"        quaternion xyzw {_vector(quat_xyzw, 3, 6)}"
-        + ("  (w < 0: -q is the same rotation)" if flipped else ""),
-        f"        axis-angle  axis {_axis(axis, angle)}  angle "
-        f"{_number(math.degrees(angle), 1, 6)} deg  (R = I + sin(a) K + (1 - cos(a)) K^2)",
-    ]
+    lines += ["", *_cone0_lines(record, cone0_w)]
+    lines += ["", *_attitude_lines(record, quat_xyzw)]
     mount_off = se3.invert(record.T_b_c_est) @ T_b_c
     # With the mounts block the declared mount's error is shown there, beside the recovered one.
     if mounts is None and not np.allclose(mount_off, np.eye(4), atol=1e-9):

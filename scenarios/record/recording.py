@@ -835,6 +835,28 @@ def _log_static(
     scenery: Scenery,
 ) -> None:
     """Frames and their axes, the meshes, mount, intrinsics, truth, description, styles."""
+    _log_world_and_body(rec, scenery)
+    _log_camera_model(rec, spec, camera)
+    _log_camera_axes(rec)
+    _log_world_contents(rec, spec, scenery)
+    rec.log(
+        entity.DESCRIPTION,
+        rr.TextDocument(describe(spec, seed), media_type="text/markdown"),
+        static=True,
+    )
+    _log_styles(rec)
+
+
+def _log_world_and_body(rec: rr.RecordingStream, scenery: Scenery) -> None:
+    """The world's and the body's frames with their axes, and the drone's mesh in the body.
+
+    Parameters
+    ----------
+    rec : rerun.RecordingStream
+        The recording, logged to statically.
+    scenery : Scenery
+        The scene's meshes; ``drone_b`` is drawn in the body frame.
+    """
     rec.log(
         entity.WORLD,
         rr.ViewCoordinates.RIGHT_HAND_Z_UP,
@@ -847,6 +869,20 @@ def _log_static(
     )
     _in_frame(rec, entity.DRONE, FRAME.BODY)
     rec.log(entity.DRONE, _mesh(scenery.drone_b), static=True)
+
+
+def _log_camera_model(rec: rr.RecordingStream, spec: ScenarioSpec, camera: PinholeCamera) -> None:
+    """The camera's fixed mount ``T_b_c`` and its pinhole, and the image entities in it.
+
+    Parameters
+    ----------
+    rec : rerun.RecordingStream
+        The recording, logged to statically.
+    spec : ScenarioSpec
+        The scenario: its declared mount, and whether its flight slides the camera.
+    camera : PinholeCamera
+        The intrinsics (OpenCV pixel-centre convention, converted for Rerun).
+    """
     if not spec.flight.moves_camera:  # a sliding mount is logged every tick instead
         rec.log(
             entity.CAMERA,
@@ -867,6 +903,16 @@ def _log_static(
     )
     for path in (entity.IMAGE, entity.DEPTH, entity.DETECTIONS, entity.KEYPOINTS):
         _in_frame(rec, path, FRAME.IMAGE)
+
+
+def _log_camera_axes(rec: rr.RecordingStream) -> None:
+    """The camera's axes, drawn thin, and its name past the tip of its optical axis.
+
+    Parameters
+    ----------
+    rec : rerun.RecordingStream
+        The recording, logged to statically.
+    """
     # The camera's axes thin and its name past the tip of its optical axis
     # (``CAMERA_NAME_Z_M``), where the world's and the body's axes are thick and named at
     # their origins: 15 cm from the body's origin, the camera's name there sat on the body's.
@@ -892,13 +938,6 @@ def _log_static(
         ),
         static=True,
     )
-    _log_world_contents(rec, spec, scenery)
-    rec.log(
-        entity.DESCRIPTION,
-        rr.TextDocument(describe(spec, seed), media_type="text/markdown"),
-        static=True,
-    )
-    _log_styles(rec)
 
 
 def _log_world_contents(rec: rr.RecordingStream, spec: ScenarioSpec, scenery: Scenery) -> None:

@@ -438,10 +438,7 @@ def blueprint(
     imu: bool = False,
 ) -> rrb.Blueprint:
     """The default layout: images and plots on the left; the world, a close-up of the drone
-    and the state panel on the right.
-
-    The time panel starts "following": the viewer opens at the last tick, where the lesson
-    has played out, and any tick can be picked on the timeline.
+    and the state panel on the right; the time panel as ``_time_panel`` sets it.
 
     Parameters
     ----------
@@ -449,6 +446,45 @@ def blueprint(
         Where the 3D view's eye starts and what it looks at, world frame (z up).
     view : {"errors", "coordinates", "attitude", "nees"}
         The tab shown first in the lower left panel (see ``VIEWS``).
+    T_w_b, close_up_cone_w, mounts_T_w_c : array_like, optional
+        What the close-up looks at (``_close_up_view``). ``mounts_T_w_c`` (a calibrated run)
+        also gives the state panel the room its mounts block needs, and each error plot the
+        error with the recovered mount (``entity.error_recovered``).
+    error_top_m : dict of str to float or None, optional
+        Top of each method's error plot, metres (None: the method gave no estimate), and of
+        the range plot under the key ``entity.RANGE``.
+    cone0_top_m : float, optional
+        The cone-0 coordinate plots' y axes run from minus this to this, metres.
+    latency, navigation, imu : bool
+        The run delivered its images late (its ``[timing]`` is not synchronous), flies by
+        its own map, has an ``[imu]``: see ``_left_column`` and ``_time_panel``; with
+        ``imu`` the world view leaves out the IMU's name and declared mount (the close-up
+        shows them).
+    verdict : str, optional
+        The run's verdict in a few words (``checks_summary``): the scenario document's tab
+        names it, so that it shows without opening the tab.
+    """
+    if view not in VIEWS:
+        raise ValueError(f"view must be one of {list(VIEWS)}, got {view!r}")
+    world = _world_view(eye_w, look_target_w, imu=imu)
+    close_up = _close_up_view(T_w_b, close_up_cone_w, mounts_T_w_c)
+    mounts = mounts_T_w_c is not None
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            _left_column(view, error_top_m or {}, cone0_top_m, latency, mounts, navigation, imu),
+            _right_column(world, close_up, verdict, latency=latency, mounts=mounts),
+            column_shares=[2, 3],
+        ),
+        _time_panel(latency, navigation, imu),
+        collapse_panels=True,
+    )
+
+
+def _close_up_view(T_w_b, close_up_cone_w, mounts_T_w_c) -> rrb.Spatial3DView:
+    """The close-up view: the camera mounts, else a cone, else the drone.
+
+    Parameters
+    ----------
     T_w_b : array_like, shape (4, 4), optional
         The drone's pose at the tick the views are framed for (``shown_tick``: the scenario's
         ``show_at_s``, else the last): the close-up view starts behind it, to its left and
@@ -456,68 +492,95 @@ def blueprint(
     close_up_cone_w : array_like, shape (3,), optional
         A cone's base centre: the close-up looks at it instead of the drone, from its side
         (``cone_close_up``), to show the estimates around it and their ellipsoids.
-    error_top_m : dict of str to float or None, optional
-        Top of each method's error plot, metres (None: the method gave no estimate), and of
-        the range plot under the key ``entity.RANGE``.
-    cone0_top_m : float, optional
+    mounts_T_w_c : array_like, shape (4, 4), optional
+        The true camera's pose at that tick of a calibrated run: the close-up then looks at
+        the declared, true and recovered camera mounts (``mounts_close_up``).
+
+    Returns
+    -------
+    rerun.blueprint.Spatial3DView
+        The view, first of the three that applies.
+    """
+    if mounts_T_w_c is not None:
+        return mounts_close_up(mounts_T_w_c)
+    if close_up_cone_w is not None:
+        return cone_close_up(close_up_cone_w, T_w_b)
+    return _close_up(T_w_b)
+
+
+def _left_column(
+    view: str,
+    error_top_m: dict[str, float | None],
+    cone0_top_m: float | None,
+    latency: bool,
+    mounts: bool,
+    navigation: bool,
+    imu: bool,
+) -> rrb.Vertical:
+    """The images above the plots' tabs (``_lower_tabs``).
+
+    Parameters
+    ----------
+    view : {"errors", "coordinates", "attitude", "nees"}
+        The tab shown first in the lower panel (see ``VIEWS``).
+    error_top_m : dict of str to float or None
+        Top of each method's error plot, metres, and of the range plot (``entity.RANGE``).
+    cone0_top_m : float or None
         The cone-0 coordinate plots' y axes run from minus this to this, metres.
     latency : bool
-        The run delivered its images late (its ``[timing]`` is not synchronous): the error
-        tab also plots the newest-pose estimate's error and the pose stream against the image
-        stamps, and the time panel starts on ``sim_time`` (a pose sample has no tick).
-    verdict : str, optional
-        The run's verdict in a few words (``checks_summary``): the scenario document's tab
-        names it, so that it shows without opening the tab.
-    mounts_T_w_c : array_like, shape (4, 4), optional
-        The true camera's pose at that tick of a calibrated run: the close-up then looks
-        at the declared, true and recovered camera mounts (``mounts_close_up``), the state
-        panel gets the room its mounts block needs, and each error plot also draws the error
-        with the recovered mount (``entity.error_recovered``).
+        The run delivered its images late: the error tab also plots the newest-pose
+        estimate's error and the pose stream against the image stamps, and the plots get
+        more room.
+    mounts : bool
+        A calibrated run: each error plot also draws the error with the recovered mount.
     navigation : bool
-        A navigating flight: the lower left panel opens on its tab (``navigation_tab``: the
-        true clearance, the drone's distance from the cones' axes, the plan's length), and the
-        time panel on ``sim_time`` (the contact falls between two camera ticks).
+        A navigating flight: the lower panel opens on its tab (``navigation_tab``: the true
+        clearance, the drone's distance from the cones' axes, the plan's length).
     imu : bool
-        The run has an ``[imu]``: the lower left panel opens on its tab (``imu_tab``: the
-        readings in the IMU frame), and the time panel on ``sim_time`` (a reading has no tick);
-        the world view leaves out the IMU's name and declared mount (the close-up shows them).
+        The run has an ``[imu]``: the lower panel opens on its tab (``imu_tab``: the readings
+        in the IMU frame).
+
+    Returns
+    -------
+    rerun.blueprint.Vertical
+        The left column of the layout.
     """
-    if view not in VIEWS:
-        raise ValueError(f"view must be one of {list(VIEWS)}, got {view!r}")
-    world = _world_view(eye_w, look_target_w, imu=imu)
-    if mounts_T_w_c is not None:
-        close_up = mounts_close_up(mounts_T_w_c)
-    elif close_up_cone_w is not None:
-        close_up = cone_close_up(close_up_cone_w, T_w_b)
-    else:
-        close_up = _close_up(T_w_b)
-    return rrb.Blueprint(
-        rrb.Horizontal(
-            # With latency the plots and the state panel (its time block) get more room.
-            rrb.Vertical(
-                _image_tabs(),
-                _lower_tabs(
-                    view,
-                    error_top_m or {},
-                    cone0_top_m,
-                    latency,
-                    recovered_mount=mounts_T_w_c is not None,
-                    navigation=navigation,
-                    imu=imu,
-                ),
-                row_shares=[4, 6] if latency else [3, 5],
-            ),
-            _right_column(
-                world, close_up, verdict, latency=latency, mounts=mounts_T_w_c is not None
-            ),
-            column_shares=[2, 3],
+    # With latency the plots and the state panel (its time block) get more room.
+    return rrb.Vertical(
+        _image_tabs(),
+        _lower_tabs(
+            view,
+            error_top_m,
+            cone0_top_m,
+            latency,
+            recovered_mount=mounts,
+            navigation=navigation,
+            imu=imu,
         ),
-        rrb.TimePanel(
-            state="collapsed",
-            play_state="following",
-            timeline="sim_time" if latency or navigation or imu else "tick",
-        ),
-        collapse_panels=True,
+        row_shares=[4, 6] if latency else [3, 5],
+    )
+
+
+def _time_panel(latency: bool, navigation: bool, imu: bool) -> rrb.TimePanel:
+    """The time panel, collapsed and "following": the viewer opens at the last tick, where
+    the lesson has played out, and any tick can be picked on the timeline.
+
+    Parameters
+    ----------
+    latency, navigation, imu : bool
+        The run delivered its images late, flies by its own map, has an ``[imu]``: the panel
+        then starts on ``sim_time`` (a pose sample has no tick, the contact falls between two
+        camera ticks, a reading has no tick), else on ``tick``.
+
+    Returns
+    -------
+    rerun.blueprint.TimePanel
+        The panel's settings.
+    """
+    return rrb.TimePanel(
+        state="collapsed",
+        play_state="following",
+        timeline="sim_time" if latency or navigation or imu else "tick",
     )
 
 
@@ -898,6 +961,48 @@ def _lower_tabs(
     newest pose's, and the pose stream around the time cursor with each image's exposure and
     arrival; the other methods' errors move to a tab of their own after ``VIEWS``.
     """
+    errors, extra = _error_tabs(error_top_m, latency, recovered_mount)
+    tabs = {
+        "errors": errors,
+        "coordinates": _coordinates_tab(cone0_top_m),
+        "attitude": _attitude_tab(),
+        "nees": _nees_tab(error_top_m),
+    }
+    if navigation:
+        extra.append(navigation_tab())
+    if imu:
+        extra.append(imu_tab())
+    return rrb.Tabs(
+        *[tabs[name] for name in VIEW_NAMES],
+        *extra,
+        rrb.Spatial2DView(name="error against range", origin=entity.ERROR_VS_RANGE),
+        _naive_range_tab(error_top_m),
+        active_tab=len(VIEWS) + len(extra) - 1 if navigation or imu else VIEWS[view],
+    )
+
+
+def _error_tabs(
+    error_top_m: dict[str, float | None], latency: bool, recovered_mount: bool
+) -> tuple[rrb.Vertical, list[rrb.Vertical]]:
+    """The position-error tab, and with ``latency`` the tab of the other methods' errors.
+
+    Parameters
+    ----------
+    error_top_m : dict of str to float or None
+        The top of each plot's y axis, metres, by method (None: no estimate in the run).
+    latency : bool
+        Show the lesson of time: the depth_image error beside the newest pose's and the pose
+        stream around the time cursor; the other methods then move to a tab of their own.
+    recovered_mount : bool
+        The run's estimates were made again with the recovered mount (plotted beside).
+
+    Returns
+    -------
+    errors : rerun.blueprint.Vertical
+        The error tab, shown under ``VIEWS``' name ``errors``.
+    extra : list of rerun.blueprint.Vertical
+        The other methods' error tab with ``latency``, else empty.
+    """
     # A user's function (vnav.plugin) is plotted after the built-ins it is judged beside.
     users = [m.name for m in active_methods() if m.images == "user"]
     checked = [*PREFERENCE, *users]
@@ -928,30 +1033,30 @@ def _lower_tabs(
             row_shares=[1 if _gave_none(error_top_m, name) else 4 for name in checked],
             name="position error",
         )
-    tabs = {
-        "errors": errors,
-        "coordinates": _coordinates_tab(cone0_top_m),
-        "attitude": _attitude_tab(),
-        "nees": _nees_tab(error_top_m),
-    }
-    if navigation:
-        extra.append(navigation_tab())
-    if imu:
-        extra.append(imu_tab())
-    return rrb.Tabs(
-        *[tabs[name] for name in VIEW_NAMES],
-        *extra,
-        rrb.Spatial2DView(name="error against range", origin=entity.ERROR_VS_RANGE),
-        rrb.Vertical(
-            _series(f"{NAIVE} error (m)", [entity.error(NAIVE)], _from_zero(error_top_m, NAIVE)),
-            _series(
-                "range to the matched cones (m)",
-                [entity.RANGE],
-                _from_zero(error_top_m, entity.RANGE),
-            ),
-            name="naive, range",
+    return errors, extra
+
+
+def _naive_range_tab(error_top_m: dict[str, float | None]) -> rrb.Vertical:
+    """The naive chain's error above the range to the matched cones.
+
+    Parameters
+    ----------
+    error_top_m : dict of str to float or None
+        The top of each plot's y axis, metres, by method and for ``entity.RANGE``.
+
+    Returns
+    -------
+    rerun.blueprint.Vertical
+        The tab named "naive, range".
+    """
+    return rrb.Vertical(
+        _series(f"{NAIVE} error (m)", [entity.error(NAIVE)], _from_zero(error_top_m, NAIVE)),
+        _series(
+            "range to the matched cones (m)",
+            [entity.RANGE],
+            _from_zero(error_top_m, entity.RANGE),
         ),
-        active_tab=len(VIEWS) + len(extra) - 1 if navigation or imu else VIEWS[view],
+        name="naive, range",
     )
 
 
