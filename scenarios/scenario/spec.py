@@ -490,6 +490,95 @@ def _at_most_physics_rate(
         )
 
 
+def _name(top: dict[str, Any], where: str) -> str:
+    """The scenario's ``name``, checked: it names files and recordings.
+
+    Parameters
+    ----------
+    top : dict
+        The top-level table, as ``schema.TOP`` reads it.
+    where : str
+        What to call the source in error messages.
+
+    Returns
+    -------
+    str
+        The name: ASCII letters, digits, ``-`` and ``_``, at most ``schema.MAX_NAME_CHARS``.
+
+    Raises
+    ------
+    ScenarioError
+        If the name holds another character or is too long.
+    """
+    name = top["name"]
+    if not all(c.isascii() and (c.isalnum() or c in "-_") for c in name):
+        raise _err(where, "name", f"may hold letters, digits, '-' and '_' only, got {name!r}")
+    if len(name) > schema.MAX_NAME_CHARS:
+        raise _err(
+            where, "name", f"must be at most {schema.MAX_NAME_CHARS} characters, got {len(name)}"
+        )
+    return name
+
+
+def _scene_and_flight(
+    top: dict[str, Any], where: str
+) -> tuple[SceneConfig, KinematicFlight | ControlledFlight | OrbitFlight | NavigateFlight]:
+    """The world (``[camera]``, ``[[cones]]``, ``[imu]``, the drone's start pose) and the
+    ``[flight]`` it starts from, read in that order (camera, cones, flight, imu), so that
+    the first bad table is the one reported.
+
+    Parameters
+    ----------
+    top : dict
+        The top-level table, as ``schema.TOP`` reads it.
+    where : str
+        What to call the source in error messages.
+
+    Returns
+    -------
+    scene : SceneConfig
+    flight : KinematicFlight | ControlledFlight | OrbitFlight | NavigateFlight
+
+    Raises
+    ------
+    ScenarioError
+        Naming the offending table; ``cones`` where ``SceneConfig`` refuses the cones.
+    """
+    camera = _camera(top["camera"], where)
+    cones_w = _cones(top["cones"], where)
+    flight = _flight(top["flight"], where)
+    imu = _imu(top["imu"], flight, where)
+    start_position_w, start_quat_xyzw = _start_pose(flight)
+    try:
+        scene = SceneConfig(
+            camera=camera,
+            cones_w=tuple(cones_w),
+            start_position_w=start_position_w,
+            start_quat_xyzw=start_quat_xyzw,
+            imu=imu,
+        )
+    except ValueError as exc:
+        raise _err(where, "cones", str(exc)) from None
+    return scene, flight
+
+
+def _show_at_within_run(spec: ScenarioSpec, where: str) -> None:
+    """Refuse a ``show_at_s`` (the instant the recording's 3D views are framed for) after the
+    run's end.
+
+    Raises
+    ------
+    ScenarioError
+        If ``spec.show_at_s`` is later than ``spec.end_s``.
+    """
+    if spec.show_at_s is not None and spec.show_at_s > spec.end_s:
+        raise _err(
+            where,
+            "show_at_s",
+            f"must be at most the run's end, {spec.end_s:g} s, got {spec.show_at_s:g}",
+        )
+
+
 def from_dict(data: dict[str, Any], where: str = "<scenario>") -> ScenarioSpec:
     """Build a ``ScenarioSpec`` from parsed TOML (user units), as ``scenarios.scenario.schema``
     declares.
@@ -507,28 +596,8 @@ def from_dict(data: dict[str, Any], where: str = "<scenario>") -> ScenarioSpec:
         Naming ``where`` and the offending key.
     """
     top = _read(data, schema.TOP, where, "")
-    name = top["name"]
-    if not all(c.isascii() and (c.isalnum() or c in "-_") for c in name):
-        raise _err(where, "name", f"may hold letters, digits, '-' and '_' only, got {name!r}")
-    if len(name) > schema.MAX_NAME_CHARS:
-        raise _err(
-            where, "name", f"must be at most {schema.MAX_NAME_CHARS} characters, got {len(name)}"
-        )
-    camera = _camera(top["camera"], where)
-    cones_w = _cones(top["cones"], where)
-    flight = _flight(top["flight"], where)
-    imu = _imu(top["imu"], flight, where)
-    start_position_w, start_quat_xyzw = _start_pose(flight)
-    try:
-        scene = SceneConfig(
-            camera=camera,
-            cones_w=tuple(cones_w),
-            start_position_w=start_position_w,
-            start_quat_xyzw=start_quat_xyzw,
-            imu=imu,
-        )
-    except ValueError as exc:
-        raise _err(where, "cones", str(exc)) from None
+    name = _name(top, where)
+    scene, flight = _scene_and_flight(top, where)
     noise = NoiseModel(**_read(_or_empty(top["noise"]), schema.NOISE, where, "noise"))
     timing = Timing(**_read(_or_empty(top["timing"]), schema.TIMING, where, "timing"))
     _at_most_physics_rate(1.0 / scene.timestep_s, top["camera_rate_hz"], timing, where)
@@ -549,12 +618,7 @@ def from_dict(data: dict[str, Any], where: str = "<scenario>") -> ScenarioSpec:
         close_up=top["close_up"],
         show_at_s=top["show_at_s"],
     )
-    if spec.show_at_s is not None and spec.show_at_s > spec.end_s:
-        raise _err(
-            where,
-            "show_at_s",
-            f"must be at most the run's end, {spec.end_s:g} s, got {spec.show_at_s:g}",
-        )
+    _show_at_within_run(spec, where)
     return spec
 
 
