@@ -478,25 +478,10 @@ def test_navigate_flights_keys_sweep_with_strings_and_vectors():
         plan({"scenario": "avoid", "grid": {"flight.estimate": ["nave"]}}, "s.toml")
 
 
-def test_navigation_columns_rates_and_plot(tmp_path, rng, figures):
-    """A navigating sweep's rows carry the flight's outcome (booleans, null where the flight
-    diverged); summary.json's collision and goal rates per grid point are the fractions
-    counted by hand from results.parquet (read back), over the episodes that did not diverge;
-    navigation_vs_<key>.png draws them, one line per value of the other key, in the methods'
-    colours."""
-    sweep = plan(NAV_SWEEP, "avoid-sweep.toml")
-    episodes = _nav_episodes(sweep, rng)
-    pq.write_table(results_table(sweep, episodes), tmp_path / "r.parquet")
-    table = pq.read_table(tmp_path / "r.parquet")
-    assert table.column_names[-7:] == [*NAV_COLUMNS, "simulated_s", "wall_s"]
-    for flag in NAV_FLAGS:
-        assert table.schema.field(flag).type == pa.bool_()
-    got = table.to_pylist()
-    (diverged,) = [r for r in got if r["status"] == "diverged"]
-    assert diverged["nav__collided"] is None and diverged["nav__reached_goal"] is None
-    assert math.isnan(diverged["nav__min_clearance_m"])
-
-    doc = summary.build(sweep, episodes, out_dir="d", point_files=["f"] * 6, complete=True)
+def _assert_rates_counted_by_hand(doc: dict, got: list[dict]) -> None:
+    """Each of summary.json's ``points`` (``doc``) has the collision and goal rates, counts,
+    clearance and time-to-goal statistics counted by hand from the rows ``got`` (read back
+    from results.parquet), over its episodes that did not diverge."""
     assert [p["index"] for p in doc["points"]] == list(range(6))
     for point in doc["points"]:
         mine = [r for r in got if r["point"] == point["index"]]
@@ -516,15 +501,12 @@ def test_navigation_columns_rates_and_plot(tmp_path, rng, figures):
         assert nav["min_clearance_m"]["median"] == np.median(clearances)
         times = [r["nav__time_to_goal_s"] for r in reached]
         assert nav["time_to_goal_s"]["median"] == (np.median(times) if times else None)
-    assert doc["points"][5]["navigation"]["flown"] == 3  # its seed 3 diverged
-    json.dumps(doc, allow_nan=False)  # summary.json holds no NaN
 
-    key = "noise.extrinsic_std_deg"
-    names = plots.plot_names(sweep)
-    assert f"navigation_vs_{key}.png" in names and "navigation_vs_flight.estimate.png" in names
-    png = plots.plot_png(sweep, episodes, f"navigation_vs_{key}.png")
-    assert png[:4] == b"\x89PNG"
-    (fig,) = figures
+
+def _assert_rate_lines_match_summary(fig, doc: dict, key: str) -> None:
+    """navigation_vs_<key>.png's figure ``fig``: a collision and a goal panel, one line per
+    ``flight.estimate`` in the method's colour, each point the rate summary.json (``doc``)
+    gives its grid point; the legend titled with the other key."""
     collision, goal = [ax for ax in fig.axes if ax.lines]
     assert (collision.get_title(), goal.get_title()) == ("collision rate", "goal rate")
     colors = {m.name: tuple(np.array(m.color_rgb) / 255.0) for m in METHODS}
@@ -541,6 +523,38 @@ def test_navigation_columns_rates_and_plot(tmp_path, rng, figures):
                 assert y == point[rate]
     (legend,) = fig.legends
     assert legend.get_title().get_text() == "flight.estimate"
+
+
+def test_navigation_columns_rates_and_plot(tmp_path, rng, figures):
+    """A navigating sweep's rows carry the flight's outcome (booleans, null where the flight
+    diverged); summary.json's collision and goal rates per grid point are the fractions
+    counted by hand from results.parquet (read back), over the episodes that did not diverge;
+    navigation_vs_<key>.png draws them, one line per value of the other key, in the methods'
+    colours."""
+    sweep = plan(NAV_SWEEP, "avoid-sweep.toml")
+    episodes = _nav_episodes(sweep, rng)
+    pq.write_table(results_table(sweep, episodes), tmp_path / "r.parquet")
+    table = pq.read_table(tmp_path / "r.parquet")
+    assert table.column_names[-7:] == [*NAV_COLUMNS, "simulated_s", "wall_s"]
+    for flag in NAV_FLAGS:
+        assert table.schema.field(flag).type == pa.bool_()
+    got = table.to_pylist()
+    (diverged,) = [r for r in got if r["status"] == "diverged"]
+    assert diverged["nav__collided"] is None and diverged["nav__reached_goal"] is None
+    assert math.isnan(diverged["nav__min_clearance_m"])
+
+    doc = summary.build(sweep, episodes, out_dir="d", point_files=["f"] * 6, complete=True)
+    _assert_rates_counted_by_hand(doc, got)
+    assert doc["points"][5]["navigation"]["flown"] == 3  # its seed 3 diverged
+    json.dumps(doc, allow_nan=False)  # summary.json holds no NaN
+
+    key = "noise.extrinsic_std_deg"
+    names = plots.plot_names(sweep)
+    assert f"navigation_vs_{key}.png" in names and "navigation_vs_flight.estimate.png" in names
+    png = plots.plot_png(sweep, episodes, f"navigation_vs_{key}.png")
+    assert png[:4] == b"\x89PNG"
+    (fig,) = figures
+    _assert_rate_lines_match_summary(fig, doc, key)
     with pytest.raises(ValueError, match="no plot"):
         plots.plot_png(sweep, episodes, "navigation_vs_nothing.png")
 

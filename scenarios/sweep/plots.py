@@ -593,6 +593,91 @@ def _rate_colors(curves: list[RateCurve]) -> list[Any]:
     return [LINE_COLORS[i % len(LINE_COLORS)] for i in range(len(curves))]
 
 
+def _too_many_lines_figure(title: str, n_curves: int, others: list[str]):
+    """The figure drawn instead of more than ``MAX_LINES`` lines: one panel saying how many
+    combinations of the ``others`` keys there are, and that summary.json holds each grid
+    point's rates.
+
+    Parameters
+    ----------
+    title : str
+        The figure's title.
+    n_curves : int
+        How many lines the plot would have drawn (combinations of the other swept keys).
+    others : list of str
+        The other swept keys.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    fig, (ax,) = _figure(title, "", [""], [])
+    ax.set_axis_off()
+    text = (
+        f"{n_curves} combinations of {', '.join(others)}: more than {MAX_LINES} lines. "
+        "Each grid point's rates are in summary.json."
+    )
+    ax.text(
+        0.5,
+        0.5,
+        "\n".join(textwrap.wrap(text, 50)),
+        transform=ax.transAxes,
+        ha="center",
+        va="center",
+        fontsize=9,
+    )
+    return fig
+
+
+def _navigation_note(
+    plan: SweepPlan, episodes: list[Episode], curves: list[RateCurve], others: list[str]
+) -> list[str]:
+    """The caption of ``navigation_vs_key_figure``: what each point counts (the range of the
+    grid points' flown episodes) and what the panels hold (``_panels_note``).
+
+    Returns
+    -------
+    list of str
+        The caption's paragraphs.
+    """
+    flown = [int(n) for c in curves for n in c.flown]
+    counts = f"{min(flown)}" if min(flown) == max(flown) else f"{min(flown)} to {max(flown)}"
+    return [
+        f"Each point: of one grid point's {counts} flown episodes (its seeds, less any whose "
+        "flight diverged), the fraction that touched a cone (MuJoCo's contact), and the "
+        "fraction that came within the goal radius of the goal.",
+        _panels_note(
+            plan, f"one line per value of {', '.join(others)}" if others else "", episodes
+        ),
+    ]
+
+
+def _other_keys_legend(fig, axes, others: list[str]) -> None:
+    """The legend of the lines (one per combination of the ``others`` keys, titled with
+    their names), right of the panels, aligned with their top.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+    axes : list of matplotlib.axes.Axes
+        The panels; the first one's lines are the legend's entries.
+    others : list of str
+        The other swept keys.
+    """
+    x1 = max(ax.get_position().x1 for ax in axes)
+    y1 = max(ax.get_position().y1 for ax in axes)
+    fig.legend(
+        handles=axes[0].lines,
+        loc="upper left",
+        bbox_to_anchor=(x1 + 0.1 / fig.get_figwidth(), y1),
+        fontsize=8,
+        title=", ".join(others),
+        title_fontsize=8,
+        alignment="left",
+        frameon=False,
+    )
+
+
 def navigation_vs_key_figure(plan: SweepPlan, episodes: list[Episode], key: str):
     """The figure of ``navigation_vs_key_png`` (a matplotlib ``Figure``): two panels, the
     collision rate and the goal rate against ``key``, one line per ``rate_curves`` curve,
@@ -602,32 +687,8 @@ def navigation_vs_key_figure(plan: SweepPlan, episodes: list[Episode], key: str)
     others = [k for k in swept_keys(plan) if k != key]
     curves = rate_curves(plan, episodes, key)
     if len(curves) > MAX_LINES:
-        fig, (ax,) = _figure(title, "", [""], [])
-        ax.set_axis_off()
-        text = (
-            f"{len(curves)} combinations of {', '.join(others)}: more than {MAX_LINES} lines. "
-            "Each grid point's rates are in summary.json."
-        )
-        ax.text(
-            0.5,
-            0.5,
-            "\n".join(textwrap.wrap(text, 50)),
-            transform=ax.transAxes,
-            ha="center",
-            va="center",
-            fontsize=9,
-        )
-        return fig
-    flown = [int(n) for c in curves for n in c.flown]
-    counts = f"{min(flown)}" if min(flown) == max(flown) else f"{min(flown)} to {max(flown)}"
-    note = [
-        f"Each point: of one grid point's {counts} flown episodes (its seeds, less any whose "
-        "flight diverged), the fraction that touched a cone (MuJoCo's contact), and the "
-        "fraction that came within the goal radius of the goal.",
-        _panels_note(
-            plan, f"one line per value of {', '.join(others)}" if others else "", episodes
-        ),
-    ]
+        return _too_many_lines_figure(title, len(curves), others)
+    note = _navigation_note(plan, episodes, curves, others)
     fig, axes = _figure(
         title, key, ["collision rate", "goal rate"], note, ylabel="fraction of episodes"
     )
@@ -641,18 +702,7 @@ def navigation_vs_key_figure(plan: SweepPlan, episodes: list[Episode], key: str)
         if not any(np.isfinite(getattr(c, rate)).any() for c in curves):
             ax.text(0.5, 0.5, "no flown episode", transform=ax.transAxes, ha="center", fontsize=8)
     if others:
-        x1 = max(ax.get_position().x1 for ax in axes)
-        y1 = max(ax.get_position().y1 for ax in axes)
-        fig.legend(
-            handles=axes[0].lines,
-            loc="upper left",
-            bbox_to_anchor=(x1 + 0.1 / fig.get_figwidth(), y1),
-            fontsize=8,
-            title=", ".join(others),
-            title_fontsize=8,
-            alignment="left",
-            frameon=False,
-        )
+        _other_keys_legend(fig, axes, others)
     return fig
 
 
