@@ -97,6 +97,59 @@ def _tick(k, cones_in_view, detections, gimbal_locked=False, reference_error_m=N
     )
 
 
+def _two_ticks() -> list[TickRecord]:
+    """The ticks of ``run``: at tick 0, cone 0 matched at 2 m (in the contract's domain) and
+    one detection matched to no cone; at tick 1, gimbal locked, cone 0 matched again at 10 m
+    and cone 1 at 30 m, out of the contract's domain (both with their NEES)."""
+    return [
+        _tick(
+            0,
+            [0, 1],
+            [
+                _detection(
+                    0,
+                    {"depth_image": 0.02, "naive": 3.0},
+                    2.0,
+                    True,
+                    {"depth_image": [1.0, 0.0, 0.0], "naive": [4.0, 0.0, 0.0]},
+                    [0.0, 0.0, 5.0],
+                    latest=(0.12, 0.1),
+                ),
+                _detection(None, {}, None, False, {"depth_image": [9.0, 9.0, 0.0]}, None),
+            ],
+            reference_error_m=0.2,
+        ),
+        _tick(
+            1,
+            [0, 1],
+            [
+                _detection(
+                    0,
+                    {"depth_image": 0.03, "naive": 5.0},
+                    10.0,
+                    True,
+                    {"depth_image": [1.02, 0.0, 0.0], "naive": [6.0, 0.0, 0.0]},
+                    [0.0, 1.0, 5.0],
+                    latest=(0.27, 0.3),
+                    nees={"depth_image": (2.0, 3)},
+                ),
+                _detection(
+                    1,
+                    {"depth_image": 0.5},
+                    30.0,
+                    False,
+                    {"depth_image": [3.0, 3.0, 0.0]},
+                    [2.0, 0.0, 30.0],
+                    latest=(0.5, 0.0),  # no motion: not judged
+                    nees={"depth_image": (4.0, 3)},
+                ),
+            ],
+            gimbal_locked=True,
+            reference_error_m=0.7,
+        ),
+    ]
+
+
 @pytest.fixture(scope="module")
 def run() -> RunResult:
     """Two ticks, two cones: cone 0 seen twice, cone 1 once (out of the contract's domain),
@@ -126,53 +179,7 @@ def run() -> RunResult:
             frames_used=300,
             errors={"rotation_deg": 0.04, "translation_m": 0.003, "time_offset_s": 0.0002},
         ),
-        ticks=[
-            _tick(
-                0,
-                [0, 1],
-                [
-                    _detection(
-                        0,
-                        {"depth_image": 0.02, "naive": 3.0},
-                        2.0,
-                        True,
-                        {"depth_image": [1.0, 0.0, 0.0], "naive": [4.0, 0.0, 0.0]},
-                        [0.0, 0.0, 5.0],
-                        latest=(0.12, 0.1),
-                    ),
-                    _detection(None, {}, None, False, {"depth_image": [9.0, 9.0, 0.0]}, None),
-                ],
-                reference_error_m=0.2,
-            ),
-            _tick(
-                1,
-                [0, 1],
-                [
-                    _detection(
-                        0,
-                        {"depth_image": 0.03, "naive": 5.0},
-                        10.0,
-                        True,
-                        {"depth_image": [1.02, 0.0, 0.0], "naive": [6.0, 0.0, 0.0]},
-                        [0.0, 1.0, 5.0],
-                        latest=(0.27, 0.3),
-                        nees={"depth_image": (2.0, 3)},
-                    ),
-                    _detection(
-                        1,
-                        {"depth_image": 0.5},
-                        30.0,
-                        False,
-                        {"depth_image": [3.0, 3.0, 0.0]},
-                        [2.0, 0.0, 30.0],
-                        latest=(0.5, 0.0),  # no motion: not judged
-                        nees={"depth_image": (4.0, 3)},
-                    ),
-                ],
-                gimbal_locked=True,
-                reference_error_m=0.7,
-            ),
-        ],
+        ticks=_two_ticks(),
     )
 
 
