@@ -422,8 +422,22 @@ def _print_condition(title: str, rows: list[Row], ms: dict, floors: dict[str, st
     print()
 
 
-def _print(figures: dict, rows: list[Row]) -> None:
-    """The two tables, the steadiness figures and every target, met or not."""
+_FLOORS = {
+    "copy/floor": "copy of the points, p.copy()",
+    "copy_out/floor": "copy into a buffer, np.copyto(buf, p)",
+    "pass/floor": "one pass, np.negative(p)",
+    "pass_out/floor": "one pass into a buffer, np.negative(p, out=buf)",
+}
+"""The floors' timing keys and their labels, under each table."""
+
+
+def _verdict(met: bool) -> str:
+    """A target's verdict, as the tables print it."""
+    return "met" if met else "NOT met"
+
+
+def _print_tables(figures: dict, rows: list[Row]) -> None:
+    """What was measured and how, the quiet and the busy table, and what each peer runs."""
     n, repeats = figures["n"], figures["repeats"]
     print(
         f"vnav vs SciPy {figures['versions']['scipy']} vs pytransform3d "
@@ -431,26 +445,21 @@ def _print(figures: dict, rows: list[Row]) -> None:
         f"interleaved samples (ms per call; a sample is the median of back-to-back calls over "
         f"{_SAMPLE_S * 1e3:.0f} ms); 'x vnav' = peer time / vnav time (>= 1: vnav ahead)"
     )
-    floors = {
-        "copy/floor": "copy of the points, p.copy()",
-        "copy_out/floor": "copy into a buffer, np.copyto(buf, p)",
-        "pass/floor": "one pass, np.negative(p)",
-        "pass_out/floor": "one pass into a buffer, np.negative(p, out=buf)",
-    }
     for cond, title in (("quiet", "quiet"), ("busy", "beside a busy neighbour process")):
         load = figures["load_1min"][cond]
         title = f"{title} (1-min load average {load:.2f} before it started)"
-        _print_condition(title, rows, figures["ms"][cond], floors)
+        _print_condition(title, rows, figures["ms"][cond], _FLOORS)
     print("\n".join(_LEGEND) + "\n")
+
+
+def _print_targets(figures: dict) -> None:
+    """Every target, met or not (each comparison not met named), and the out-of-cache
+    figure."""
     t = figures["targets"]
-
-    def verdict(met: bool) -> str:
-        return "met" if met else "NOT met"
-
     ahead = t["ahead_of_peers"]
     print(
         f"vnav >= SciPy and >= pytransform3d (best and median, quiet and busy, answers within "
-        f"{_AGREE_ATOL:g}): {verdict(ahead['met'])} "
+        f"{_AGREE_ATOL:g}): {_verdict(ahead['met'])} "
         f"({ahead['count'] - len(ahead['not_met'])} of {ahead['count']} comparisons)"
     )
     for c in ahead["not_met"]:
@@ -461,10 +470,10 @@ def _print(figures: dict, rows: list[Row]) -> None:
         )
     for label, f in t["apply_over_copy"]["figures"].items():
         print(f"{label} / copy: best {f['best_ms']:.2f}, median {f['median_ms']:.2f}")
-    print(f"se3.apply <= {_APPLY_OVER_COPY}x copy: {verdict(t['apply_over_copy']['met'])}")
+    print(f"se3.apply <= {_APPLY_OVER_COPY}x copy: {_verdict(t['apply_over_copy']['met'])}")
     for label, f in t["apply_over_one_pass"]["figures"].items():
         print(f"{label} / one pass: best {f['best_ms']:.2f}, median {f['median_ms']:.2f}")
-    print(f"se3.apply <= {_APPLY_OVER_COPY}x one pass: {verdict(t['apply_over_one_pass']['met'])}")
+    print(f"se3.apply <= {_APPLY_OVER_COPY}x one pass: {_verdict(t['apply_over_one_pass']['met'])}")
     steady = t["busy_over_quiet_median"]["figures"]
     print(
         "busy median / quiet median: "
@@ -472,7 +481,7 @@ def _print(figures: dict, rows: list[Row]) -> None:
     )
     print(
         f"busy median <= {_BUSY_OVER_QUIET:g}x quiet median: "
-        f"{verdict(t['busy_over_quiet_median']['met'])}"
+        f"{_verdict(t['busy_over_quiet_median']['met'])}"
     )
     big = figures["out_of_cache"]
     print(
@@ -483,7 +492,13 @@ def _print(figures: dict, rows: list[Row]) -> None:
         f"(x{big['apply_out']['best_ms'] / big['pass_out']['best_ms']:.2f}); a copy writes "
         "without reading its destination first, a computing pass cannot (not a target)"
     )
-    print(f"all targets: {verdict(figures['targets_met'])}")
+    print(f"all targets: {_verdict(figures['targets_met'])}")
+
+
+def _print(figures: dict, rows: list[Row]) -> None:
+    """The two tables, the steadiness figures and every target, met or not."""
+    _print_tables(figures, rows)
+    _print_targets(figures)
 
 
 def run(args: argparse.Namespace) -> dict:

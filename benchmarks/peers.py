@@ -526,7 +526,14 @@ def _in_fresh_process(*args, **kwargs) -> dict:
         return pool.submit(measure, *args, **kwargs).result()
 
 
-def run(args: argparse.Namespace) -> dict:
+def _require_pybullet() -> None:
+    """Stop here unless PyBullet is importable.
+
+    Raises
+    ------
+    SystemExit
+        If PyBullet (the bench extra) is not installed.
+    """
     try:
         import pybullet  # noqa: F401
     except ImportError:
@@ -534,12 +541,19 @@ def run(args: argparse.Namespace) -> dict:
             "benchmarks peers: PyBullet is not installed; it is in the bench extra: "
             "pip install -e '.[bench]'"
         ) from None
-    rounds = max(1, getattr(args, "rounds", 3))
-    kinematic = getattr(args, "kinematic", False)
-    duration_s = getattr(args, "duration_s", None)
-    segmentation = not getattr(args, "no_segmentation", False)
-    spec = peer_spec(kinematic=kinematic, duration_s=duration_s)
-    load_start = os.getloadavg()
+
+
+def _alternating_runs(
+    rounds: int, kinematic: bool, duration_s: float | None, segmentation: bool
+) -> dict[str, list[dict]]:
+    """``rounds`` runs of every variant, each in a fresh process (``measure``), the order
+    reversed every other round.
+
+    Returns
+    -------
+    dict
+        Each of ``VARIANTS`` to its runs' figures, in the order they ran.
+    """
     runs: dict[str, list[dict]] = {v: [] for v in VARIANTS}
     for i in range(rounds):
         # A B C D, then D C B A: no variant always first (a warmer cache, a quieter moment).
@@ -549,13 +563,19 @@ def run(args: argparse.Namespace) -> dict:
                     variant, kinematic=kinematic, duration_s=duration_s, segmentation=segmentation
                 )
             )
-    load_end = os.getloadavg()
+    return runs
+
+
+def _per_variant(runs: dict[str, list[dict]]) -> dict[str, dict]:
+    """Each variant's frame rates over its runs (``_alternating_runs``): the loop's (frames
+    2..N) best and median per wall second, best per CPU second; the whole run's (all N) best
+    per wall and per CPU second; and the runs themselves."""
 
     def rates(variant: str, key: str) -> list[float]:
         loop = key.startswith("loop")  # frames 2..N; a whole run's all N
         return [(r["frames"] - loop) / r[key] for r in runs[variant]]
 
-    per = {
+    return {
         v: {
             "frames": runs[v][0]["frames"],
             "loop_fps_best": max(rates(v, "loop_s")),
@@ -567,8 +587,13 @@ def run(args: argparse.Namespace) -> dict:
         }
         for v in VARIANTS
     }
+
+
+def _ratios_over_pybullet(per: dict[str, dict]) -> dict[str, dict[str, float]]:
+    """Each vnav variant's rates (``_per_variant``) over PyBullet's: best against best,
+    median against median."""
     peer = per["pybullet"]
-    ratios = {
+    return {
         v: {
             key: per[v][f"{key}_best"] / peer[f"{key}_best"]
             for key in ("loop_fps", "loop_frames_per_cpu_s", "run_fps", "run_frames_per_cpu_s")
@@ -577,6 +602,21 @@ def run(args: argparse.Namespace) -> dict:
         for v in VARIANTS
         if v != "pybullet"
     }
+
+
+def run(args: argparse.Namespace) -> dict:
+    """Every variant ``--rounds`` times, alternating, each in a fresh process; print the table
+    unless ``--json``; return the figures."""
+    _require_pybullet()
+    rounds = max(1, getattr(args, "rounds", 3))
+    kinematic = getattr(args, "kinematic", False)
+    duration_s = getattr(args, "duration_s", None)
+    segmentation = not getattr(args, "no_segmentation", False)
+    spec = peer_spec(kinematic=kinematic, duration_s=duration_s)
+    load_start = os.getloadavg()
+    runs = _alternating_runs(rounds, kinematic, duration_s, segmentation)
+    load_end = os.getloadavg()
+    per = _per_variant(runs)
     camera = spec.scene.camera
     figures = {
         "scenario": "multi-cone, first 4 cones, " + ("keyframes" if kinematic else "controlled"),
@@ -591,7 +631,7 @@ def run(args: argparse.Namespace) -> dict:
         "load_avg_start": list(load_start),
         "load_avg_end": list(load_end),
         "variants": per,
-        "ratio_over_pybullet": ratios,
+        "ratio_over_pybullet": _ratios_over_pybullet(per),
         "target_ratio": TARGET_RATIO,
         "passed": all(r["passed"] for v in ("pipeline", "pipeline-no-rec") for r in runs[v]),
     }
