@@ -506,27 +506,13 @@ def test_ray_engine_reuses_each_workers_scene(work, serial):
     assert outcomes == {(0, 1): (True, False), (1, 2): (False, True)}
 
 
-def test_on_ray_an_episode_that_raises_or_kills_its_worker_costs_itself_only(
-    monkeypatch, tmp_path, work, serial
-):
-    """On one Ray worker: an episode that raises is not run again (a real error: its actor
-    lives on); one that kills its worker's process every time runs 1 + EPISODE_RETRIES times
-    (the worker restarted each time), alone after the first, so that it costs no other
-    episode more than the one try they shared; the others give the serial rows. Once Ray's
-    restarts are used up, the worker is gone and the episodes left come back as failures."""
-    from collections import Counter
-
+def _faulty_worker(started: Path, raiser: tuple[int, int], crasher: tuple[int, int]) -> type:
+    """The engine's worker class with two faults added: each episode it starts is appended to
+    ``started`` (``point seed pid``); the episode ``raiser`` raises, ``crasher`` kills its
+    worker's process. A subclass of EpisodeRunner, not of the patched ``engines._Worker``,
+    which the workers could no longer import; defined here, so that Ray ships it by value."""
     from scenarios.sweep.episode import EpisodeRunner
-    from scenarios.sweep.plan import load
 
-    started = tmp_path / "started"
-    # The raiser is never in flight beside the crasher's first run (the episodes on either
-    # side of it are): an episode lost with its worker before its reply arrived is rightly run
-    # again, and that must not be what this test counts.
-    raiser, crasher = (1, 2), (0, 2)
-
-    # The engine's worker class with two faults added (a subclass of EpisodeRunner, not of
-    # the patched name, which the workers could no longer import).
     class Faulty(EpisodeRunner):
         def ready(self):
             return os.getpid()
@@ -540,10 +526,25 @@ def test_on_ray_an_episode_that_raises_or_kills_its_worker_costs_itself_only(
                 os._exit(1)
             return super().run(scenario_toml, point, seed)
 
-    monkeypatch.setattr(engines, "_Worker", Faulty)
-    plan = load(work / "small.toml")
-    tasks = {(p, s): engines.Task(p, s, plan.points[p].scenario_toml) for p, s in plan.episodes}
-    engine = engines.RayEngine(workers=1, estimators=plan.estimators)  # the sweep's user:ref
+    return Faulty
+
+
+def _run_on_one_faulty_worker(tasks: dict, estimators, started: Path, crasher: tuple[int, int]):
+    """Every task of ``tasks`` on one Ray worker (``engines._Worker`` patched to fail), then,
+    its restarts used up, ``crasher`` and episode (0, 3) again.
+
+    Returns
+    -------
+    results : list
+        The first run's rows and failures.
+    pid_after : int
+        The worker's process id after the first run (restarted).
+    runs : list of tuple
+        ``(point, seed, pid)`` of each episode the workers started, in order.
+    later : list
+        The second run's results.
+    """
+    engine = engines.RayEngine(workers=1, estimators=estimators)  # the sweep's user:ref
     try:
         import ray
 
@@ -556,6 +557,32 @@ def test_on_ray_an_episode_that_raises_or_kills_its_worker_costs_itself_only(
         later = list(engine.run([tasks[crasher], tasks[0, 3]]))
     finally:
         engine.close()
+    return results, pid_after, runs, later
+
+
+def test_on_ray_an_episode_that_raises_or_kills_its_worker_costs_itself_only(
+    monkeypatch, tmp_path, work, serial
+):
+    """On one Ray worker: an episode that raises is not run again (a real error: its actor
+    lives on); one that kills its worker's process every time runs 1 + EPISODE_RETRIES times
+    (the worker restarted each time), alone after the first, so that it costs no other
+    episode more than the one try they shared; the others give the serial rows. Once Ray's
+    restarts are used up, the worker is gone and the episodes left come back as failures."""
+    from collections import Counter
+
+    from scenarios.sweep.plan import load
+
+    started = tmp_path / "started"
+    # The raiser is never in flight beside the crasher's first run (the episodes on either
+    # side of it are): an episode lost with its worker before its reply arrived is rightly run
+    # again, and that must not be what this test counts.
+    raiser, crasher = (1, 2), (0, 2)
+    monkeypatch.setattr(engines, "_Worker", _faulty_worker(started, raiser, crasher))
+    plan = load(work / "small.toml")
+    tasks = {(p, s): engines.Task(p, s, plan.points[p].scenario_toml) for p, s in plan.episodes}
+    results, pid_after, runs, later = _run_on_one_faulty_worker(
+        tasks, plan.estimators, started, crasher
+    )
     failures = {(r.point, r.seed): r.error for r in results if isinstance(r, engines.Failure)}
     assert failures.keys() == {raiser, crasher}
     assert failures[raiser] == "RuntimeError: a bug"
