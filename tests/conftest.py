@@ -102,6 +102,7 @@ SHARED = {
             "tests/test_calibrate_command.py::test_recording_inputs_are_the_runs",
             "tests/test_calibrate_command.py::test_in_run_calibration_meets_",
             "tests/test_calibrate_command.py::test_calibrate_refuses_what_it_cannot_use",
+            "tests/test_calibrate_imu_command.py::test_the_imu_builtin_recording",
             "tests/test_multiview.py::test_pnp_trajectory_of_the_calibration_builtin_",
             "tests/test_covariance.py::test_uncertainty_builtin_covariance_grows_",
             "tests/test_diagnose.py::test_builtin_",
