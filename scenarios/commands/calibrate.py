@@ -208,8 +208,10 @@ def _imu_table(result: ImuCamCalibration, inputs: ImuCalibrationInputs) -> str:
     columns."""
     lines = ["camera in the IMU frame T_i_c (Kalibr's T_cam_imu is its inverse):"]
     lines += ["  " + " ".join(f"{v:9.5f}" for v in row) for row in result.T_i_c]
+    sign = "-" if result.time_offset_s < 0.0 else "+"
     lines.append(
-        f"clock offset (timeshift_cam_imu): t_imu = t_cam + {1e3 * result.time_offset_s:.3f} ms"
+        f"clock offset (timeshift_cam_imu): t_imu = t_cam {sign} "
+        f"{1e3 * abs(result.time_offset_s):.3f} ms"
     )
     lines.append(
         f"reprojection RMS {result.reprojection_rms_px:.3f} px over "

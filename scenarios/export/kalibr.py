@@ -193,7 +193,7 @@ def imu_camchain_yaml(
         ``t_imu = t_cam + shift``, seconds.
     vnav_sim : dict of str to float, int, str or ndarray
         The project's own figures, written under ``cam0.vnav_sim`` in this order (a (4, 4)
-        array as four rows).
+        array as four rows, a (3,) one as one list).
 
     Raises
     ------
@@ -238,6 +238,8 @@ def _text(
     for key, value in vnav_sim.items():
         if isinstance(value, str):
             lines.append(f"    {key}: {_quoted(value)}")
+        elif isinstance(value, np.ndarray) and value.ndim == 1:
+            lines.append(f"    {key}: {_row(value)}")
         elif isinstance(value, np.ndarray):
             lines.append(f"    {key}:")
             lines += [f"    - {_row(row)}" for row in np.atleast_2d(value)]
