@@ -135,6 +135,7 @@ LONGEST_FIRST = (
     "tests/test_sweep.py::test_an_existing_cluster_gives_the_serial_rows",
     "builtin-runs",
     "tests/test_plugin_mistakes.py",
+    "tests/test_calibrate_imu_command.py",
     "tests/test_readme.py::test_sweep_commands_run",
     "tests/test_readme.py::test_avoid_sweep_shows_what_the_readme_says",
     "tests/test_sweep.py::test_resume_after_an_interruption_runs_only_the_missing_episodes",
