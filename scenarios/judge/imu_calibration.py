@@ -4,7 +4,10 @@ The inputs are what a camera and an IMU record (``vnav.imu_calibration``): each 
 exposure stamp on the camera clock and the apexes the detector found in it, the cone map, and
 the IMU's readings stamped on its own clock. Neither the pose stream nor a declared mount goes
 in. The truth is the simulator's: ``T_i_c = T_b_i^-1 T_b_c`` of the true mounts (each its
-declared one times its ``mount_error``) and the scenario's ``[imu] time_offset_s``.
+declared one times its ``mount_error``) and the scenario's ``[imu] time_offset_s``. A
+recording carries the same inputs (``scenarios.record.reader.imu_calibration_inputs``), blobs
+included, so that ``vnav-demo calibrate --imu`` and the run's own calibration make the same two
+passes (``ImuCalibrationInputs.solve``) on the same numbers.
 """
 
 from __future__ import annotations
