@@ -9,8 +9,9 @@
 - ``vnav-demo lecture``: the lecture's worked examples next to vnav's results.
 - ``vnav-demo sweep FILE.toml [--out DIR] [--workers N] [--address ADDR] [--resume]``: a
   scenario over a grid of values and many seeds, on Ray (``scenarios.sweep``).
-- ``vnav-demo calibrate FILE.rrd [--out FILE.yaml]``: the camera mount and clock offset
-  recovered from a recording (``scenarios.commands.calibrate``), written as Kalibr's camchain.
+- ``vnav-demo calibrate FILE.rrd [--out FILE.yaml] [--imu]``: the camera mount and clock
+  offset recovered from a recording (``scenarios.commands.calibrate``), written as Kalibr's
+  camchain; with ``--imu``, the camera against the IMU (``T_i_c``, ``timeshift_cam_imu``).
 
 Output fits 80 columns (``scenarios.commands.console.WIDTH``). Exit status: 0 when every check
 passed (or was skipped), 1 when a check failed or had no data, 2 for bad usage or bad input
@@ -93,7 +94,8 @@ def build_parser() -> argparse.ArgumentParser:
         "on the cone apexes' reprojection error over the whole flight. Prints the answer, its "
         "standard errors and, as the recording holds the truth, its errors. Exit status 2 if "
         "the file is not such a recording or the flight does not determine the answer (too "
-        "few cones seen, no rotation to reveal the offset): the message says which.",
+        "few cones seen, no rotation to reveal the offset): the message says which. With "
+        "--imu, the camera-IMU calibration (T_i_c and Kalibr's timeshift_cam_imu) instead.",
     )
     p.add_argument("recording", metavar="FILE.rrd", help="a recording from vnav-demo run")
     p.add_argument(
@@ -101,6 +103,13 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         metavar="FILE.yaml",
         help="also write the answer as Kalibr camchain YAML",
+    )
+    p.add_argument(
+        "--imu",
+        action="store_true",
+        help="calibrate the camera against the IMU instead (a run with an [imu]): T_i_c and "
+        "Kalibr's timeshift_cam_imu (t_imu = t_cam + offset), from the images and the IMU's "
+        "readings alone",
     )
     p.set_defaults(func=_verb("calibrate"))
     return parser

@@ -22,6 +22,10 @@ A run with an IMU (``ImuExtrinsics``) also has Kalibr's own two keys:
 
 ``cam0.vnav_sim.imu_extrinsics`` says where the IMU's figures come from.
 
+A camera calibrated against the IMU itself (``vnav.imu_calibration``, ``imu_camchain_yaml``)
+has Kalibr's two keys alone, as ``kalibr_calibrate_imu_camera`` writes them: ``T_cam_imu``, the
+inverse of the recovered ``T_i_c``, and ``timeshift_cam_imu``, the recovered offset; no body.
+
 The project's own figures sit in ``cam0.vnav_sim``, a key no Kalibr reader looks up. Not at the
 top level: Kalibr's ``CameraChainParameters.numCameras()`` counts every top-level key as a
 camera. The intrinsics are the project's (``vnav.camera.PinholeCamera``: OpenCV's pixel-centre
@@ -40,7 +44,7 @@ import numpy as np
 from vnav import se3
 from vnav.camera import PinholeCamera
 
-__all__ = ["IMAGE_TOPIC", "ImuExtrinsics", "camchain_yaml", "yaml_float"]
+__all__ = ["IMAGE_TOPIC", "ImuExtrinsics", "camchain_yaml", "imu_camchain_yaml", "yaml_float"]
 
 IMAGE_TOPIC = "/camera/image_raw"
 """The image topic of the run's ROS 2 bag (``scenarios.export.mcap``)."""
@@ -156,6 +160,67 @@ def camchain_yaml(
             f"  timeshift_cam_imu: {yaml_float(imu.timeshift_cam_imu_s)}  # t_imu = t_cam + shift",
         ]
         vnav_sim = {**vnav_sim, "T_b_i": T_b_i, "imu_extrinsics": imu.source}
+    return _text(
+        camera,
+        head,
+        [
+            *imu_lines,
+            "  T_cam_body:  # body to camera: p_cam = T_cam_body p_body (the inverse of T_b_c)",
+            *(f"  - {_row(row)}" for row in T_cam_body),
+            f"  timeshift_cam_body: {yaml_float(time_offset_s)}  # t_body = t_cam + shift",
+        ],
+        vnav_sim,
+    )
+
+
+def imu_camchain_yaml(
+    camera: PinholeCamera,
+    T_i_c: np.ndarray,
+    timeshift_cam_imu_s: float,
+    vnav_sim: dict[str, float | int | str | np.ndarray],
+) -> str:
+    """The camchain text of one camera calibrated against an IMU, as Kalibr's
+    ``kalibr_calibrate_imu_camera`` writes it: ``T_cam_imu`` and ``timeshift_cam_imu`` are the
+    calibrated ones (``vnav.imu_calibration``); no body in it.
+
+    Parameters
+    ----------
+    camera : PinholeCamera
+        Intrinsics and resolution.
+    T_i_c : ndarray, shape (4, 4)
+        The camera's optical frame in the IMU frame (written inverted, as ``T_cam_imu``).
+    timeshift_cam_imu_s : float
+        ``t_imu = t_cam + shift``, seconds.
+    vnav_sim : dict of str to float, int, str or ndarray
+        The project's own figures, written under ``cam0.vnav_sim`` in this order (a (4, 4)
+        array as four rows, a (3,) one as one list).
+
+    Raises
+    ------
+    ValueError
+        If ``T_i_c`` is not a rigid transform or a number is not finite.
+    """
+    T_cam_imu = se3.invert(se3.check_pose(T_i_c, "T_i_c"))
+    head = [
+        "# T_cam_imu and timeshift_cam_imu calibrated from the images and the IMU's readings",
+        "# alone (cam0.vnav_sim.imu_extrinsics): the camera referred to the IMU, no body.",
+    ]
+    imu_lines = [
+        "  T_cam_imu:  # IMU to camera: p_cam = T_cam_imu p_imu (the inverse of T_i_c)",
+        *(f"  - {_row(row)}" for row in T_cam_imu),
+        f"  timeshift_cam_imu: {yaml_float(timeshift_cam_imu_s)}  # t_imu = t_cam + shift",
+    ]
+    return _text(camera, head, imu_lines, vnav_sim)
+
+
+def _text(
+    camera: PinholeCamera,
+    head: list[str],
+    extrinsics: list[str],
+    vnav_sim: dict[str, float | int | str | np.ndarray],
+) -> str:
+    """The camchain: ``head`` (comments), ``cam0`` with the camera's intrinsics, the
+    ``extrinsics`` lines and the project's figures under ``vnav_sim``."""
     lines = [
         '# Kalibr camchain (ethz-asl/kalibr, wiki "Yaml formats"), written by vnav-sim.',
         *head,
@@ -167,15 +232,14 @@ def camchain_yaml(
         f"  resolution: [{int(camera.width)}, {int(camera.height)}]",
         f"  rostopic: {IMAGE_TOPIC}",
         "  cam_overlaps: []",
-        *imu_lines,
-        "  T_cam_body:  # body to camera: p_cam = T_cam_body p_body (the inverse of T_b_c)",
-        *(f"  - {_row(row)}" for row in T_cam_body),
-        f"  timeshift_cam_body: {yaml_float(time_offset_s)}  # t_body = t_cam + shift",
+        *extrinsics,
         "  vnav_sim:  # the project's names and figures; no Kalibr reader looks them up",
     ]
     for key, value in vnav_sim.items():
         if isinstance(value, str):
             lines.append(f"    {key}: {_quoted(value)}")
+        elif isinstance(value, np.ndarray) and value.ndim == 1:
+            lines.append(f"    {key}: {_row(value)}")
         elif isinstance(value, np.ndarray):
             lines.append(f"    {key}:")
             lines += [f"    - {_row(row)}" for row in np.atleast_2d(value)]

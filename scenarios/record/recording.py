@@ -67,8 +67,9 @@ docs/CONVENTIONS.md; "in F" is the named transform frame an entity is drawn in):
     estimator/masks                AnyValues ``masks``: every detection's blob, exactly
                                    (``pack_masks``; the JPEG is lossy, the blob is what the
                                    apexes are fitted to)
-    truth                          AnyValues (static): camera_clock_offset_s
-                                   (``vnav-demo calibrate`` reads these and the detections)
+    truth                          AnyValues (static): camera_clock_offset_s and, with an
+                                   [imu], imu_time_offset_s (``vnav-demo calibrate`` reads
+                                   these and the detections)
     world/navigation/..., metrics/navigation/...   a navigating flight's plan, map, goal,
                                    contact and clearances (``navigation_views``)
     world/body/imu..., imu/...     a run with an [imu]: the IMU frame (true and declared
@@ -1218,7 +1219,7 @@ def _transform_columns(T_parent_child: np.ndarray, **more) -> object:
 
 def _log_run_inputs(rec: rr.RecordingStream, result: RunResult, latency: bool) -> None:
     """At the end of a run: the pose stream as the estimator received it and the true clock
-    offset (what ``vnav-demo calibrate`` reads beside the detections)."""
+    offsets (what ``vnav-demo calibrate`` reads beside the detections)."""
     if result.poses is not None:
         if latency:
             _send_pose_samples(rec, result.poses)
@@ -1227,11 +1228,11 @@ def _log_run_inputs(rec: rr.RecordingStream, result: RunResult, latency: bool) -
             indexes=[rr.TimeColumn("sim_time", duration=result.poses.stamps_s)],
             columns=_transform_columns(result.poses.T_w_b),
         )
-    rec.log(
-        entity.TRUTH_VALUES,
-        rr.AnyValues(camera_clock_offset_s=result.spec.timing.camera_clock_offset_s),
-        static=True,
-    )
+    truth = {"camera_clock_offset_s": result.spec.timing.camera_clock_offset_s}
+    if result.spec.scene.imu is not None:
+        # What ``vnav-demo calibrate --imu`` judges its clock offset against.
+        truth["imu_time_offset_s"] = result.spec.scene.imu.time_offset_s
+    rec.log(entity.TRUTH_VALUES, rr.AnyValues(**truth), static=True)
 
 
 def _log_outcome(
