@@ -162,3 +162,34 @@ def test_midpoint_covariance_is_its_view_by_view_form() -> None:
         got = midpoint_covariance(CAMERA, T, uv, apex, cov_T, cov_uv)
         ref = _midpoint_covariance_reference(CAMERA, T, uv, apex, cov_T, cov_uv)
         np.testing.assert_allclose(got, ref, rtol=1e-10, atol=1e-16)
+
+
+def test_estimate_from_the_window_is_the_reference_to_the_last_bit() -> None:
+    """``ApexTracker._estimate`` (each view's part computed once, when it joins) against
+    ``_estimate_reference`` (the triangulation and ``midpoint_covariance`` of every view of
+    the window again) at every image: equal to the last bit, while rays leave the window by
+    count and by time (the buffers compacted several times), with pose covariances on some
+    views only and pixels noisy."""
+    rng = np.random.default_rng(5)
+    tracker = ApexTracker(CAMERA, max_views=6, window_s=1.0)
+    compared = 0
+    for i, (t_s, T, uv, _) in enumerate(_images(rng, 0.3, n=41, span_m=12.0)):
+        A = rng.normal(size=(6, 6)) * 1e-3
+        cov_T = A @ A.T if i % 3 else None
+        # After image 20 a pause of 0.8 s: rays leave the window by time.
+        t_s += 0.8 * (i > 20)
+        tracked = tracker.update(t_s, T, uv, cov_T_w_c=cov_T, cov_uv=0.16 * np.eye(2))
+        by_id = {tr.id: tr for tr in tracker._tracks}
+        for got in tracked:
+            ref = tracker._estimate_reference(by_id[got.track])
+            assert (got.track, got.parallax_deg, got.views) == (
+                ref.track,
+                ref.parallax_deg,
+                ref.views,
+            )
+            for a, b in ((got.p_w, ref.p_w), (got.apex_w, ref.apex_w), (got.cov_w, ref.cov_w)):
+                assert (a is None) == (b is None)
+                if a is not None:
+                    assert np.array_equal(a, b)
+            compared += got.cov_w is not None
+    assert compared > 60
