@@ -263,3 +263,26 @@ def test_standard_errors_consider_the_focal_length() -> None:
         assert result.std_translation_m == pytest.approx(std[:3].max())
         assert result.std_rotation_deg == pytest.approx(math.degrees(std[3:6].max()))
         assert result.std_offset_s == pytest.approx(std[6])
+
+
+def test_mutual_nearest_is_its_detection_by_detection_form() -> None:
+    """``_mutual_nearest`` (every row and column at once) against
+    ``_mutual_nearest_reference`` (the definition, detection by detection): the same pairs,
+    on random maps and pixels with gates that keep some pairs and drop others, cones behind
+    the camera, and ties."""
+    from vnav.calibration import _mutual_nearest, _mutual_nearest_reference
+
+    rng = np.random.default_rng(3)
+    camera = PinholeCamera.from_fovy(60.0, 640, 480)
+    T_w_c = se3.make(np.eye(3), [0.0, 0.0, 0.0])
+    kept = 0
+    for trial in range(200):
+        apex_w = rng.uniform([-4.0, -3.0, -5.0], [4.0, 3.0, 20.0], size=(rng.integers(1, 9), 3))
+        uv = rng.uniform(0.0, 640.0, size=(rng.integers(0, 9), 2))
+        if trial % 10 == 0 and len(uv):
+            uv[-1] = uv[0]  # two detections at one pixel: the first is the cone's nearest
+        gate = float(rng.choice([5.0, 50.0, 400.0]))
+        got = _mutual_nearest(camera, T_w_c, apex_w, uv, gate)
+        assert got == _mutual_nearest_reference(camera, T_w_c, apex_w, uv, gate)
+        kept += len(got)
+    assert kept > 100
