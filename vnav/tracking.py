@@ -367,15 +367,18 @@ def _window_covariance(w: _Window, A_inv: np.ndarray, p_w: np.ndarray) -> np.nda
     cov = np.zeros((3, 3))
     lo, hi = w.lo, w.hi
     posed, pixels = w.posed[lo:hi], w.pixels[lo:hi]
+    # Every view (the usual case): the window's rows themselves, not a copy of them all.
+    every = slice(None)
     if posed.any():
-        k = np.flatnonzero(posed)
-        J = np.empty((len(k), 3, 6))
-        J[:, :, :3] = P[k]
+        k = every if posed.all() else np.flatnonzero(posed)
+        Pk = P[k]
+        J = np.empty((len(Pk), 3, 6))
+        J[:, :, :3] = Pk
         J[:, :, 3:] = w["PcS"][k] + M[k] @ w["Sd"][k]
         J = A_inv @ J
         cov += np.einsum("nij,njk,nlk->il", J, w["cov_T"][k], J)
     if pixels.any():
-        k = np.flatnonzero(pixels)
+        k = every if pixels.all() else np.flatnonzero(pixels)
         J = -(A_inv @ M[k] @ w["D"][k])
         cov += np.einsum("nij,njk,nlk->il", J, w["cov_uv"][k], J)
     return 0.5 * (cov + cov.T)

@@ -88,6 +88,7 @@ def evaluate_tick(
     cov_T_b_c: np.ndarray | None = None,
     keep_depth: bool = False,
     T_w_b_newest: np.ndarray | None = None,
+    seen: TickRecord | None = None,
 ) -> TickRecord:
     """Localise every detection with what the estimator was told and compare with the truth.
 
@@ -119,6 +120,10 @@ def evaluate_tick(
     T_w_b_newest : ndarray, shape (4, 4), optional
         The newest pose received when the image arrived, as users' functions are shown it
         (``vnav.plugin``); default ``timing.T_w_b_latest``.
+    seen : TickRecord, optional
+        A record of this tick with this truth (``reevaluate``'s): its attitude, gimbal-lock
+        flag and cones in view, which depend on the truth alone, are taken from it rather
+        than computed again.
 
     Returns
     -------
@@ -126,12 +131,17 @@ def evaluate_tick(
     """
     camera = localizer.camera
     T_w_c = truth.T_w_b @ truth.T_b_c
-    R_w_b = truth.T_w_b[:3, :3]
-    # One tolerance for the flag and for the angles (so3's default): a tick flagged locked is
-    # exactly one whose angles to_rpy computed with roll = 0.
-    locked = bool(so3.gimbal_locked(R_w_b))
-    rpy_rad = so3.to_rpy(R_w_b, warn=False)
-    in_view = cones_fully_in_view(truth.cones_w, camera, T_w_c, CONTRACT_DOMAIN.min_height_px)
+    if seen is not None:
+        locked, rpy_rad, in_view = seen.gimbal_locked, seen.rpy_rad, seen.cones_in_view
+    else:
+        R_w_b = truth.T_w_b[:3, :3]
+        # One tolerance for the flag and for the angles (so3's default): a tick flagged
+        # locked is exactly one whose angles to_rpy computed with roll = 0.
+        locked = bool(so3.gimbal_locked(R_w_b))
+        rpy_rad = so3.to_rpy(R_w_b, warn=False)
+        in_view = cones_fully_in_view(
+            truth.cones_w, camera, T_w_c, CONTRACT_DOMAIN.min_height_px
+        )
     T_b_c_est = truth.T_b_c if T_b_c_est is None else T_b_c_est
     # The estimator stamps the image with its exposure time, not the simulator's.
     t_s = truth.t_s if timing is None else timing.exposure_pose_s
@@ -255,6 +265,8 @@ def reevaluate(
                 cov_T_b_c=cov_T_b_c,
                 # Users' functions are shown what they were in the run (vnav.plugin).
                 T_w_b_newest=None if t.timing is None else t.timing.T_w_b_latest,
+                # The same truth: its attitude and cones in view are the run's.
+                seen=t,
             )
         )
     return out
