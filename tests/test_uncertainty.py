@@ -208,7 +208,7 @@ def test_nees_of_a_full_rank_stack_is_nees_pair_by_pair_to_the_last_bit(rng):
     """Stacks whose covariances all have full rank (a detection's methods, the usual case,
     which ``nees_many`` scores as one product and one sum) against ``nees`` one pair at a
     time: equal to the last bit, for 1 to 9 pairs, well and badly conditioned."""
-    for trial in range(300):
+    for _ in range(300):
         m = int(rng.integers(1, 10))
         A = rng.normal(0.0, 1.0, (m, 3, 3)) * rng.uniform(1e-4, 1.0, (m, 1, 3))
         covs = A @ A.transpose(0, 2, 1) + 1e-12 * np.eye(3)

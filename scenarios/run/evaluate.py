@@ -139,9 +139,7 @@ def evaluate_tick(
         # locked is exactly one whose angles to_rpy computed with roll = 0.
         locked = bool(so3.gimbal_locked(R_w_b))
         rpy_rad = so3.to_rpy(R_w_b, warn=False)
-        in_view = cones_fully_in_view(
-            truth.cones_w, camera, T_w_c, CONTRACT_DOMAIN.min_height_px
-        )
+        in_view = cones_fully_in_view(truth.cones_w, camera, T_w_c, CONTRACT_DOMAIN.min_height_px)
     T_b_c_est = truth.T_b_c if T_b_c_est is None else T_b_c_est
     # The estimator stamps the image with its exposure time, not the simulator's.
     t_s = truth.t_s if timing is None else timing.exposure_pose_s
