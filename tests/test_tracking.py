@@ -194,3 +194,26 @@ def test_estimate_from_the_window_is_the_reference_to_the_last_bit() -> None:
                     assert np.array_equal(a, b)
             compared += got.cov_w is not None
     assert compared > 100
+
+
+def test_angle_to_a_track_is_its_reference() -> None:
+    """The association's angle from a ray to each track, with what depends on the track alone
+    computed once (``_angle_to_track``), against ``_angle_to_track_reference`` (per pair):
+    equal, for tracks with and without an apex, in front of and behind the camera."""
+    from vnav.tracking import _angle_to_track, _angle_to_track_reference
+
+    rng = np.random.default_rng(7)
+    tracker = ApexTracker(CAMERA)
+    for t_s, T, uv, _ in _images(rng, 0.3):
+        tracker.update(t_s, T, uv)
+    tracks = tracker._tracks
+    tracks[0].apex_w = None
+    tracks[1].apex_w = np.array([-50.0, 0.0, 1.0])  # behind the camera below
+    for _ in range(200):
+        centre = rng.normal(0.0, 2.0, 3)
+        d = rng.normal(size=3)
+        d /= np.linalg.norm(d)
+        for tr in tracks:
+            v = None if tr.apex_w is None else tr.apex_w - centre
+            n = None if v is None else float(np.linalg.norm(v))
+            assert _angle_to_track(d, tr, v, n) == _angle_to_track_reference(centre, d, tr)

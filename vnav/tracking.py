@@ -274,12 +274,18 @@ class ApexTracker:
         cone's bearing may also have turned by the camera's travel since that ray over the
         cone's range, at most ``baseline / MIN_RANGE_M``: the gate widens by that."""
         pairs = []
+        # What depends on the track alone, once per track (``_angle_to_track_reference`` and
+        # the gate, per pair, give the same numbers).
+        towards = []
+        for tr in self._tracks:
+            gate = self.gate_rad
+            if tr.apex_w is None:
+                gate += float(np.linalg.norm(centre - tr.rays[-1][1])) / MIN_RANGE_M
+            v = None if tr.apex_w is None else tr.apex_w - centre
+            towards.append((tr, gate, v, None if v is None else float(np.linalg.norm(v))))
         for k, d in enumerate(directions):
-            for tr in self._tracks:
-                dist = _angle_to_track(centre, d, tr)
-                gate = self.gate_rad
-                if tr.apex_w is None:
-                    gate += float(np.linalg.norm(centre - tr.rays[-1][1])) / MIN_RANGE_M
+            for tr, gate, v, n in towards:
+                dist = _angle_to_track(d, tr, v, n)
                 if dist <= gate:
                     pairs.append((dist, k, tr.id))
         pairs.sort()
@@ -384,7 +390,18 @@ def _window_covariance(w: _Window, A_inv: np.ndarray, p_w: np.ndarray) -> np.nda
     return 0.5 * (cov + cov.T)
 
 
-def _angle_to_track(centre: np.ndarray, d: np.ndarray, track: _Track) -> float:
+def _angle_to_track(d: np.ndarray, track: _Track, v: np.ndarray | None, n: float | None) -> float:
+    """``_angle_to_track_reference`` given ``v = track.apex_w - centre`` and its norm ``n``
+    (None without an apex)."""
+    if v is not None and n is not None:
+        vd = float(v @ d)
+        if n > 1e-9 and vd > 0.0:
+            return math.acos(min(1.0, vd / n))
+    d2 = track.rays[-1][2]
+    return math.acos(min(1.0, max(-1.0, float(d @ d2))))
+
+
+def _angle_to_track_reference(centre: np.ndarray, d: np.ndarray, track: _Track) -> float:
     """The angle (rad) between the ray ``centre + s d`` and the track: the direction from
     ``centre`` to the track's apex if it has one (in front), else its latest ray's."""
     if track.apex_w is not None:
