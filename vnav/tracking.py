@@ -304,7 +304,7 @@ class ApexTracker:
     def _estimate(self, track: _Track) -> TrackedApex:
         """The track's apex, base and covariance from its window's stacked rays: the numbers
         of ``_estimate_reference`` (the triangulation and ``midpoint_covariance`` of every
-        view again, at each image), each view's own part computed once (``_view``)."""
+        view again, at each image), each view's own part computed once (``_views``)."""
         w = track.window
         n = w.hi - w.lo
         angle = parallax_deg(w["dirs"]) if n >= 2 else 0.0
