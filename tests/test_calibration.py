@@ -286,3 +286,29 @@ def test_mutual_nearest_is_its_detection_by_detection_form() -> None:
         assert got == _mutual_nearest_reference(camera, T_w_c, apex_w, uv, gate)
         kept += len(got)
     assert kept > 100
+
+
+def test_residuals_are_their_reference_to_the_last_bit() -> None:
+    """``_Problem.residuals`` (the pose stream looked up once per clock offset, the poses
+    inverted without the check) against ``_residuals_reference`` (looked up at every call,
+    ``se3.invert``): equal to the last bit along a Jacobian's evaluations (offsets repeated
+    and new, the offset at its bound) and after the matching changes."""
+    from vnav.calibration import _jacobian
+
+    rng = np.random.default_rng(4)
+    stamps, T_w_b, t_cam, apex_uv = _flight(rng, DECLARED, 0.03)
+    buffer = FrameBuffer(cache_s=100.0)
+    buffer.set_transform("world", "body", stamps, T_w_b)
+    inside = (t_cam - 0.1 >= stamps[0]) & (t_cam + 0.1 <= stamps[-1])
+    images = [(float(t), uv) for t, uv, ok in zip(t_cam, apex_uv, inside, strict=True) if ok]
+    problem = _Problem(CAMERA, buffer, images, APEX_W, DECLARED, max_offset_s=0.1)
+    calls = 0
+    for x in (np.zeros(7), np.r_[rng.normal(0.0, 0.01, 6), 0.02], np.r_[np.zeros(6), 0.5]):
+        problem.match(x, 50.0)
+        assert problem.n_observations > 100
+        for _ in range(2):  # the second time from the looked-up poses
+            columns = _jacobian(problem.residuals, x)
+            assert np.array_equal(columns, _jacobian(problem._residuals_reference, x))
+            assert np.array_equal(problem.residuals(x), problem._residuals_reference(x))
+            calls += 1
+    assert calls == 6

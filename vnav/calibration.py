@@ -380,6 +380,20 @@ class _Problem:
         v = self.camera.fy * p_c[:, 1] / z + self.camera.cy
         return (np.column_stack([u, v]) - self.obs_uv).ravel()
 
+    def _residuals_reference(self, x: np.ndarray) -> np.ndarray:
+        """``residuals`` as first written (kept to test it): the pose stream looked up at
+        every call, the poses inverted by ``se3.invert``."""
+        offset = min(max(float(x[6]), -self.max_offset_s), self.max_offset_s)
+        T_w_b = self.buffer.lookup("world", "body", self.t + offset)
+        T_c_w = se3.invert(T_w_b @ self.T_b_c(x))[self.obs_image]
+        p_c = (
+            np.einsum("nij,nj->ni", T_c_w[:, :3, :3], self.apex_w[self.obs_cone]) + T_c_w[:, :3, 3]
+        )
+        z = np.maximum(p_c[:, 2], 1e-6)
+        u = self.camera.fx * p_c[:, 0] / z + self.camera.cx
+        v = self.camera.fy * p_c[:, 1] / z + self.camera.cy
+        return (np.column_stack([u, v]) - self.obs_uv).ravel()
+
     def result(self, x: np.ndarray, *, refuse_undetermined: bool = True) -> CalibrationResult:
         r = self.residuals(x)
         rms = float(np.sqrt(np.mean(r**2) * 2.0))  # per apex: sqrt(du^2 + dv^2)
