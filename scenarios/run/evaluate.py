@@ -225,7 +225,9 @@ def reevaluate(
     Each tick is given what it was given in the run: its detections, the depth under their
     masks (kept by ``evaluate_tick(keep_depth=True)``; a tick without it has no depth), the
     body pose looked up at its exposure stamp and that pose's covariance. Only the mount
-    differs. The newest-pose estimate (``DetectionRecord.latest_w``) is not made again.
+    differs. The newest-pose estimate (``DetectionRecord.latest_w``) is not made again, nor
+    what depends on the truth alone (the attitude, the cones in view: ``evaluate_tick``'s
+    ``seen``).
 
     Parameters
     ----------
