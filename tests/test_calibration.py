@@ -263,3 +263,52 @@ def test_standard_errors_consider_the_focal_length() -> None:
         assert result.std_translation_m == pytest.approx(std[:3].max())
         assert result.std_rotation_deg == pytest.approx(math.degrees(std[3:6].max()))
         assert result.std_offset_s == pytest.approx(std[6])
+
+
+def test_mutual_nearest_is_its_detection_by_detection_form() -> None:
+    """``_mutual_nearest`` (every row and column at once) against
+    ``_mutual_nearest_reference`` (the definition, detection by detection): the same pairs,
+    on random maps and pixels with gates that keep some pairs and drop others, cones behind
+    the camera, and ties."""
+    from vnav.calibration import _mutual_nearest, _mutual_nearest_reference
+
+    rng = np.random.default_rng(3)
+    camera = PinholeCamera.from_fovy(60.0, 640, 480)
+    T_w_c = se3.make(np.eye(3), [0.0, 0.0, 0.0])
+    kept = 0
+    for trial in range(200):
+        apex_w = rng.uniform([-4.0, -3.0, -5.0], [4.0, 3.0, 20.0], size=(rng.integers(1, 9), 3))
+        uv = rng.uniform(0.0, 640.0, size=(rng.integers(0, 9), 2))
+        if trial % 10 == 0 and len(uv):
+            uv[-1] = uv[0]  # two detections at one pixel: the first is the cone's nearest
+        gate = float(rng.choice([5.0, 50.0, 400.0]))
+        got = _mutual_nearest(camera, T_w_c, apex_w, uv, gate)
+        assert got == _mutual_nearest_reference(camera, T_w_c, apex_w, uv, gate)
+        kept += len(got)
+    assert kept > 100
+
+
+def test_residuals_are_their_reference_to_the_last_bit() -> None:
+    """``_Problem.residuals`` (the pose stream looked up once per clock offset, the poses
+    inverted without the check) against ``_residuals_reference`` (looked up at every call,
+    ``se3.invert``): equal to the last bit along a Jacobian's evaluations (offsets repeated
+    and new, the offset at its bound) and after the matching changes."""
+    from vnav.calibration import _jacobian
+
+    rng = np.random.default_rng(4)
+    stamps, T_w_b, t_cam, apex_uv = _flight(rng, DECLARED, 0.03)
+    buffer = FrameBuffer(cache_s=100.0)
+    buffer.set_transform("world", "body", stamps, T_w_b)
+    inside = (t_cam - 0.1 >= stamps[0]) & (t_cam + 0.1 <= stamps[-1])
+    images = [(float(t), uv) for t, uv, ok in zip(t_cam, apex_uv, inside, strict=True) if ok]
+    problem = _Problem(CAMERA, buffer, images, APEX_W, DECLARED, max_offset_s=0.1)
+    calls = 0
+    for x in (np.zeros(7), np.r_[rng.normal(0.0, 0.01, 6), 0.02], np.r_[np.zeros(6), 0.5]):
+        problem.match(x, 50.0)
+        assert problem.n_observations > 100
+        for _ in range(2):  # the second time from the looked-up poses
+            columns = _jacobian(problem.residuals, x)
+            assert np.array_equal(columns, _jacobian(problem._residuals_reference, x))
+            assert np.array_equal(problem.residuals(x), problem._residuals_reference(x))
+            calls += 1
+    assert calls == 6

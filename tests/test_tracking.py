@@ -162,3 +162,67 @@ def test_midpoint_covariance_is_its_view_by_view_form() -> None:
         got = midpoint_covariance(CAMERA, T, uv, apex, cov_T, cov_uv)
         ref = _midpoint_covariance_reference(CAMERA, T, uv, apex, cov_T, cov_uv)
         np.testing.assert_allclose(got, ref, rtol=1e-10, atol=1e-16)
+
+
+def test_estimate_from_the_window_is_the_reference_to_the_last_bit() -> None:
+    """``ApexTracker._estimate`` (each view's part computed once, when it joins) against
+    ``_estimate_reference`` (the triangulation and ``midpoint_covariance`` of every view of
+    the window again) at every image: equal to the last bit, while rays leave the window by
+    count and by time (the buffers compacted several times), with pose covariances on some
+    views only and pixels noisy."""
+    from vnav import so3
+
+    rng = np.random.default_rng(5)
+    tracker = ApexTracker(CAMERA, max_views=6, window_s=1.0)
+    compared = 0
+    for i, (t_s, T, _, _) in enumerate(_images(rng, 0.0, n=61, span_m=18.0)):
+        # A wobbling camera (every coordinate a full-mantissa number: the sums' order shows).
+        T = se3.make(
+            so3.exp(rng.normal(0.0, 0.01, 3)) @ T[:3, :3], T[:3, 3] + rng.normal(0.0, 0.05, 3)
+        )
+        T_c_w = se3.invert(T)
+        uv = CAMERA.project(APEX_W @ T_c_w[:3, :3].T + T_c_w[:3, 3])
+        uv += rng.normal(0.0, 0.3, uv.shape)
+        A = rng.normal(size=(6, 6)) * 1e-3
+        # Every view's pose uncertain in the last third, only some before.
+        cov_T = A @ A.T if i % 3 or i > 40 else None
+        # After image 20 a pause of 0.8 s: rays leave the window by time.
+        t_s += 0.8 * (i > 20)
+        tracked = tracker.update(t_s, T, uv, cov_T_w_c=cov_T, cov_uv=0.16 * np.eye(2))
+        by_id = {tr.id: tr for tr in tracker._tracks}
+        for got in tracked:
+            ref = tracker._estimate_reference(by_id[got.track])
+            assert (got.track, got.parallax_deg, got.views) == (
+                ref.track,
+                ref.parallax_deg,
+                ref.views,
+            )
+            for a, b in ((got.p_w, ref.p_w), (got.apex_w, ref.apex_w), (got.cov_w, ref.cov_w)):
+                assert (a is None) == (b is None)
+                if a is not None:
+                    assert np.array_equal(a, b)
+            compared += got.cov_w is not None
+    assert compared > 100
+
+
+def test_angle_to_a_track_is_its_reference() -> None:
+    """The association's angle from a ray to each track, with what depends on the track alone
+    computed once (``_angle_to_track``), against ``_angle_to_track_reference`` (per pair):
+    equal, for tracks with and without an apex, in front of and behind the camera."""
+    from vnav.tracking import _angle_to_track, _angle_to_track_reference
+
+    rng = np.random.default_rng(7)
+    tracker = ApexTracker(CAMERA)
+    for t_s, T, uv, _ in _images(rng, 0.3):
+        tracker.update(t_s, T, uv)
+    tracks = tracker._tracks
+    tracks[0].apex_w = None
+    tracks[1].apex_w = np.array([-50.0, 0.0, 1.0])  # behind the camera below
+    for _ in range(200):
+        centre = rng.normal(0.0, 2.0, 3)
+        d = rng.normal(size=3)
+        d /= np.linalg.norm(d)
+        for tr in tracks:
+            v = None if tr.apex_w is None else tr.apex_w - centre
+            n = None if v is None else float(np.linalg.norm(v))
+            assert _angle_to_track(d, tr, v, n) == _angle_to_track_reference(centre, d, tr)

@@ -204,6 +204,20 @@ def test_nees_of_a_rank_two_covariance_has_two_dof():
     assert nees([1.0, 2.0, 0.1], cov)[0] == np.inf
 
 
+def test_nees_of_a_full_rank_stack_is_nees_pair_by_pair_to_the_last_bit(rng):
+    """Stacks whose covariances all have full rank (a detection's methods, the usual case,
+    which ``nees_many`` scores as one product and one sum) against ``nees`` one pair at a
+    time: equal to the last bit, for 1 to 9 pairs, well and badly conditioned."""
+    for _ in range(300):
+        m = int(rng.integers(1, 10))
+        A = rng.normal(0.0, 1.0, (m, 3, 3)) * rng.uniform(1e-4, 1.0, (m, 1, 3))
+        covs = A @ A.transpose(0, 2, 1) + 1e-12 * np.eye(3)
+        errors = rng.normal(0.0, rng.uniform(0.01, 3.0), (m, 3))
+        got = nees_many(errors, covs)
+        assert got == [nees(e, c) for e, c in zip(errors, covs, strict=True)]
+        assert all(dof == 3 for _, dof in got)
+
+
 def test_nees_of_a_stack_is_nees_pair_by_pair_to_the_last_bit(rng):
     """``nees_many`` (one decomposition of the stacked covariances) against ``nees`` one pair
     at a time: covariances of rank 3, 2 (exact in z, with and without an error along z), 1

@@ -274,6 +274,9 @@ class _Problem:
         self.obs_image = np.zeros(0, dtype=np.int64)
         self.obs_cone = np.zeros(0, dtype=np.int64)
         self.obs_uv = np.zeros((0, 2))
+        # The pose stream looked up at the images' stamps under an offset: a Jacobian's six
+        # mount columns share the offset, so most evaluations look up the same poses.
+        self._T_w_b_at: dict[float, np.ndarray] = {}
 
     @property
     def n_observations(self) -> int:
@@ -352,12 +355,37 @@ class _Problem:
         # The offset held within +-max_offset_s, where every image's pose lies inside the
         # stream: a Levenberg-Marquardt step (or a difference step) beyond it would extrapolate.
         offset = min(max(float(x[6]), -self.max_offset_s), self.max_offset_s)
-        T_w_b = self.buffer.lookup("world", "body", self.t + offset)
+        T_w_b = self._T_w_b_at.get(offset)
+        if T_w_b is None:
+            if len(self._T_w_b_at) >= 16:
+                self._T_w_b_at.clear()
+            T_w_b = self._T_w_b_at[offset] = self.buffer.lookup("world", "body", self.t + offset)
         return T_w_b @ self.T_b_c(x)
 
     def residuals(self, x: np.ndarray) -> np.ndarray:
         """Reprojection errors of the matched apexes, (2 K,) px."""
-        T_c_w = se3.invert(self._poses(x))[self.obs_image]
+        # ``se3.invert`` less its check: the poses are products of checked rigid transforms.
+        T_w_c = self._poses(x)
+        Rt = np.swapaxes(T_w_c[:, :3, :3], -1, -2)
+        T_c_w = np.zeros_like(T_w_c)
+        T_c_w[:, :3, :3] = Rt
+        T_c_w[:, :3, 3] = -np.matmul(Rt, T_w_c[:, :3, 3, None])[..., 0]
+        T_c_w[:, 3, 3] = 1.0
+        T_c_w = T_c_w[self.obs_image]
+        p_c = (
+            np.einsum("nij,nj->ni", T_c_w[:, :3, :3], self.apex_w[self.obs_cone]) + T_c_w[:, :3, 3]
+        )
+        z = np.maximum(p_c[:, 2], 1e-6)
+        u = self.camera.fx * p_c[:, 0] / z + self.camera.cx
+        v = self.camera.fy * p_c[:, 1] / z + self.camera.cy
+        return (np.column_stack([u, v]) - self.obs_uv).ravel()
+
+    def _residuals_reference(self, x: np.ndarray) -> np.ndarray:
+        """``residuals`` as first written (kept to test it): the pose stream looked up at
+        every call, the poses inverted by ``se3.invert``."""
+        offset = min(max(float(x[6]), -self.max_offset_s), self.max_offset_s)
+        T_w_b = self.buffer.lookup("world", "body", self.t + offset)
+        T_c_w = se3.invert(T_w_b @ self.T_b_c(x))[self.obs_image]
         p_c = (
             np.einsum("nij,nj->ni", T_c_w[:, :3, :3], self.apex_w[self.obs_cone]) + T_c_w[:, :3, 3]
         )
@@ -491,6 +519,26 @@ def _mutual_nearest(
     camera: PinholeCamera, T_w_c: np.ndarray, apex_w: np.ndarray, uv: np.ndarray, gate_px: float
 ) -> list[tuple[int, int]]:
     """``(detection, cone)`` pairs: each the other's nearest, within ``gate_px``."""
+    T_c_w = se3.invert(T_w_c)
+    p_c = apex_w @ T_c_w[:3, :3].T + T_c_w[:3, 3]
+    proj = np.full((len(apex_w), 2), np.inf)
+    front = p_c[:, 2] > 0.1
+    proj[front] = camera.project(p_c[front])
+    d = np.linalg.norm(uv[:, None, :] - proj[None, :, :], axis=2)
+    if not len(uv):
+        return []
+    # Each detection's nearest cone and each cone's nearest detection, every row and column
+    # at once (``_mutual_nearest_reference`` is the same, detection by detection).
+    k = np.arange(len(uv))
+    c = np.argmin(d, axis=1)
+    mutual = (d[k, c] <= gate_px) & (np.argmin(d, axis=0)[c] == k)
+    return list(zip(k[mutual].tolist(), c[mutual].tolist(), strict=True))
+
+
+def _mutual_nearest_reference(
+    camera: PinholeCamera, T_w_c: np.ndarray, apex_w: np.ndarray, uv: np.ndarray, gate_px: float
+) -> list[tuple[int, int]]:
+    """``_mutual_nearest`` detection by detection, as the definition reads (kept to test it)."""
     T_c_w = se3.invert(T_w_c)
     p_c = apex_w @ T_c_w[:3, :3].T + T_c_w[:3, 3]
     proj = np.full((len(apex_w), 2), np.inf)

@@ -26,7 +26,7 @@ from vnav import se3, so3
 from vnav.camera import PinholeCamera
 from vnav.cone import TRAFFIC_CONE, ConeModel
 from vnav.estimators import NoEstimate
-from vnav.multiview import parallax_deg, triangulate_checked
+from vnav.multiview import MIN_RAY_COS, parallax_deg, triangulate_checked
 from vnav.observation import Exposure, Observation
 from vnav.sensor_noise import keypoint_std_px
 
@@ -66,9 +66,78 @@ class TrackedApex:
     cov_w: np.ndarray | None = None
 
 
+_WINDOW_SHAPES: dict[str, tuple[int, ...]] = {
+    "dirs": (3,),  # the association's ray (``update``'s direction)
+    "d": (3,),  # the triangulation's ray (``multiview._rays_w``)
+    # The pose: its centre and optical axis read as the reference reads them (strided
+    # views of the stack: numpy's einsum sums a contiguous operand in another order).
+    "T": (4, 4),
+    "P": (3, 3),  # I - d d^T
+    "PcS": (3, 3),  # -P [c]x
+    "Sd": (3, 3),  # [d]x
+    "D": (3, 2),  # the unit ray's change per pixel
+    "cov_T": (6, 6),
+    "cov_uv": (2, 2),
+}
+"""A ray's quantities a ``_Window`` keeps, with their shapes."""
+
+
+class _Window:
+    """A track's rays as stacked arrays, each ray's own quantities computed once, when it
+    joins: what ``triangulate_checked`` and ``midpoint_covariance`` compute from every
+    view of the window at each image (rays, projectors, the Jacobians' parts that do not
+    depend on the estimate). Rows ``lo:hi`` of buffers twice ``max_views`` long; when full,
+    the window's rows move to the front."""
+
+    __slots__ = ("beside", "buf", "hi", "lo", "pixels", "posed")
+
+    def __init__(self, capacity: int) -> None:
+        self.buf = {k: np.zeros((capacity, *s)) for k, s in _WINDOW_SHAPES.items()}
+        self.beside = np.zeros(capacity, dtype=bool)
+        self.posed = np.zeros(capacity, dtype=bool)
+        self.pixels = np.zeros(capacity, dtype=bool)
+        self.lo = self.hi = 0
+
+    def append(
+        self,
+        rows: dict[str, np.ndarray],
+        k: int,
+        beside: bool,
+        cov_T: np.ndarray | None,
+        cov_uv: np.ndarray | None,
+    ) -> None:
+        """Row ``k`` of ``rows`` (``ApexTracker._views``) and the view's covariances (None:
+        exact) as the window's newest ray."""
+        capacity = self.beside.size
+        if self.hi == capacity:
+            n = self.hi - self.lo
+            for a in (*self.buf.values(), self.beside, self.posed, self.pixels):
+                a[:n] = a[self.lo : self.hi]
+            self.lo, self.hi = 0, n
+        i = self.hi
+        buf = self.buf
+        for key, value in rows.items():
+            buf[key][i] = value[k]
+        if cov_T is not None:
+            buf["cov_T"][i] = cov_T
+        if cov_uv is not None:
+            buf["cov_uv"][i] = cov_uv
+        self.beside[i] = beside
+        self.posed[i] = cov_T is not None
+        self.pixels[i] = cov_uv is not None
+        self.hi += 1
+
+    def popleft(self) -> None:
+        self.lo += 1
+
+    def __getitem__(self, key: str) -> np.ndarray:
+        return self.buf[key][self.lo : self.hi]
+
+
 @dataclass
 class _Track:
     id: int
+    window: _Window
     rays: deque = field(default_factory=deque)  # (t_s, centre (3,), unit direction (3,), T, uv)
     apex_w: np.ndarray | None = None
 
@@ -148,23 +217,54 @@ class ApexTracker:
         centre = T[:3, 3]
         directions = self.camera.rays(uv) @ T[:3, :3].T if len(uv) else np.zeros((0, 3))
         assigned = self._associate(centre, directions)
+        beside, rows = self._views(T, uv)
+        rows["dirs"] = directions
         out = []
         for k, d in enumerate(directions):
             track = assigned.get(k)
             if track is None:
-                track = _Track(self._next_id)
+                track = _Track(self._next_id, _Window(2 * self.max_views))
                 self._next_id += 1
                 self._tracks.append(track)
             track.rays.append((float(t_s), centre.copy(), d, T, uv[k], cov_T_w_c, cov_uv))
+            track.window.append(rows, k, bool(beside[k]), cov_T_w_c, cov_uv)
             while len(track.rays) > self.max_views:
                 track.rays.popleft()
+                track.window.popleft()
             out.append(self._estimate(track))
         return out
+
+    def _views(self, T: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """The image's rays' quantities for the windows (``_Window``), (K, ...) each: computed
+        by the same operations as ``triangulate_checked`` and ``midpoint_covariance`` compute
+        them for every view of a window, so the same numbers (``_estimate_reference`` is the
+        test), and whether each ray lies in the image plane (``MIN_RAY_COS``)."""
+        camera = self.camera
+        n = len(uv)
+        rays_c = camera.rays(uv) if n else np.zeros((0, 3))
+        Ts = np.broadcast_to(T, (n, 4, 4))
+        R = Ts[:, :3, :3]
+        d = np.einsum("nij,nj->ni", R, rays_c)
+        P = np.eye(3) - np.einsum("ni,nj->nij", d, d)
+        x = (uv[:, 0] - camera.cx) / camera.fx
+        y = (uv[:, 1] - camera.cy) / camera.fy
+        D = P @ np.stack([R[:, :, 0] / camera.fx, R[:, :, 1] / camera.fy], axis=2)
+        D /= np.sqrt(x * x + y * y + 1.0)[:, None, None]
+        rows = {
+            "d": d,
+            "T": Ts,
+            "P": P,
+            "PcS": -P @ so3.skew(np.ascontiguousarray(Ts[:, :3, 3])),
+            "Sd": so3.skew(d),
+            "D": D,
+        }
+        return ~(rays_c[:, 2] > MIN_RAY_COS), rows
 
     def _forget(self, t_s: float) -> None:
         for tr in self._tracks:
             while tr.rays and tr.rays[0][0] < t_s - self.window_s:
                 tr.rays.popleft()
+                tr.window.popleft()
         self._tracks = [tr for tr in self._tracks if tr.rays]
 
     def _associate(self, centre: np.ndarray, directions: np.ndarray) -> dict[int, _Track]:
@@ -174,12 +274,18 @@ class ApexTracker:
         cone's bearing may also have turned by the camera's travel since that ray over the
         cone's range, at most ``baseline / MIN_RANGE_M``: the gate widens by that."""
         pairs = []
+        # What depends on the track alone, once per track (``_angle_to_track_reference`` and
+        # the gate, per pair, give the same numbers).
+        towards = []
+        for tr in self._tracks:
+            gate = self.gate_rad
+            if tr.apex_w is None:
+                gate += float(np.linalg.norm(centre - tr.rays[-1][1])) / MIN_RANGE_M
+            v = None if tr.apex_w is None else tr.apex_w - centre
+            towards.append((tr, gate, v, None if v is None else float(np.linalg.norm(v))))
         for k, d in enumerate(directions):
-            for tr in self._tracks:
-                dist = _angle_to_track(centre, d, tr)
-                gate = self.gate_rad
-                if tr.apex_w is None:
-                    gate += float(np.linalg.norm(centre - tr.rays[-1][1])) / MIN_RANGE_M
+            for tr, gate, v, n in towards:
+                dist = _angle_to_track(d, tr, v, n)
                 if dist <= gate:
                     pairs.append((dist, k, tr.id))
         pairs.sort()
@@ -196,6 +302,38 @@ class ApexTracker:
         return out
 
     def _estimate(self, track: _Track) -> TrackedApex:
+        """The track's apex, base and covariance from its window's stacked rays: the numbers
+        of ``_estimate_reference`` (the triangulation and ``midpoint_covariance`` of every
+        view again, at each image), each view's own part computed once (``_views``)."""
+        w = track.window
+        n = w.hi - w.lo
+        angle = parallax_deg(w["dirs"]) if n >= 2 else 0.0
+        if angle < self.min_parallax_deg:
+            return TrackedApex(track.id, None, track.apex_w, angle, n)
+        # triangulate_checked: the same checks, in its order.
+        d, P, T = w["d"], w["P"], w["T"]
+        c = T[:, :3, 3]
+        if w.beside[w.lo : w.hi].any() or not parallax_deg(d) >= self.min_parallax_deg:
+            return TrackedApex(track.id, None, None, angle, n)
+        A = P.sum(axis=0)
+        apex = np.linalg.solve(A, np.einsum("nij,nj->i", P, c))
+        if not np.all(np.einsum("ni,ni->n", apex - c, T[:, :3, 2]) > 0.0):
+            return TrackedApex(track.id, None, None, angle, n)
+        track.apex_w = apex
+        base = apex - np.array([0.0, 0.0, self.cone.height_m])
+        cov = _window_covariance(w, np.linalg.inv(A), apex)
+        range_m = float(np.linalg.norm(apex - track.rays[-1][1]))
+        if (
+            math.sqrt(max(float(np.linalg.eigvalsh(cov)[-1]), 0.0))
+            > self.max_std_fraction * range_m
+        ):
+            return TrackedApex(track.id, None, apex, angle, n, None)
+        return TrackedApex(track.id, base, apex, angle, n, cov)
+
+    def _estimate_reference(self, track: _Track) -> TrackedApex:
+        """``_estimate`` as every view of the window computes it again at each image (kept to
+        test it): ``triangulate_checked`` and ``midpoint_covariance`` on the window's poses and
+        pixels. It leaves ``track`` as it was."""
         directions = np.array([r[2] for r in track.rays])
         angle = parallax_deg(directions) if len(directions) >= 2 else 0.0
         if angle < self.min_parallax_deg:
@@ -207,7 +345,6 @@ class ApexTracker:
             apex = triangulate_checked(self.camera, T, uv, min_parallax_deg=self.min_parallax_deg)
         except ValueError:
             return TrackedApex(track.id, None, None, angle, len(track.rays))
-        track.apex_w = apex
         base = apex - np.array([0.0, 0.0, self.cone.height_m])
         cov = midpoint_covariance(
             self.camera,
@@ -226,7 +363,45 @@ class ApexTracker:
         return TrackedApex(track.id, base, apex, angle, len(track.rays), cov)
 
 
-def _angle_to_track(centre: np.ndarray, d: np.ndarray, track: _Track) -> float:
+def _window_covariance(w: _Window, A_inv: np.ndarray, p_w: np.ndarray) -> np.ndarray:
+    """``midpoint_covariance`` of the window's views at ``p_w``, ``A_inv = (sum P_i)^-1``,
+    from the parts ``ApexTracker._view`` computed once per view: the same operations on the
+    same numbers."""
+    d, P = w["d"], w["P"]
+    wv = w["T"][:, :3, 3] - p_w
+    M = np.einsum("ni,ni->n", d, wv)[:, None, None] * np.eye(3) + d[:, :, None] * wv[:, None, :]
+    cov = np.zeros((3, 3))
+    lo, hi = w.lo, w.hi
+    posed, pixels = w.posed[lo:hi], w.pixels[lo:hi]
+    # Every view (the usual case): the window's rows themselves, not a copy of them all.
+    every = slice(None)
+    if posed.any():
+        k = every if posed.all() else np.flatnonzero(posed)
+        Pk = P[k]
+        J = np.empty((len(Pk), 3, 6))
+        J[:, :, :3] = Pk
+        J[:, :, 3:] = w["PcS"][k] + M[k] @ w["Sd"][k]
+        J = A_inv @ J
+        cov += np.einsum("nij,njk,nlk->il", J, w["cov_T"][k], J)
+    if pixels.any():
+        k = every if pixels.all() else np.flatnonzero(pixels)
+        J = -(A_inv @ M[k] @ w["D"][k])
+        cov += np.einsum("nij,njk,nlk->il", J, w["cov_uv"][k], J)
+    return 0.5 * (cov + cov.T)
+
+
+def _angle_to_track(d: np.ndarray, track: _Track, v: np.ndarray | None, n: float | None) -> float:
+    """``_angle_to_track_reference`` given ``v = track.apex_w - centre`` and its norm ``n``
+    (None without an apex)."""
+    if v is not None and n is not None:
+        vd = float(v @ d)
+        if n > 1e-9 and vd > 0.0:
+            return math.acos(min(1.0, vd / n))
+    d2 = track.rays[-1][2]
+    return math.acos(min(1.0, max(-1.0, float(d @ d2))))
+
+
+def _angle_to_track_reference(centre: np.ndarray, d: np.ndarray, track: _Track) -> float:
     """The angle (rad) between the ray ``centre + s d`` and the track: the direction from
     ``centre`` to the track's apex if it has one (in front), else its latest ray's."""
     if track.apex_w is not None:

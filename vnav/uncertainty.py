@@ -509,20 +509,25 @@ def nees_many(errors: object, covs: object, rtol: float = 1e-9) -> list[tuple[fl
         bad = bool(((scale != 0.0) & (w[:, 0] < -1e-9 * scale)).any())
     if bad:
         return [nees(ei, Si, rtol) for ei, Si in zip(e, S, strict=True)]
-    out = []
-    for ei, wi, Vi in zip(e, w, V, strict=True):  # ``nees`` past its decomposition
-        top = float(wi[-1])
-        if top <= 0.0:
-            out.append((0.0, 0) if not np.any(ei) else (math.inf, 0))
+    # ``nees`` past its decomposition, every pair at once: ``Vi.T @ ei`` as a stack is the
+    # same BLAS product matrix by matrix; the eigenvalues come sorted, so those ``nees``
+    # leaves out are a row's first, and its sum with zeros in their place is the same sum.
+    top = w[:, -1]
+    keep = w > rtol * top[:, None]
+    c = np.matmul(V.transpose(0, 2, 1), e[:, :, None])[..., 0]
+    terms = np.where(keep, c**2 / np.where(keep, w, 1.0), 0.0)
+    values = np.sum(terms, axis=1).tolist()
+    dofs = keep.sum(axis=1).tolist()
+    out = list(zip(values, dofs, strict=True))
+    for i in np.flatnonzero(~keep.all(axis=1)).tolist():
+        ei = e[i]
+        if not float(top[i]) > 0.0:
+            out[i] = (0.0, 0) if not np.any(ei) else (math.inf, 0)
             continue
-        keep = wi > rtol * top
-        c = Vi.T @ ei
-        outside_c = c[~keep]
+        outside_c = c[i][~keep[i]]
         outside = math.sqrt(float(outside_c.dot(outside_c)))
         if outside > 1e-9 + math.sqrt(rtol) * math.sqrt(float(ei.dot(ei))):
-            out.append((math.inf, int(keep.sum())))
-        else:
-            out.append((float(np.sum(c[keep] ** 2 / wi[keep])), int(keep.sum())))
+            out[i] = (math.inf, dofs[i])
     return out
 
 

@@ -88,6 +88,7 @@ def evaluate_tick(
     cov_T_b_c: np.ndarray | None = None,
     keep_depth: bool = False,
     T_w_b_newest: np.ndarray | None = None,
+    seen: TickRecord | None = None,
 ) -> TickRecord:
     """Localise every detection with what the estimator was told and compare with the truth.
 
@@ -119,6 +120,10 @@ def evaluate_tick(
     T_w_b_newest : ndarray, shape (4, 4), optional
         The newest pose received when the image arrived, as users' functions are shown it
         (``vnav.plugin``); default ``timing.T_w_b_latest``.
+    seen : TickRecord, optional
+        A record of this tick with this truth (``reevaluate``'s): its attitude, gimbal-lock
+        flag and cones in view, which depend on the truth alone, are taken from it rather
+        than computed again.
 
     Returns
     -------
@@ -126,12 +131,15 @@ def evaluate_tick(
     """
     camera = localizer.camera
     T_w_c = truth.T_w_b @ truth.T_b_c
-    R_w_b = truth.T_w_b[:3, :3]
-    # One tolerance for the flag and for the angles (so3's default): a tick flagged locked is
-    # exactly one whose angles to_rpy computed with roll = 0.
-    locked = bool(so3.gimbal_locked(R_w_b))
-    rpy_rad = so3.to_rpy(R_w_b, warn=False)
-    in_view = cones_fully_in_view(truth.cones_w, camera, T_w_c, CONTRACT_DOMAIN.min_height_px)
+    if seen is not None:
+        locked, rpy_rad, in_view = seen.gimbal_locked, seen.rpy_rad, seen.cones_in_view
+    else:
+        R_w_b = truth.T_w_b[:3, :3]
+        # One tolerance for the flag and for the angles (so3's default): a tick flagged
+        # locked is exactly one whose angles to_rpy computed with roll = 0.
+        locked = bool(so3.gimbal_locked(R_w_b))
+        rpy_rad = so3.to_rpy(R_w_b, warn=False)
+        in_view = cones_fully_in_view(truth.cones_w, camera, T_w_c, CONTRACT_DOMAIN.min_height_px)
     T_b_c_est = truth.T_b_c if T_b_c_est is None else T_b_c_est
     # The estimator stamps the image with its exposure time, not the simulator's.
     t_s = truth.t_s if timing is None else timing.exposure_pose_s
@@ -150,9 +158,11 @@ def evaluate_tick(
     )
     cone_of = _match(estimates, truth.cones_w)
     T_c_w = se3.invert(T_w_c)
+    estimates_w = [{m: p for m, p in e.items() if p is not None} for e in estimates]
+    scores = _nees_by_detection(estimates, estimates_w, cone_of, truth.cones_w)
     records = [
-        _compare(d, e, cone_of.get(i), truth.cones_w, T_c_w, in_view)
-        for i, (d, e) in enumerate(zip(detections, estimates, strict=True))
+        _compare(d, e, est_w, cone_of.get(i), truth.cones_w, T_c_w, in_view, scores[i])
+        for i, (d, e, est_w) in enumerate(zip(detections, estimates, estimates_w, strict=True))
     ]
     if timing is not None and timing.T_w_b_latest is not None:
         records = [
@@ -215,7 +225,9 @@ def reevaluate(
     Each tick is given what it was given in the run: its detections, the depth under their
     masks (kept by ``evaluate_tick(keep_depth=True)``; a tick without it has no depth), the
     body pose looked up at its exposure stamp and that pose's covariance. Only the mount
-    differs. The newest-pose estimate (``DetectionRecord.latest_w``) is not made again.
+    differs. The newest-pose estimate (``DetectionRecord.latest_w``) is not made again, nor
+    what depends on the truth alone (the attitude, the cones in view: ``evaluate_tick``'s
+    ``seen``).
 
     Parameters
     ----------
@@ -255,6 +267,8 @@ def reevaluate(
                 cov_T_b_c=cov_T_b_c,
                 # Users' functions are shown what they were in the run (vnav.plugin).
                 T_w_b_newest=None if t.timing is None else t.timing.T_w_b_latest,
+                # The same truth: its attitude and cones in view are the run's.
+                seen=t,
             )
         )
     return out
@@ -388,16 +402,47 @@ def with_method(
     )
 
 
+def _nees_by_detection(
+    estimates: list[ConeEstimates],
+    estimates_w: list[dict[str, np.ndarray]],
+    cone_of: dict[int, int],
+    cones_w: np.ndarray,
+) -> list[list[tuple[float, int]] | None]:
+    """Each matched detection's ``nees_many`` of its estimates (in ``estimates_w``'s order)
+    against its true cone, None for an unmatched one: every detection's as one stack (the
+    same numbers as a call per detection: ``nees_many`` scores a stack matrix by matrix)."""
+    errors, covs, counts = [], [], []
+    for i, (e, est_w) in enumerate(zip(estimates, estimates_w, strict=True)):
+        cone_index = cone_of.get(i)
+        if cone_index is None:
+            counts.append(None)
+            continue
+        p_true_w = cones_w[cone_index]
+        errors.extend(p - p_true_w for p in est_w.values())
+        covs.extend(e.cov_w_by_method[m] for m in est_w)
+        counts.append(len(est_w))
+    scored = nees_many(np.array(errors).reshape(-1, 3), np.array(covs).reshape(-1, 3, 3))
+    out: list[list[tuple[float, int]] | None] = []
+    start = 0
+    for n in counts:
+        out.append(None if n is None else scored[start : start + n])
+        start += n or 0
+    return out
+
+
 def _compare(
     detection: ConeDetection,
     estimates: ConeEstimates,
+    estimates_w: dict[str, np.ndarray],
     cone_index: int | None,
     cones_w: np.ndarray,
     T_c_w: np.ndarray,
     in_view: list[int],
+    scores: list[tuple[float, int]] | None,
 ) -> DetectionRecord:
-    """One detection's record: its estimates and, if matched, their errors and the range."""
-    estimates_w = {m: p for m, p in estimates.items() if p is not None}
+    """One detection's record: its estimates (``estimates_w``, those ``estimates`` gives)
+    and, if matched, their errors, NEES (``scores``, in ``estimates_w``'s order,
+    ``_nees_by_detection``) and the range."""
     no_estimate = dict(estimates.no_estimate)
     covariances_w = dict(estimates.cov_w_by_method)
     if cone_index is None:
@@ -408,16 +453,8 @@ def _compare(
     p_c_true = se3.apply(T_c_w, p_true_w)
     range_m = float(np.linalg.norm(p_c_true))
     errors_m = _errors_m(p_true_w, estimates_w)
-    scored = dict(
-        zip(
-            estimates_w,
-            nees_many(
-                np.array([p - p_true_w for p in estimates_w.values()]).reshape(-1, 3),
-                np.array([covariances_w[m] for m in estimates_w]).reshape(-1, 3, 3),
-            ),
-            strict=True,
-        )
-    )
+    assert scores is not None  # matched: scored by _nees_by_detection
+    scored = dict(zip(estimates_w, scores, strict=True))
     nees_by_method = {m: v for m, v in scored.items() if _has_nees(v)}
     in_contract = cone_index in in_view and CONTRACT_DOMAIN.contains_range(range_m)
     return DetectionRecord(
