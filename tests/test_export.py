@@ -200,16 +200,18 @@ def test_depth_mm_rounds_each_depth_exactly_to_the_millimetre():
 
 
 def test_a_ticks_depth_in_millimetres_is_made_once_for_every_exporter(calibration):
-    """``tick_depth_mm``: the same tick's record and depth give the very array made for the
-    first exporter (read-only); another tick's record, or another far plane, a new one."""
+    """``tick_depth_mm``: the same tick's record and depth give the same handle, whose ``get``
+    makes ``depth_mm`` once (the very array for every exporter, read-only); another tick's
+    record, or another far plane, a new handle."""
     record, other = calibration.records[:2]
     depth_m = calibration.depth_m[0]
-    first = base.tick_depth_mm(record, depth_m, 100.0)
-    assert base.tick_depth_mm(record, depth_m, 100.0) is first
-    assert not first.flags.writeable
+    shared = base.tick_depth_mm(record, depth_m, 100.0)
+    assert base.tick_depth_mm(record, depth_m, 100.0) is shared
+    first = shared.get()
+    assert shared.get() is first and not first.flags.writeable
     np.testing.assert_array_equal(first, base.depth_mm(depth_m, 100.0))
-    assert base.tick_depth_mm(other, depth_m, 100.0) is not first
-    assert base.tick_depth_mm(other, depth_m, 20.0) is not first
+    assert base.tick_depth_mm(other, depth_m, 100.0) is not shared
+    assert base.tick_depth_mm(other, depth_m, 20.0).get() is not first
 
 
 def test_euroc_sensor_files_describe_the_camera(calibration):

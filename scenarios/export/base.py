@@ -13,7 +13,8 @@ will be in the output directory) and those it did not write this time (with the 
 (``scenarios.record.outputs.OutputPair.add``).
 
 What several exporters write of the same image is made once: the depth in millimetres
-(``tick_depth_mm``), which the EuRoC PNGs and the bag's depth images both hold.
+(``tick_depth_mm``), which the EuRoC PNGs and the bag's depth images both hold, made on the
+exporters' threads, not the run's.
 """
 
 from __future__ import annotations
@@ -40,6 +41,7 @@ __all__ = [
     "ExportResult",
     "Exporter",
     "Flusher",
+    "TickDepthMm",
     "depth_mm",
     "listed_files",
     "stamp_ns",
@@ -208,30 +210,51 @@ def depth_mm(depth_m: np.ndarray, far_m: float) -> np.ndarray:
     return out
 
 
-_tick_depth_lock = threading.Lock()
-_tick_depth_last: tuple[TickRecord, np.ndarray, float, np.ndarray] | None = None
+class TickDepthMm:
+    """A tick's depth in millimetres (``depth_mm``), made by the first thread that asks for it
+    (an exporter's writer, off the run's thread) and shared by every exporter of the tick.
 
-
-def tick_depth_mm(record: TickRecord, depth_m: np.ndarray, far_m: float) -> np.ndarray:
-    """``depth_mm(depth_m, far_m)`` of a tick, made once for every exporter given that tick:
-    the result of the last call is returned again for the same ``record`` and ``depth_m``
-    (the same objects, as ``scenarios.run.runner.FanOut`` hands each observer) and ``far_m``.
-
-    Returns
-    -------
-    ndarray, shape (H, W), uint16
-        Read-only: the exporters share it.
+    Parameters
+    ----------
+    depth_m : ndarray, shape (H, W)
+        Not modified until ``get`` has been called (the renderer makes a new one each tick).
+    far_m : float
     """
+
+    def __init__(self, depth_m: np.ndarray, far_m: float) -> None:
+        self._depth_m: np.ndarray | None = depth_m
+        self.far_m = far_m
+        self._mm: np.ndarray | None = None
+        self._lock = threading.Lock()
+
+    def get(self) -> np.ndarray:
+        """The (H, W) uint16 millimetres, read-only (the exporters share them)."""
+        with self._lock:
+            if self._mm is None:
+                mm = depth_mm(self._depth_m, self.far_m)
+                mm.flags.writeable = False
+                self._mm, self._depth_m = mm, None
+            return self._mm
+
+
+_tick_depth_lock = threading.Lock()
+_tick_depth_last: tuple[TickRecord, np.ndarray, TickDepthMm] | None = None
+
+
+def tick_depth_mm(record: TickRecord, depth_m: np.ndarray, far_m: float) -> TickDepthMm:
+    """The ``TickDepthMm`` of a tick, one for every exporter given that tick: the last call's is
+    returned again for the same ``record`` and ``depth_m`` (the same objects, as
+    ``scenarios.run.runner.FanOut`` hands each observer) and ``far_m``. Nothing is computed
+    here: the first ``get`` computes."""
     global _tick_depth_last
     with _tick_depth_lock:
         last = _tick_depth_last
-        if last is not None and last[0] is record and last[1] is depth_m and last[2] == far_m:
-            return last[3]
-        mm = depth_mm(depth_m, far_m)
-        mm.flags.writeable = False
+        if last is not None and last[0] is record and last[1] is depth_m and last[2].far_m == far_m:
+            return last[2]
+        shared = TickDepthMm(depth_m, far_m)
         # The record and the depth are held (not their ids): neither id is reused meanwhile.
-        _tick_depth_last = (record, depth_m, far_m, mm)
-        return mm
+        _tick_depth_last = (record, depth_m, shared)
+        return shared
 
 
 def stamp_ns(record: TickRecord) -> int:

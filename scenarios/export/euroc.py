@@ -67,6 +67,7 @@ from scenarios.export.base import (
     DEPTH_SCALE,
     ExportResult,
     Flusher,
+    TickDepthMm,
     depth_mm,
     stamp_ns,
     tick_depth_mm,
@@ -159,14 +160,14 @@ def _write_images(
     rgb_path: Path,
     rgb: np.ndarray,
     depth_path: Path | None,
-    depth_mm: np.ndarray | None,
+    depth_mm: TickDepthMm | None,
     flusher: Flusher,
 ) -> None:
     """Encode and write one tick's images (on the writer thread); flush them."""
     _write_file(rgb_path, _png(cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), PNG_PARAMS))
     flusher.submit(rgb_path)
     if depth_path is not None and depth_mm is not None:
-        _write_file(depth_path, _png(depth_mm, DEPTH_PNG_PARAMS))
+        _write_file(depth_path, _png(depth_mm.get(), DEPTH_PNG_PARAMS))
         flusher.submit(depth_path)
 
 

@@ -75,7 +75,7 @@ from mcap.writer import Writer as McapWriter
 # registered here through mcap's Writer).
 from mcap_ros2._dynamic import serialize_dynamic
 
-from scenarios.export.base import ExportResult, tick_depth_mm
+from scenarios.export.base import ExportResult, TickDepthMm, tick_depth_mm
 from scenarios.export.ros2_msgs import QOS_LATCHED, QOS_VOLATILE, msgdef
 from scenarios.scenario.spec import KinematicFlight
 from vnav import quat, se3
@@ -291,7 +291,7 @@ class McapExporter:
         stamp_ns: int,
         transforms: list[dict],
         rgb: np.ndarray,
-        depth_mm: np.ndarray | None,
+        depth_mm: TickDepthMm | None,
     ) -> None:
         """Write one tick's messages (on the writer thread)."""
         cam = self._camera
@@ -309,7 +309,7 @@ class McapExporter:
         self._write_raw("/camera/image_raw", _image_cdr(rgb, "rgb8", stamp_ns), stamp_ns)
         if depth_mm is not None:
             self._write_raw(
-                "/camera/depth/image_raw", _image_cdr(depth_mm, "16UC1", stamp_ns), stamp_ns
+                "/camera/depth/image_raw", _image_cdr(depth_mm.get(), "16UC1", stamp_ns), stamp_ns
             )
             self._depth_ticks += 1
         for d in record.detections:
