@@ -214,6 +214,26 @@ def test_a_ticks_depth_in_millimetres_is_made_once_for_every_exporter(calibratio
     assert base.tick_depth_mm(other, depth_m, 20.0).get() is not first
 
 
+def test_a_flush_that_fails_is_an_error(tmp_path):
+    """``Flusher``: files flushed on its threads; a file it cannot flush (here, one that is not
+    there) raises from ``wait``, and from the next ``submit`` once it is known."""
+    flusher = base.Flusher(threads=2)
+    try:
+        for i in range(5):
+            (tmp_path / f"{i}.png").write_bytes(b"x" * 1000)
+            flusher.submit(tmp_path / f"{i}.png")
+        flusher.wait()
+        flusher.submit(tmp_path / "missing.png")
+        with pytest.raises(FileNotFoundError):
+            flusher.wait()
+        flusher.submit(tmp_path / "missing.png")
+        with pytest.raises(FileNotFoundError):
+            for _ in range(1000):  # until the failed flush is done and seen
+                flusher.submit(tmp_path / "0.png")
+    finally:
+        flusher.shutdown()
+
+
 def test_euroc_sensor_files_describe_the_camera(calibration):
     """cam0/sensor.yaml has EuRoC's keys in its order; the intrinsics are the camera's,
     ``T_BS`` the true mount, row-major; the ground truth's T_BS the identity."""
