@@ -7,7 +7,9 @@ from __future__ import annotations
 import dataclasses
 import errno
 import json
+import math
 import os
+from fractions import Fraction
 from pathlib import Path
 
 import cv2
@@ -20,7 +22,7 @@ from evo.tools import file_interface
 
 from scenarios import export, pipeline
 from scenarios.cli import main
-from scenarios.export import euroc
+from scenarios.export import base, euroc
 from scenarios.record import outputs
 from scenarios.run.runner import FanOut
 from scenarios.scenario import builtin
@@ -158,6 +160,78 @@ def test_euroc_depth_is_the_runs_depth_in_millimetres(calibration):
         assert valid.any() and (~valid).any()  # ground and sky
         assert np.all(np.abs(mm[valid] / 1000.0 - depth_m[valid]) <= 0.0005 + 1e-6)
         assert not mm[~valid].any()
+
+
+def _mm_exact(d: float, far_m: float) -> int:
+    """The depth ``d`` in millimetres by exact rational arithmetic (``Fraction``), rounded half
+    to even (Python's ``round``), 0 without a return: the reference of ``depth_mm``."""
+    if not math.isfinite(d) or d <= 0 or d >= far_m:
+        return 0
+    mm = round(Fraction(d) * 1000)
+    return mm if mm <= 65535 else 0
+
+
+def test_depth_mm_rounds_each_depth_exactly_to_the_millimetre():
+    """``base.depth_mm`` (float32 depth -> uint16 mm) against exact rational arithmetic: at and
+    beside every half millimetre (where float32 arithmetic would round the wrong way), zero,
+    negative, NaN, infinite depths, the far plane (as float32, as the sky reads it) and just
+    below it, 65.5355 m and its neighbours, and random depths."""
+    far_m = 50.0 / 3.0  # not a float32: compared as the renderer's float32 sky reads it
+    f32 = np.float32
+    halves = np.arange(0.5, 20_000, 997.0) / 1000.0
+    edge = [0.0, -0.0, -1.0, np.nan, np.inf, -np.inf, far_m, 65.5355, 70.0, 1e-4, 4e-4]
+    values = np.concatenate(
+        [
+            np.asarray(edge, dtype=f32),
+            halves.astype(f32),
+            np.nextafter(halves.astype(f32), f32(0)),
+            np.nextafter(halves.astype(f32), f32(100)),
+            np.nextafter(np.asarray([far_m, 65.5355], f32), f32(0)),
+            np.nextafter(np.asarray([far_m, 65.5355], f32), f32(100)),
+            np.random.default_rng(3).uniform(-1, 80, 4000).astype(f32),
+        ]
+    )
+    far_f32 = float(f32(far_m))  # the sky's depth: the renderer's far plane in float32
+    want = np.array([_mm_exact(float(d), far_f32) for d in values], dtype=np.uint16)
+    got = base.depth_mm(values.reshape(-1, 1), far_m).ravel()
+    assert got.dtype == np.uint16
+    np.testing.assert_array_equal(got, want)
+    assert got[list(values).index(f32(far_m))] == 0  # the sky
+
+
+def test_a_ticks_depth_in_millimetres_is_made_once_for_every_exporter(calibration):
+    """``tick_depth_mm``: the same tick's record and depth give the same handle, whose ``get``
+    makes ``depth_mm`` once (the very array for every exporter, read-only); another tick's
+    record, or another far plane, a new handle."""
+    record, other = calibration.records[:2]
+    depth_m = calibration.depth_m[0]
+    shared = base.tick_depth_mm(record, depth_m, 100.0)
+    assert base.tick_depth_mm(record, depth_m, 100.0) is shared
+    first = shared.get()
+    assert shared.get() is first and not first.flags.writeable
+    np.testing.assert_array_equal(first, base.depth_mm(depth_m, 100.0))
+    assert base.tick_depth_mm(other, depth_m, 100.0) is not shared
+    assert base.tick_depth_mm(other, depth_m, 20.0).get() is not first
+
+
+def test_a_flush_that_fails_is_an_error(tmp_path):
+    """``Flusher``: files flushed on its threads; a file it cannot flush (here, one that is not
+    there) raises from ``wait``, and from the next ``submit`` once it is known."""
+    flusher = base.Flusher(threads=2)
+    try:
+        for i in range(5):
+            (tmp_path / f"{i}.png").write_bytes(b"x" * 1000)
+            flusher.submit(tmp_path / f"{i}.png")
+        flusher.wait()
+        flusher.submit(tmp_path / "missing.png")
+        with pytest.raises(FileNotFoundError):
+            flusher.wait()
+        flusher.submit(tmp_path / "missing.png")
+        with pytest.raises(FileNotFoundError):
+            for _ in range(1000):  # until the failed flush is done and seen
+                flusher.submit(tmp_path / "0.png")
+    finally:
+        flusher.shutdown()
 
 
 def test_euroc_sensor_files_describe_the_camera(calibration):

@@ -13,12 +13,13 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 import pytest
+from mcap_ros2._dynamic import serialize_dynamic
 from rosbags.highlevel import AnyReader
 from rosbags.interfaces import QosDurability
 from rosbags.typesys import Stores, get_typestore
 from scipy.spatial.transform import Rotation
 
-from scenarios.export.mcap import IMU_TOPIC, TOPICS, McapExporter, estimates_topic
+from scenarios.export.mcap import IMU_TOPIC, TOPICS, McapExporter, _image_cdr, estimates_topic
 from scenarios.export.ros2_msgs import msgdef
 from scenarios.run.runner import run_scenario
 from scenarios.scenario import builtin
@@ -97,9 +98,9 @@ def test_the_bag_read_by_rosbags_is_the_run(latency):
     """Every message, deserialised by rosbags with the ROS 2 Humble types: /tf is the true body
     pose of each image (1e-9), /tf_static the true mount of every tick, latched; the camera
     info the camera's K (and the MuJoCo camera's, from the field of view), the images byte for
-    byte those rendered, the depth the rendered depth, the ground truth the body pose, the
-    estimates each method's; all stamped at the image's camera-clock stamp plus the whole
-    second the 20 ms clock offset needs to keep ROS time positive."""
+    byte those rendered, the depth the rendered depth to the millimetre (16UC1), the ground
+    truth the body pose, the estimates each method's; all stamped at the image's camera-clock
+    stamp plus the whole second the 20 ms clock offset needs to keep ROS time positive."""
     spec, keeper, result, exported, path = latency
     assert exported.written == ("latency.mcap",)
     assert exported.note == "no /imu: the scenario has no [imu]"
@@ -162,9 +163,15 @@ def test_the_bag_read_by_rosbags_is_the_run(latency):
     depths = by_topic["/camera/depth/image_raw"]
     assert len(depths) == len(records)
     for (_, depth, _), i in zip(depths, order, strict=True):
-        assert (depth.encoding, depth.is_bigendian, depth.step) == ("32FC1", 0, 4 * cam.width)
-        got = np.frombuffer(depth.data.tobytes(), dtype="<f4").reshape(cam.height, cam.width)
-        np.testing.assert_array_equal(got, keeper.depth[i])
+        assert (depth.encoding, depth.is_bigendian, depth.step) == ("16UC1", 0, 2 * cam.width)
+        mm = np.frombuffer(depth.data.tobytes(), dtype="<u2").reshape(cam.height, cam.width)
+        # The rendered depth to the millimetre where there is a return nearer than the far
+        # plane and than 65.535 m, the most 16 bits hold; 0 (no measurement) elsewhere.
+        depth_m = keeper.depth[i]
+        valid = (depth_m > 0) & (depth_m < spec.scene.zfar_m) & (depth_m < 65.5355)
+        assert valid.any() and (~valid).any()  # the ground and the sky
+        assert np.all(np.abs(mm[valid] / 1000.0 - depth_m[valid]) <= 0.0005 + 1e-6)
+        assert not mm[~valid].any()
 
     poses = by_topic["/ground_truth/pose"]
     for (_, pose, _), i in zip(poses, order, strict=True):
@@ -343,3 +350,38 @@ def test_estimate_topics_are_ros_names():
     assert estimates_topic("depth_image") == "/estimates/depth_image"
     assert estimates_topic("user:my_fn") == "/estimates/user/my_fn"
     assert estimates_topic("user:2nd-try") == "/estimates/user/_2nd_try"
+
+
+@pytest.mark.parametrize(
+    ("encoding", "dtype", "channels", "stamp_ns"),
+    [
+        ("rgb8", np.uint8, 3, 1_020_000_000),
+        ("16UC1", np.uint16, None, 33_333_333),
+        ("mono8", np.uint8, None, 0),
+        ("bgra8", np.uint8, 4, 1_700_000_000_123_456_789),
+    ],
+)
+def test_an_image_message_is_the_generic_encoders_bytes(encoding, dtype, channels, stamp_ns):
+    """``_image_cdr`` (the pixels copied once) makes the bytes mcap-ros2-support's own CDR
+    encoder makes of the same ``sensor_msgs/Image``, whatever the padding the encoding's
+    length leaves before ``step``; rosbags decodes them to the same pixels."""
+    shape = (3, 5) if channels is None else (3, 5, channels)
+    pixels = np.random.default_rng(0).integers(0, np.iinfo(dtype).max, shape, dtype=dtype)
+    type_name = "sensor_msgs/msg/Image"
+    encode = serialize_dynamic(type_name, msgdef(type_name))[type_name]
+    sec, nanosec = divmod(stamp_ns, 1_000_000_000)
+    message = {
+        "header": {"stamp": {"sec": sec, "nanosec": nanosec}, "frame_id": "camera_optical_frame"},
+        "height": shape[0],
+        "width": shape[1],
+        "encoding": encoding,
+        "is_bigendian": 0,
+        "step": pixels.strides[0],
+        "data": pixels.tobytes(),
+    }
+    data = _image_cdr(pixels, encoding, stamp_ns)
+    assert data == encode(message)
+    image = HUMBLE.deserialize_cdr(data, type_name)
+    assert (image.height, image.width, image.encoding) == (shape[0], shape[1], encoding)
+    got = np.frombuffer(image.data.tobytes(), dtype=np.dtype(dtype).newbyteorder("<"))
+    np.testing.assert_array_equal(got.reshape(shape), pixels)

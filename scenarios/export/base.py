@@ -5,17 +5,23 @@ An exporter (``Exporter``) is made with its staging directory, a hidden temporar
 the output directory (``scenarios.record.outputs.staging_dir``). The run feeds it as it feeds
 the recording (``scenarios.run.runner.FanOut``): ``start``, ``on_tick`` per camera tick,
 then ``finish`` once the run is judged, or ``abort`` if anything fails. Every file it writes
-is flushed to the disk (``write_flushed``) before ``finish`` returns, so that the commit
-flushes only the directories. ``finish`` returns an ``ExportResult``: the final names it
-staged (files or directories, named as they will be in the output directory) and those it
-did not write this time (with the reason in ``note``). ``scenarios.pipeline`` commits them
-with the recording and the report, all or none
+is flushed to the disk (``write_flushed``, or a ``Flusher`` for the many files of a run)
+before ``finish`` returns, so that the commit flushes only the directories. ``finish``
+returns an ``ExportResult``: the final names it staged (files or directories, named as they
+will be in the output directory) and those it did not write this time (with the reason in
+``note``). ``scenarios.pipeline`` commits them with the recording and the report, all or none
 (``scenarios.record.outputs.OutputPair.add``).
+
+What several exporters write of the same image is made once: the depth in millimetres
+(``tick_depth_mm``), which the EuRoC PNGs and the bag's depth images both hold, made on the
+exporters' threads, not the run's.
 """
 
 from __future__ import annotations
 
 import os
+import threading
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
@@ -29,7 +35,24 @@ if TYPE_CHECKING:  # annotations only: importing sim.mesh loads MuJoCo before si
     from scenarios.scenario.spec import ScenarioSpec
     from sim.mesh import Scenery
 
-__all__ = ["ExportResult", "Exporter", "listed_files", "stamp_ns", "write_flushed"]
+__all__ = [
+    "DEPTH_MM_MAX",
+    "DEPTH_SCALE",
+    "ExportResult",
+    "Exporter",
+    "Flusher",
+    "TickDepthMm",
+    "depth_mm",
+    "listed_files",
+    "stamp_ns",
+    "tick_depth_mm",
+    "write_flushed",
+]
+
+DEPTH_SCALE = 1000.0
+"""The exported 16-bit depth's value per metre (millimetres)."""
+DEPTH_MM_MAX = int(np.iinfo(np.uint16).max)
+"""The farthest depth 16 bits hold, millimetres (65.535 m)."""
 
 
 @dataclass(frozen=True)
@@ -88,6 +111,150 @@ def write_flushed(path: Path, data: bytes) -> None:
         f.write(data)
         f.flush()
         os.fsync(f.fileno())
+
+
+class Flusher:
+    """Flushes files to the disk (``fsync``) on threads of its own, several at a time.
+
+    One ``fsync`` waits for the disk's journal (about 5 ms on this project's machines);
+    several waiting at once share a commit. An exporter writing two files a tick hands each
+    to ``submit`` once written, and calls ``wait`` before its ``finish`` returns.
+
+    Parameters
+    ----------
+    threads : int
+        ``fsync`` calls waiting at once at most.
+
+    Notes
+    -----
+    ``submit``, ``raise_done``, ``wait`` and ``shutdown`` are called from one thread at a
+    time (the exporter's writer, then its ``finish``).
+    """
+
+    def __init__(self, threads: int = 4) -> None:
+        self._pool = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="vnav-fsync")
+        self._pending: list[Future] = []
+
+    def submit(self, path: Path) -> None:
+        """Flush the file ``path`` (already written and closed) to the disk.
+
+        Raises
+        ------
+        OSError
+            An earlier file's flush failed (a full disk...): raised as soon as it is known.
+        """
+        self.raise_done()
+        self._pending.append(self._pool.submit(_fsync_path, Path(path)))
+
+    def raise_done(self) -> None:
+        """Raise the error of a flush that failed, if one has; forget those that succeeded."""
+        done = [f for f in self._pending if f.done()]
+        if done:
+            self._pending = [f for f in self._pending if not f.done()]
+            for f in done:
+                f.result()
+
+    def wait(self) -> None:
+        """Return once every file submitted is on the disk.
+
+        Raises
+        ------
+        OSError
+            If one could not be flushed.
+        """
+        pending, self._pending = self._pending, []
+        for f in pending:
+            f.result()
+
+    def shutdown(self) -> None:
+        """Stop the threads (after the flushes under way); nothing more is flushed."""
+        self._pool.shutdown(wait=True, cancel_futures=True)
+        self._pending = []
+
+
+def _fsync_path(path: Path) -> None:
+    # A read-only descriptor flushes the file's data as well: fsync acts on the file, and a
+    # write-back error not yet reported to anyone is reported to it.
+    fd = os.open(path, os.O_RDONLY | os.O_CLOEXEC)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def depth_mm(depth_m: np.ndarray, far_m: float) -> np.ndarray:
+    """Planar depth in metres -> uint16 millimetres, rounded (half to even); 0 where there is
+    no return (not finite, not positive, at or beyond ``far_m``: the sky) or beyond 65.535 m.
+
+    Parameters
+    ----------
+    depth_m : ndarray, shape (H, W)
+    far_m : float
+        The renderer's far plane (the sky reads it).
+
+    Returns
+    -------
+    ndarray, shape (H, W), uint16
+    """
+    depth_m = np.asarray(depth_m)
+    # In float64, where a float32 depth times 1000 is exact (float32 would round some 0.5 mm
+    # off), in one pass with no float64 copy of the depth first.
+    mm = np.multiply(depth_m, DEPTH_SCALE, dtype=np.float64)
+    np.rint(mm, out=mm)
+    # NaN compares false: no return. A depth that rounds to 0 mm is written 0 either way.
+    valid = depth_m < far_m
+    valid &= mm > 0.0
+    valid &= mm <= DEPTH_MM_MAX
+    out = np.zeros(depth_m.shape, dtype=np.uint16)
+    np.copyto(out, mm, casting="unsafe", where=valid)
+    return out
+
+
+class TickDepthMm:
+    """A tick's depth in millimetres (``depth_mm``), made by the first thread that asks for it
+    (an exporter's writer, off the run's thread) and shared by every exporter of the tick.
+
+    Parameters
+    ----------
+    depth_m : ndarray, shape (H, W)
+        Not modified until ``get`` has been called (the renderer makes a new one each tick).
+    far_m : float
+    """
+
+    def __init__(self, depth_m: np.ndarray, far_m: float) -> None:
+        self._depth_m: np.ndarray | None = depth_m
+        self.far_m = far_m
+        self._mm: np.ndarray | None = None
+        self._lock = threading.Lock()
+
+    def get(self) -> np.ndarray:
+        """The (H, W) uint16 millimetres, read-only (the exporters share them)."""
+        with self._lock:
+            if self._mm is None:
+                mm = depth_mm(self._depth_m, self.far_m)
+                mm.flags.writeable = False
+                self._mm, self._depth_m = mm, None
+            return self._mm
+
+
+_tick_depth_lock = threading.Lock()
+_tick_depth_last: tuple[TickRecord, np.ndarray, TickDepthMm] | None = None
+
+
+def tick_depth_mm(record: TickRecord, depth_m: np.ndarray, far_m: float) -> TickDepthMm:
+    """The ``TickDepthMm`` of a tick, one for every exporter given that tick: the last call's is
+    returned again for the same ``record`` and ``depth_m`` (the same objects, as
+    ``scenarios.run.runner.FanOut`` hands each observer) and ``far_m``. Nothing is computed
+    here: the first ``get`` computes."""
+    global _tick_depth_last
+    with _tick_depth_lock:
+        last = _tick_depth_last
+        if last is not None and last[0] is record and last[1] is depth_m and last[2].far_m == far_m:
+            return last[2]
+        shared = TickDepthMm(depth_m, far_m)
+        # The record and the depth are held (not their ids): neither id is reused meanwhile.
+        _tick_depth_last = (record, depth_m, shared)
+        return shared
 
 
 def stamp_ns(record: TickRecord) -> int:

@@ -47,7 +47,9 @@ The velocity is the simulator's (``scenarios.run.records.TickRecord.v_w_b_mps``)
 free-joint velocity, or a keyframe flight's segment slope, not a difference of poses.
 
 Images are encoded and written on a worker thread (OpenCV and file writes release the GIL),
-overlapping the next tick's rendering, as the recording's JPEGs are.
+overlapping the next tick's rendering, as the recording's JPEGs are, and flushed to the disk
+by a ``scenarios.export.base.Flusher`` (several files at a time, off the writer's thread). The
+depth in millimetres is made once for this export and the bag's (``tick_depth_mm``).
 """
 
 from __future__ import annotations
@@ -61,7 +63,16 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 
-from scenarios.export.base import ExportResult, stamp_ns, write_flushed
+from scenarios.export.base import (
+    DEPTH_SCALE,
+    ExportResult,
+    Flusher,
+    TickDepthMm,
+    depth_mm,
+    stamp_ns,
+    tick_depth_mm,
+    write_flushed,
+)
 from scenarios.export.kalibr import yaml_float
 from scenarios.run.records import RunResult, TickRecord
 from vnav import quat
@@ -82,13 +93,20 @@ __all__ = [
 
 logger = logging.getLogger(__name__)
 
-DEPTH_SCALE = 1000.0
-"""The depth PNG's value per metre (millimetres)."""
-DEPTH_MM_MAX = np.iinfo(np.uint16).max
 PNG_PARAMS = [cv2.IMWRITE_PNG_COMPRESSION, 1, cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_NONE]
-"""zlib level 1 and no PNG row filter: a rendered 640x480 image is encoded in about 6 ms
-instead of OpenCV's default's 13 ms (level 1) to 25 ms (level 3), and comes out smaller than
-with the default filters (lossless either way)."""
+"""The colour image's: zlib level 1 and no PNG row filter: a rendered 640x480 image is encoded
+in about 6 ms instead of OpenCV's default's 13 ms (level 1) to 25 ms (level 3), and comes out
+smaller than with the default filters or the ``SUB`` filter (lossless either way)."""
+DEPTH_PNG_PARAMS = [
+    cv2.IMWRITE_PNG_COMPRESSION,
+    1,
+    cv2.IMWRITE_PNG_FILTER,
+    cv2.IMWRITE_PNG_FILTER_SUB,
+]
+"""The 16-bit depth's: zlib level 1 and the ``SUB`` row filter (each byte less the one two
+bytes left, the same byte of the pixel before): a smooth depth's high bytes become zeros, and
+the image is a third the size of unfiltered (72 KB against 194 KB for the orbit built-in at
+640x480) and encoded in 40% less time (6 ms against 10 ms)."""
 MAX_QUEUED = 8
 """Images waiting for the writer thread at most; beyond, a tick waits (bounded memory)."""
 
@@ -108,8 +126,8 @@ IMU_HEADER = (
 
 
 def depth_png_mm(depth_m: np.ndarray, far_m: float) -> np.ndarray:
-    """Planar depth in metres -> uint16 millimetres, rounded; 0 where there is no return
-    (not finite, not positive, at or beyond ``far_m``: the sky) or beyond 65.535 m.
+    """The depth PNG's pixels: ``scenarios.export.base.depth_mm`` (uint16 millimetres, 0
+    where there is no return or beyond 65.535 m).
 
     Parameters
     ----------
@@ -121,37 +139,36 @@ def depth_png_mm(depth_m: np.ndarray, far_m: float) -> np.ndarray:
     -------
     ndarray, shape (H, W), uint16
     """
-    depth_m = np.asarray(depth_m)
-    mm = np.rint(depth_m.astype(np.float64) * DEPTH_SCALE)  # float32 would round some 0.5 mm off
-    # NaN compares false: no return.
-    valid = (depth_m > 0.0) & (depth_m < far_m) & (mm <= DEPTH_MM_MAX)
-    return np.where(valid, mm, 0).astype(np.uint16)
+    return depth_mm(depth_m, far_m)
 
 
 def _write_file(path: Path, data: bytes) -> None:
-    """Write ``data`` to a new file and flush it to the disk (an exporter's files are
-    flushed before ``finish`` returns, ``scenarios.export.base``)."""
-    write_flushed(path, data)
+    """Write ``data`` to a new file (an image; the caller hands it to the ``Flusher``)."""
+    with open(path, "xb") as f:
+        f.write(data)
 
 
-def _png(image: np.ndarray) -> bytes:
-    ok, png = cv2.imencode(".png", image, PNG_PARAMS)
+def _png(image: np.ndarray, params: list[int]) -> np.ndarray:
+    """The PNG file's bytes, as OpenCV's (N,) uint8 buffer (written as it is, not copied)."""
+    ok, png = cv2.imencode(".png", image, params)
     if not ok:
         raise RuntimeError("OpenCV could not PNG-encode an image")
-    return png.tobytes()
+    return png
 
 
 def _write_images(
     rgb_path: Path,
     rgb: np.ndarray,
     depth_path: Path | None,
-    depth_m: np.ndarray | None,
-    far_m: float,
+    depth_mm: TickDepthMm | None,
+    flusher: Flusher,
 ) -> None:
-    """Encode and write one tick's images (on the writer thread)."""
-    _write_file(rgb_path, _png(cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)))
-    if depth_path is not None and depth_m is not None:
-        _write_file(depth_path, _png(depth_png_mm(depth_m, far_m)))
+    """Encode and write one tick's images (on the writer thread); flush them."""
+    _write_file(rgb_path, _png(cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), PNG_PARAMS))
+    flusher.submit(rgb_path)
+    if depth_path is not None and depth_mm is not None:
+        _write_file(depth_path, _png(depth_mm.get(), DEPTH_PNG_PARAMS))
+        flusher.submit(depth_path)
 
 
 def _matrix_yaml(T: np.ndarray) -> str:
@@ -200,6 +217,7 @@ class EurocExporter:
         self._camera: PinholeCamera | None = None
         self._seed = 0
         self._writer: ThreadPoolExecutor | None = None
+        self._flusher: Flusher | None = None
         self._pending: deque[Future] = deque()
         self._images: list[int] = []
         self._depths: list[int] = []
@@ -216,6 +234,7 @@ class EurocExporter:
         for sub in ("cam0/data", "depth0/data", "state_groundtruth_estimate0"):
             (mav0 / sub).mkdir(parents=True)
         self._writer = ThreadPoolExecutor(max_workers=1, thread_name_prefix="vnav-euroc")
+        self._flusher = Flusher()
 
     def on_tick(self, record: TickRecord, rgb: np.ndarray, depth_m: np.ndarray | None) -> None:
         """Queue the tick's images for the writer thread; keep its ground-truth row."""
@@ -223,15 +242,18 @@ class EurocExporter:
         self._raise_done()
         t_ns = stamp_ns(record)
         mav0 = self._root / "mav0"
-        depth_path = None if depth_m is None else mav0 / "depth0" / "data" / f"{t_ns}.png"
+        depth_path, mm = None, None
+        if depth_m is not None:
+            depth_path = mav0 / "depth0" / "data" / f"{t_ns}.png"
+            mm = tick_depth_mm(record, depth_m, self._spec.scene.zfar_m)
         self._pending.append(
             self._writer.submit(
                 _write_images,
                 mav0 / "cam0" / "data" / f"{t_ns}.png",
                 rgb,
                 depth_path,
-                depth_m,
-                self._spec.scene.zfar_m,
+                mm,
+                self._flusher,
             )
         )
         self._images.append(t_ns)
@@ -256,8 +278,10 @@ class EurocExporter:
         try:
             while self._pending:
                 self._pending.popleft().result()
+            self._flusher.wait()
         finally:
             self._writer.shutdown(wait=True, cancel_futures=True)
+            self._flusher.shutdown()
         mav0, spec = self._root / "mav0", self._spec
         about = f"vnav-sim scenario {spec.name}, seed {self._seed}"
         _write_text(
@@ -362,6 +386,8 @@ class EurocExporter:
         """Stop the writer (the staging directory is its owner's to remove)."""
         if self._writer is not None:
             self._writer.shutdown(wait=True, cancel_futures=True)
+        if self._flusher is not None:
+            self._flusher.shutdown()
         self._pending.clear()
 
 
@@ -371,7 +397,7 @@ def _quoted(text: str) -> str:
 
 
 def _write_text(path: Path, text: str) -> None:
-    _write_file(path, text.encode("utf-8"))
+    write_flushed(path, text.encode("utf-8"))
 
 
 def _image_table(stamps_ns: list[int]) -> str:

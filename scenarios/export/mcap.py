@@ -12,7 +12,10 @@ Topics (frames per REP 103 and REP 105, docs/CONVENTIONS.md, "ROS 2 bags (MCAP) 
 - ``/camera/image_raw`` (``sensor_msgs/msg/Image``): the image as rendered, ``rgb8``;
 - ``/camera/camera_info`` (``sensor_msgs/msg/CameraInfo``): ``K``, ``P = [K | 0]``, ``R = I``,
   ``plumb_bob`` with zero distortion;
-- ``/camera/depth/image_raw`` (``sensor_msgs/msg/Image``): planar depth, ``32FC1``, metres;
+- ``/camera/depth/image_raw`` (``sensor_msgs/msg/Image``): planar depth, ``16UC1``, millimetres
+  (as RGB-D cameras' drivers publish it, and the EuRoC export's depth PNGs hold it: the same
+  pixels, ``scenarios.export.base.depth_mm``), 0 where there is no return (the sky, the far
+  plane, beyond 65.535 m), which ``depth_image_proc`` reads as "no measurement";
 - ``/ground_truth/pose`` (``geometry_msgs/msg/PoseStamped``): ``T_w_b`` in ``map``;
 - ``/cones`` (``visualization_msgs/msg/MarkerArray``): the true cones, one ``TRIANGLE_LIST``
   each (the simulator's meshes), latched;
@@ -43,6 +46,11 @@ clock reads negative at the start of the flight (the camera's when ``camera_cloc
 that stamp in nanoseconds (the readings are written after the run, the file's index orders
 them). The file's metadata record ``vnav_sim`` names the scenario, the seed, the clock
 offsets and ``stamp_origin_s``.
+
+The messages are encoded and written, and the file's chunks compressed (zstd), on a thread of
+the exporter's own, overlapping the next tick's rendering; ``on_tick`` checks the images and
+queues them. An image message is encoded straight from its pixels (``_image_cdr``: one copy,
+not the generic encoder's three).
 """
 
 from __future__ import annotations
@@ -51,6 +59,9 @@ import logging
 import math
 import os
 import re
+import struct
+from collections import deque
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, BinaryIO
 
@@ -64,7 +75,7 @@ from mcap.writer import Writer as McapWriter
 # registered here through mcap's Writer).
 from mcap_ros2._dynamic import serialize_dynamic
 
-from scenarios.export.base import ExportResult
+from scenarios.export.base import ExportResult, TickDepthMm, tick_depth_mm
 from scenarios.export.ros2_msgs import QOS_LATCHED, QOS_VOLATILE, msgdef
 from scenarios.scenario.spec import KinematicFlight
 from vnav import quat, se3
@@ -117,6 +128,8 @@ _LATCHED = {"/tf_static", "/cones"}
 _ESTIMATE_TYPE = "geometry_msgs/msg/PointStamped"
 _MARKER_TRIANGLE_LIST = 11
 _NS_PER_S = 1_000_000_000
+MAX_QUEUED = 8
+"""Ticks waiting for the writer thread at most; beyond, a tick waits (bounded memory)."""
 
 
 def estimates_topic(method: str) -> str:
@@ -163,6 +176,8 @@ class McapExporter:
         self._depth_ticks = 0
         self._ticks = 0
         self._spec: ScenarioSpec | None = None
+        self._thread: ThreadPoolExecutor | None = None
+        self._pending: deque[Future] = deque()
 
     # -- the run -------------------------------------------------------------------------
 
@@ -217,18 +232,24 @@ class McapExporter:
             # One message: a latched topic keeps only its last one for a late subscriber.
             self._write("/tf_static", {"transforms": static}, stamp_ns)
         self._write("/cones", _cone_markers(spec, scenery, stamp_ns), stamp_ns)
+        self._thread = ThreadPoolExecutor(max_workers=1, thread_name_prefix="vnav-mcap")
 
     def on_tick(self, record: TickRecord, rgb: np.ndarray, depth_m: np.ndarray | None) -> None:
-        """Write the image's messages, all stamped at its exposure (camera clock).
+        """Check the image's messages and queue them for the writer thread, all stamped at its
+        exposure (camera clock).
 
         Raises
         ------
         ValueError
             If ``rgb`` is not the camera's (H, W, 3) uint8 image, ``depth_m`` not its (H, W)
             depth, or the mount differs from the static one written at the start.
+        OSError
+            If writing an earlier tick failed (a full disk...).
         """
-        if self._writer is None or self._camera is None:
+        if self._writer is None or self._camera is None or self._thread is None:
             raise ValueError("on_tick before start (or after finish or abort)")
+        while self._pending and self._pending[0].done():
+            self._pending.popleft().result()
         cam = self._camera
         rgb = np.asarray(rgb)
         if rgb.shape != (cam.height, cam.width, 3) or rgb.dtype != np.uint8:
@@ -246,7 +267,7 @@ class McapExporter:
                     f"depth_m: expected a ({cam.height}, {cam.width}) float image, got "
                     f"{depth.shape} {depth.dtype}"
                 )
-            depth = depth.astype("<f4", copy=False)
+            depth = tick_depth_mm(record, depth, self._spec.scene.zfar_m)
         stamp_cam_s = record.t_s if record.timing is None else record.timing.stamp_cam_s
         stamp_ns = self._stamp_ns(stamp_cam_s)
         transforms = [_transform(stamp_ns, FRAME_MAP, FRAME_BODY, record.T_w_b)]
@@ -257,6 +278,23 @@ class McapExporter:
                 f"tick {record.tick}: the camera mount T_b_c moved from the static mount "
                 "written to /tf_static, in a flight that does not slide the camera"
             )
+        self._pending.append(
+            self._thread.submit(self._write_tick, record, stamp_ns, transforms, rgb, depth)
+        )
+        while len(self._pending) > MAX_QUEUED:
+            self._pending.popleft().result()
+        self._ticks += 1
+
+    def _write_tick(
+        self,
+        record: TickRecord,
+        stamp_ns: int,
+        transforms: list[dict],
+        rgb: np.ndarray,
+        depth_mm: TickDepthMm | None,
+    ) -> None:
+        """Write one tick's messages (on the writer thread)."""
+        cam = self._camera
         self._write("/tf", {"transforms": transforms}, stamp_ns)
         q_xyzw = quat.from_matrix(record.T_w_b[:3, :3])
         self._write(
@@ -268,13 +306,10 @@ class McapExporter:
             stamp_ns,
         )
         self._write("/camera/camera_info", _camera_info(cam, stamp_ns), stamp_ns)
-        self._write("/camera/image_raw", _image(rgb, "rgb8", stamp_ns), stamp_ns)
-        if depth is not None:
-            # Little-endian float32 whatever the machine: is_bigendian is written as 0.
-            self._write(
-                "/camera/depth/image_raw",
-                _image(depth, "32FC1", stamp_ns),
-                stamp_ns,
+        self._write_raw("/camera/image_raw", _image_cdr(rgb, "rgb8", stamp_ns), stamp_ns)
+        if depth_mm is not None:
+            self._write_raw(
+                "/camera/depth/image_raw", _image_cdr(depth_mm.get(), "16UC1", stamp_ns), stamp_ns
             )
             self._depth_ticks += 1
         for d in record.detections:
@@ -283,7 +318,6 @@ class McapExporter:
                 self._channel(topic, _ESTIMATE_TYPE)
                 point = {"header": _header(stamp_ns, FRAME_MAP), "point": _xyz(p_w)}
                 self._write(topic, point, stamp_ns)
-        self._ticks += 1
 
     def finish(self, result: RunResult) -> ExportResult:
         """Write the file's index and footer and close it, flushed to the disk.
@@ -296,6 +330,11 @@ class McapExporter:
         if self._writer is None or self._file is None:
             raise ValueError("finish before start (or after finish or abort)")
         try:
+            try:
+                while self._pending:
+                    self._pending.popleft().result()
+            finally:
+                self._thread.shutdown(wait=True, cancel_futures=True)
             imu = self._spec.scene.imu if self._spec is not None else None
             if imu is not None and result.imu is not None:
                 self._write_imu(imu, result.imu)
@@ -319,7 +358,10 @@ class McapExporter:
         return ExportResult(self.name, (self.path.name,), note=note)
 
     def abort(self) -> None:
-        """Close and remove the file if it was started; nothing otherwise."""
+        """Stop the writer thread; close and remove the file if it was started."""
+        if self._thread is not None:
+            self._thread.shutdown(wait=True, cancel_futures=True)
+        self._pending.clear()
         if self._file is not None:
             try:
                 self._file.close()
@@ -372,12 +414,15 @@ class McapExporter:
         self._sequence[topic] = 0
 
     def _write(self, topic: str, message: dict, stamp_ns: int) -> None:
+        self._write_raw(topic, self._channels[topic][1](message), stamp_ns)
+
+    def _write_raw(self, topic: str, data: bytes, stamp_ns: int) -> None:
+        """Write a message already encoded (CDR) on ``topic``."""
         assert self._writer is not None
-        channel_id, encode = self._channels[topic]
         self._writer.add_message(
-            channel_id,
+            self._channels[topic][0],
             log_time=stamp_ns,
-            data=encode(message),
+            data=data,
             publish_time=stamp_ns,
             sequence=self._sequence[topic],
         )
@@ -454,19 +499,40 @@ def _camera_info(camera: PinholeCamera, stamp_ns: int) -> dict:
     }
 
 
-def _image(pixels: np.ndarray, encoding: str, stamp_ns: int) -> dict:
-    """A ``sensor_msgs/Image`` of an (H, W) or (H, W, C) array, rows packed (no padding)."""
-    data = np.ascontiguousarray(pixels)
+_CDR_LE = b"\x00\x01\x00\x00"
+"""The encapsulation header of little-endian plain CDR (what ROS 2 writes)."""
+
+
+def _cdr_string(text: str, offset: int) -> bytes:
+    """A CDR string at ``offset`` (from the end of the encapsulation header): padding to 4,
+    its length with the NUL, the bytes, the NUL."""
+    raw = text.encode("utf-8") + b"\x00"
+    return b"\x00" * (-offset % 4) + struct.pack("<I", len(raw)) + raw
+
+
+def _image_cdr(pixels: np.ndarray, encoding: str, stamp_ns: int) -> bytes:
+    """A ``sensor_msgs/Image`` in ``FRAME_CAMERA`` of an (H, W) or (H, W, C) array, rows
+    packed (no padding), CDR-encoded: the bytes mcap-ros2-support's encoder makes of the same
+    message, with the pixels copied once; little-endian (``is_bigendian`` 0) whatever the
+    machine.
+
+    Parameters
+    ----------
+    pixels : ndarray, shape (H, W) or (H, W, C), uint8 or uint16
+    encoding : str
+        ``sensor_msgs/Image``'s ``encoding`` (``rgb8``, ``16UC1``).
+    stamp_ns : int
+    """
+    data = np.ascontiguousarray(pixels, dtype=pixels.dtype.newbyteorder("<"))
     height, width = data.shape[:2]
-    return {
-        "header": _header(stamp_ns, FRAME_CAMERA),
-        "height": height,
-        "width": width,
-        "encoding": encoding,
-        "is_bigendian": 0,
-        "step": data.strides[0],
-        "data": data.tobytes(),
-    }
+    sec, nanosec = divmod(stamp_ns, _NS_PER_S)
+    out = struct.pack("<iI", sec, nanosec)
+    out += _cdr_string(FRAME_CAMERA, len(out))
+    out += b"\x00" * (-len(out) % 4) + struct.pack("<II", height, width)
+    out += _cdr_string(encoding, len(out))
+    out += b"\x00"  # is_bigendian
+    out += b"\x00" * (-len(out) % 4) + struct.pack("<II", data.strides[0], data.nbytes)
+    return b"".join((_CDR_LE, out, data))
 
 
 def _cone_markers(spec: ScenarioSpec, scenery: Scenery, stamp_ns: int) -> dict:
