@@ -17,10 +17,12 @@ import logging
 import math
 import os
 import re
+import resource
 import shutil
 import sys
 import textwrap
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 from scenarios import pipeline
@@ -36,6 +38,7 @@ from scenarios.commands.common import (
 )
 from scenarios.commands.console import WIDTH, say
 from scenarios.commands.console import error as _error
+from scenarios.commands.workers import default_jobs, run_parallel
 from scenarios.export.base import ExportResult
 from scenarios.run.evaluate import MATCH_GATE_M
 from scenarios.scenario import builtin
@@ -404,22 +407,37 @@ def final_summary(
     return "\n".join(lines)
 
 
+def _print(stream: str, text: str) -> None:
+    """``run_one``'s default ``emit``: ``text`` to stdout (``"out"``) or as an error line."""
+    if stream == "out":
+        say(text)
+    else:
+        _error(text)
+
+
 def run_one(
     spec: ScenarioSpec,
     args: argparse.Namespace,
     out_dir: Path,
     scenes: SceneCache | None = None,
+    emit: Callable[[str, str], None] = _print,
+    progress: Callable[[int, int], None] | None = None,
 ) -> tuple[int, Path | None]:
     """Run one scenario, write its files, print its summary; return its exit status and its
     recording (None when nothing was written). ``scenes``: the command's scenes and their
-    OpenGL context, shared by its runs (``sim.scene_cache``)."""
+    OpenGL context, shared by its runs (``sim.scene_cache``). ``emit(stream, text)`` prints
+    each text, ``stream`` ``"out"`` (the summary) or ``"err"`` (an error line); a worker
+    process (``scenarios.commands.workers``) collects them instead. ``progress`` is called
+    after every camera tick (default: ``Progress``'s bar)."""
+    if progress is None:
+        progress = Progress(spec.name, enabled=not args.quiet)
     try:
         try:
             outcome = pipeline.run(
                 spec,
                 seed=args.seed,
                 out_dir=out_dir,
-                progress=Progress(spec.name, enabled=not args.quiet),
+                progress=progress,
                 exports=getattr(args, "exports", ()),
                 scenes=scenes,
             )
@@ -430,26 +448,27 @@ def run_one(
                 raise Signalled(signum) from exc
             raise
     except SimulationError as exc:
-        _error(f"{spec.name}: could not complete: the simulation diverged: {exc}")
+        emit("err", f"{spec.name}: could not complete: the simulation diverged: {exc}")
         return EXIT_INCOMPLETE, None
     except OSError as exc:
-        _error(
+        emit(
+            "err",
             f"{spec.name}: could not complete: cannot write its files: {exc}; "
-            "the previous files were kept"
+            "the previous files were kept",
         )
         return EXIT_INCOMPLETE, None
     except MemoryError:
-        _error(f"{spec.name}: could not complete: out of memory")
+        emit("err", f"{spec.name}: could not complete: out of memory")
         return EXIT_INCOMPLETE, None
     except Exception as exc:  # an internal error: say it in one line, keep the others going
         logger.debug("internal error", exc_info=True)
-        _error(f"{spec.name}: could not complete: internal error: {type(exc).__name__}: {exc}")
+        emit("err", f"{spec.name}: could not complete: internal error: {type(exc).__name__}: {exc}")
         return EXIT_INCOMPLETE, None
     if not args.quiet:
-        say(summary(outcome.report, outcome.rrd_path, outcome.json_path))
+        emit("out", summary(outcome.report, outcome.rrd_path, outcome.json_path))
     if not args.quiet:
         for done in outcome.exports:
-            say("\n".join(export_lines(done, out_dir)))
+            emit("out", "\n".join(export_lines(done, out_dir)))
     return (EXIT_PASSED if outcome.passed else EXIT_CHECK_FAILED), outcome.rrd_path
 
 
@@ -464,6 +483,8 @@ def _validate(args: argparse.Namespace) -> tuple[list[ScenarioSpec], Path]:
     """Every check that can be made before running; InputError on the first failure."""
     if not 0 <= args.seed <= MAX_SEED:
         raise InputError(f"--seed must be in [0, 2**63 - 1], got {args.seed}")
+    if getattr(args, "jobs", None) is not None and args.jobs < 1:
+        raise InputError(f"--jobs must be a positive number of processes, got {args.jobs}")
     if args.max_ticks < 1:
         raise InputError(f"--max-ticks must be a positive number of ticks, got {args.max_ticks}")
     specs = resolve(args.scenarios, args.all)
@@ -516,6 +537,13 @@ def user_methods(specs: list[str], timeout_s: float | None = None) -> tuple[Meth
     return tuple(found.values())
 
 
+def cpu_time_s() -> float:
+    """CPU seconds (user and system) of this process and of its worker processes that have
+    ended (``scenarios.commands.workers``)."""
+    children = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return time.process_time() + children.ru_utime + children.ru_stime
+
+
 def command(args: argparse.Namespace) -> int:
     """Entry point of ``vnav-demo run``; returns the exit status."""
     return guarded(lambda: _validate(args), _body(args), kept="no partial file was kept")
@@ -523,11 +551,16 @@ def command(args: argparse.Namespace) -> int:
 
 def _body(args: argparse.Namespace):
     def run_all(specs: list[ScenarioSpec], out_dir: Path) -> int:
-        wall_s, cpu_s = time.perf_counter(), time.process_time()
-        # One OpenGL context for every run: a new one costs 0.2 s of set-up per scenario.
-        with extended(getattr(args, "user_methods", ())), SceneCache(capacity=2) as scenes:
-            results = [(spec, *run_one(spec, args, out_dir, scenes)) for spec in specs]
-        duration = (time.perf_counter() - wall_s, time.process_time() - cpu_s)
+        wall_s, cpu_s = time.perf_counter(), cpu_time_s()
+        jobs = min(args.jobs, len(specs)) if args.jobs is not None else default_jobs(len(specs))
+        if jobs > 1:  # each worker process has its own OpenGL context and scenes
+            statuses = run_parallel(specs, args, out_dir, jobs, emit=_print)
+            results = [(spec, *outcome) for spec, outcome in zip(specs, statuses, strict=True)]
+        else:
+            # One OpenGL context for every run: a new one costs 0.2 s of set-up per scenario.
+            with extended(getattr(args, "user_methods", ())), SceneCache(capacity=2) as scenes:
+                results = [(spec, *run_one(spec, args, out_dir, scenes)) for spec in specs]
+        duration = (time.perf_counter() - wall_s, cpu_time_s() - cpu_s)
         if not args.quiet:
             say(final_summary(results, out_dir, duration))
         return max((status for _, status, _ in results), default=EXIT_PASSED)

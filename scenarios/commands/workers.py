@@ -1,0 +1,379 @@
+"""``vnav-demo run`` with several scenarios on several worker processes (``--jobs N``).
+
+Each worker is a fresh Python process (multiprocessing's ``spawn``: an OpenGL context, EGL's
+included, cannot be shared across processes, nor safely inherited by a fork) with its own
+``SceneCache`` and OpenGL context, kept for every scenario it runs. It inherits the
+command's environment (``MUJOCO_GL``, set before MuJoCo is imported: ``sim.gl``) and runs a
+scenario exactly as the serial command does (``scenarios.commands.run.run_one``): each
+scenario's files are written and committed by the worker that ran it, under that worker's
+temporary names (``scenarios.record.outputs``), while the command holds the directory's lock.
+
+What the user sees is the serial command's: the command prints each scenario's summary and
+error lines in the scenarios' order, whichever finishes first (a worker sends them back as
+text), one progress bar on a terminal (the earliest scenario still running), and the exit
+status of every scenario the same way. Signals:
+
+- The command's SIGTERM, SIGHUP or Ctrl-C stop every worker (SIGTERM): each removes its
+  unfinished files, as the serial command does, before the command ends with 128 + N.
+  Workers ignore SIGINT (a terminal's Ctrl-C reaches the whole process group: the command
+  stops them itself) and any signal after the first (their clean-up runs whole).
+- A worker stopped by SIGTERM or SIGHUP from outside stops the command as if it had
+  received the signal; a worker killed outright (SIGKILL, the out-of-memory killer) leaves
+  its scenario incomplete (exit status 3) and the others run on.
+- A command killed outright (SIGKILL) takes its workers with it: on Linux each asks the
+  kernel for SIGTERM when the command's process ends (``PR_SET_PDEATHSIG``), and every
+  worker also stops at its next camera tick once the command is gone. Their temporary files
+  are removed by the next run in the directory (``remove_stale_partials``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import ctypes
+import logging
+import multiprocessing
+import os
+import signal
+import sys
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from multiprocessing.connection import Connection, wait
+from pathlib import Path
+from typing import Any
+
+from scenarios.commands.common import (
+    EXIT_INCOMPLETE,
+    Signalled,
+    signal_caught,
+    stop_on_signals,
+)
+from scenarios.scenario.spec import ScenarioSpec
+
+__all__ = ["default_jobs", "run_parallel"]
+
+logger = logging.getLogger(__name__)
+
+STOP_TIMEOUT_S = 60.0
+"""How long the command waits for a stopped worker to clean up before killing it."""
+
+_PR_SET_PDEATHSIG = 1
+"""``prctl``'s option: the signal this process gets when its parent ends (Linux)."""
+
+Messages = list[tuple[str, str]]
+"""A scenario's printed texts, in order: ``("out", summary)`` or ``("err", error line)``."""
+
+
+def usable_cores() -> int:
+    """The CPU cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        return os.cpu_count() or 1
+
+
+def default_jobs(n_scenarios: int) -> int:
+    """Worker processes for ``n_scenarios`` when ``--jobs`` is not given: two where there
+    are two cores and two scenarios, else one (the serial command)."""
+    return max(1, min(2, usable_cores(), n_scenarios))
+
+
+@dataclass
+class _Worker:
+    """One worker process, its two pipes and the scenario it runs (an index, or None)."""
+
+    process: Any
+    tasks: Connection
+    results: Connection
+    index: int | None = None
+    gone: bool = False
+
+
+@dataclass
+class _Bar:
+    """The command's progress bar: the earliest scenario still running, one line on
+    stderr (``scenarios.commands.run.Progress``)."""
+
+    specs: list[ScenarioSpec]
+    enabled: bool
+    ticks: dict[int, tuple[int, int]] = field(default_factory=dict)
+    shown: bool = False
+
+    def update(self, index: int, done: int, total: int, running: set[int]) -> None:
+        from scenarios.commands.run import Progress
+
+        self.ticks[index] = (done, total)
+        first = min(running, default=None)
+        if not self.enabled or first is None or first not in self.ticks:
+            return
+        done, total = self.ticks[first]
+        Progress(self.specs[first].name, enabled=True)(done, total)
+        self.shown = done != total
+
+    def clear(self) -> None:
+        """Clear a bar left on the line before the command prints there."""
+        if self.shown:
+            sys.stderr.write("\r" + " " * 70 + "\r")
+            sys.stderr.flush()
+            self.shown = False
+
+
+def run_parallel(
+    specs: list[ScenarioSpec],
+    args: argparse.Namespace,
+    out_dir: Path,
+    jobs: int,
+    emit: Callable[[str, str], None],
+) -> list[tuple[int, Path | None]]:
+    """Run ``specs`` on ``jobs`` worker processes; return each scenario's exit status and
+    recording (None when nothing was written), in ``specs``' order.
+
+    Each scenario's texts are passed to ``emit(stream, text)`` in ``specs``' order, as soon
+    as it and every scenario before it have finished.
+
+    Raises
+    ------
+    Signalled, KeyboardInterrupt
+        When the command or a worker is stopped by a signal; every worker has ended then.
+    """
+    ctx = multiprocessing.get_context("spawn")
+    options = {
+        "seed": args.seed,
+        "quiet": args.quiet,
+        "exports": tuple(getattr(args, "exports", ())),
+        "estimator": list(getattr(args, "estimator", None) or []),
+        "estimator_timeout_s": getattr(args, "estimator_timeout_s", None),
+        "progress": not args.quiet and sys.stderr.isatty(),
+    }
+    bar = _Bar(specs, enabled=bool(options["progress"]))
+    pending = list(range(len(specs)))
+    done: dict[int, tuple[int, Path | None, Messages]] = {}
+    printed = 0
+    workers: list[_Worker] = []
+    try:
+        for _ in range(min(jobs, len(specs))):
+            workers.append(_start(ctx, options, out_dir))
+        for worker in workers:
+            _assign(worker, pending, specs)
+        while printed < len(specs):
+            live = [w for w in workers if not w.gone]
+            if not live:  # every worker died: nothing left to run the rest
+                for index in pending:
+                    done[index] = (EXIT_INCOMPLETE, None, [("err", _lost(specs[index], None))])
+                pending.clear()
+            else:
+                ready = wait([w.results for w in live] + [w.process.sentinel for w in live])
+                for worker in live:
+                    if worker.results in ready or worker.process.sentinel in ready:
+                        _receive(worker, specs, pending, done, bar, workers)
+            while printed in done:
+                messages = done[printed][2]
+                bar.clear()
+                for stream, text in messages:
+                    emit(stream, text)
+                printed += 1
+        for worker in workers:
+            if not worker.gone:
+                with contextlib.suppress(OSError):
+                    worker.tasks.send(None)
+        for worker in workers:
+            worker.process.join()
+    except BaseException:
+        bar.clear()
+        _stop(workers)
+        raise
+    finally:
+        for worker in workers:
+            worker.tasks.close()
+            worker.results.close()
+    return [(done[i][0], done[i][1]) for i in range(len(specs))]
+
+
+def _start(ctx, options: dict[str, Any], out_dir: Path) -> _Worker:
+    task_r, task_w = ctx.Pipe(duplex=False)
+    result_r, result_w = ctx.Pipe(duplex=False)
+    process = ctx.Process(
+        target=_serve,
+        args=(task_r, result_w, options, out_dir, os.getpid()),
+        name="vnav-demo-run",
+        daemon=True,  # ended by multiprocessing if the command leaves without stopping it
+    )
+    process.start()
+    task_r.close()  # the worker's ends: closed here so that its death reads as EOF
+    result_w.close()
+    return _Worker(process, task_w, result_r)
+
+
+def _assign(worker: _Worker, pending: list[int], specs: list[ScenarioSpec]) -> None:
+    """Give ``worker`` the next scenario, or tell it to end."""
+    worker.index = pending.pop(0) if pending else None
+    try:
+        worker.tasks.send(None if worker.index is None else (worker.index, specs[worker.index]))
+    except OSError:  # it has died: its sentinel says so next
+        if worker.index is not None:
+            pending.insert(0, worker.index)
+        worker.index = None
+
+
+def _receive(
+    worker: _Worker,
+    specs: list[ScenarioSpec],
+    pending: list[int],
+    done: dict[int, tuple[int, Path | None, Messages]],
+    bar: _Bar,
+    workers: list[_Worker],
+) -> None:
+    """Read every message ``worker`` has sent; note its death."""
+    while True:
+        try:
+            if not worker.results.poll():
+                break
+            message = worker.results.recv()
+        except (EOFError, OSError):
+            break
+        kind = message[0]
+        if kind == "ticks":
+            running = {w.index for w in workers if w.index is not None and not w.gone}
+            bar.update(message[1], message[2], message[3], running)
+        elif kind == "done":
+            _, index, status, rrd, messages = message
+            done[index] = (status, rrd, messages)
+            _assign(worker, pending, specs)
+        elif kind == "signalled":  # stopped from outside: the command stops as if it had been
+            raise Signalled(message[1])
+        elif kind == "broken":  # it could not start (no OpenGL context...): run nothing more
+            if worker.index is not None:
+                done[worker.index] = (
+                    EXIT_INCOMPLETE,
+                    None,
+                    [("err", f"{specs[worker.index].name}: could not complete: {message[1]}")],
+                )
+                worker.index = None
+    if worker.process.is_alive():
+        return
+    worker.process.join()
+    worker.gone = True
+    if worker.index is not None:  # killed while running a scenario
+        done[worker.index] = (
+            EXIT_INCOMPLETE,
+            None,
+            [("err", _lost(specs[worker.index], worker.process.exitcode))],
+        )
+        worker.index = None
+
+
+def _lost(spec: ScenarioSpec, exitcode: int | None) -> str:
+    """The error line of a scenario whose worker ended without finishing it."""
+    if exitcode is not None and exitcode < 0:
+        how = f"was killed by {signal.Signals(-exitcode).name}"
+    elif exitcode is not None:
+        how = f"ended with status {exitcode}"
+    else:
+        how = "could not run it"
+    return f"{spec.name}: could not complete: its worker process {how}"
+
+
+def _stop(workers: list[_Worker]) -> None:
+    """Stop every worker (SIGTERM) and wait for each to clean up; kill one that does not
+    within ``STOP_TIMEOUT_S``."""
+    for worker in workers:
+        if worker.process.is_alive():
+            worker.process.terminate()
+    for worker in workers:
+        worker.process.join(STOP_TIMEOUT_S)
+        if worker.process.is_alive():
+            logger.warning("worker %d did not stop; killing it", worker.process.pid)
+            worker.process.kill()
+            worker.process.join()
+
+
+# ------------------------------------------------------------------------ in the worker
+
+
+def _end_with_parent(parent_pid: int) -> None:
+    """Ask for SIGTERM when the command's process ends (Linux), however it ends."""
+    if sys.platform.startswith("linux"):
+        with contextlib.suppress(OSError, AttributeError):
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0)
+    if os.getppid() != parent_pid:  # it ended before the request was made
+        raise Signalled(signal.SIGTERM)
+
+
+class _Ticks:
+    """A worker's ``progress``: stops the run on a signal whose exception was swallowed or
+    once the command is gone, and sends the bar's steps to the command."""
+
+    def __init__(self, results: Connection, index: int, parent_pid: int, send: bool) -> None:
+        self.results, self.index, self.parent_pid, self.send = results, index, parent_pid, send
+        self.step = -1
+
+    def __call__(self, done: int, total: int) -> None:
+        if (signum := signal_caught()) is not None:
+            raise Signalled(signum)
+        if os.getppid() != self.parent_pid:  # the command was killed: stop as on SIGTERM
+            raise Signalled(signal.SIGTERM)
+        step = 30 * done // total  # the bar's width (run.Progress): one message a step
+        if self.send and (step != self.step or done == total):
+            self.step = step
+            self.results.send(("ticks", self.index, done, total))
+
+
+def _serve(
+    tasks: Connection,
+    results: Connection,
+    options: dict[str, Any],
+    out_dir: Path,
+    parent_pid: int,
+) -> None:
+    """A worker's main: run each scenario the command sends until it sends None."""
+    # Ctrl-C reaches the whole process group; the command stops its workers itself.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        with stop_on_signals(once=True):
+            _end_with_parent(parent_pid)
+            _run_tasks(tasks, results, options, out_dir, parent_pid)
+    except Signalled as exc:
+        with contextlib.suppress(OSError):
+            results.send(("signalled", exc.signum))
+        sys.exit(128 + exc.signum)
+    except (EOFError, BrokenPipeError):  # the command has gone
+        sys.exit(EXIT_INCOMPLETE)
+
+
+def _run_tasks(
+    tasks: Connection,
+    results: Connection,
+    options: dict[str, Any],
+    out_dir: Path,
+    parent_pid: int,
+) -> None:
+    from scenarios.commands.run import InputError, run_one, user_methods
+    from sim.scene_cache import SceneCache
+    from vnav.methods import extended
+
+    args = argparse.Namespace(
+        seed=options["seed"], quiet=options["quiet"], exports=options["exports"]
+    )
+    try:
+        methods = user_methods(options["estimator"], options["estimator_timeout_s"])
+        stack = contextlib.ExitStack()
+        stack.enter_context(extended(methods))
+        scenes = stack.enter_context(SceneCache(capacity=2))
+    except (InputError, Exception) as exc:  # checked by the command already: not expected
+        logger.debug("worker set-up failed", exc_info=True)
+        results.send(("broken", f"its worker could not start: {type(exc).__name__}: {exc}"))
+        sys.exit(EXIT_INCOMPLETE)
+    with stack:
+        while (task := tasks.recv()) is not None:
+            index, spec = task
+            messages: Messages = []
+            status, rrd = run_one(
+                spec,
+                args,
+                out_dir,
+                scenes,
+                emit=lambda stream, text, said=messages: said.append((stream, text)),
+                progress=_Ticks(results, index, parent_pid, bool(options["progress"])),
+            )
+            results.send(("done", index, status, rrd, messages))
