@@ -17,7 +17,6 @@ import logging
 import math
 import os
 import re
-import resource
 import shutil
 import sys
 import textwrap
@@ -537,13 +536,6 @@ def user_methods(specs: list[str], timeout_s: float | None = None) -> tuple[Meth
     return tuple(found.values())
 
 
-def cpu_time_s() -> float:
-    """CPU seconds (user and system) of this process and of its worker processes that have
-    ended (``scenarios.commands.workers``)."""
-    children = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return time.process_time() + children.ru_utime + children.ru_stime
-
-
 def command(args: argparse.Namespace) -> int:
     """Entry point of ``vnav-demo run``; returns the exit status."""
     return guarded(lambda: _validate(args), _body(args), kept="no partial file was kept")
@@ -551,16 +543,18 @@ def command(args: argparse.Namespace) -> int:
 
 def _body(args: argparse.Namespace):
     def run_all(specs: list[ScenarioSpec], out_dir: Path) -> int:
-        wall_s, cpu_s = time.perf_counter(), cpu_time_s()
+        wall_s, cpu_s = time.perf_counter(), time.process_time()
+        workers_cpu_s = 0.0
         jobs = min(args.jobs, len(specs)) if args.jobs is not None else default_jobs(len(specs))
         if jobs > 1:  # each worker process has its own OpenGL context and scenes
-            statuses = run_parallel(specs, args, out_dir, jobs, emit=_print)
+            statuses, workers_cpu_s = run_parallel(specs, args, out_dir, jobs, emit=_print)
             results = [(spec, *outcome) for spec, outcome in zip(specs, statuses, strict=True)]
         else:
             # One OpenGL context for every run: a new one costs 0.2 s of set-up per scenario.
             with extended(getattr(args, "user_methods", ())), SceneCache(capacity=2) as scenes:
                 results = [(spec, *run_one(spec, args, out_dir, scenes)) for spec in specs]
-        duration = (time.perf_counter() - wall_s, cpu_time_s() - cpu_s)
+        cpu_s = time.process_time() - cpu_s + workers_cpu_s
+        duration = (time.perf_counter() - wall_s, cpu_s)
         if not args.quiet:
             say(final_summary(results, out_dir, duration))
         return max((status for _, status, _ in results), default=EXIT_PASSED)

@@ -34,6 +34,7 @@ import ctypes
 import logging
 import multiprocessing
 import os
+import resource
 import signal
 import sys
 from collections.abc import Callable
@@ -124,9 +125,10 @@ def run_parallel(
     out_dir: Path,
     jobs: int,
     emit: Callable[[str, str], None],
-) -> list[tuple[int, Path | None]]:
+) -> tuple[list[tuple[int, Path | None]], float]:
     """Run ``specs`` on ``jobs`` worker processes; return each scenario's exit status and
-    recording (None when nothing was written), in ``specs``' order.
+    recording (None when nothing was written), in ``specs``' order, and the CPU seconds
+    (user and system) the workers spent.
 
     Each scenario's texts are passed to ``emit(stream, text)`` in ``specs``' order, as soon
     as it and every scenario before it have finished.
@@ -136,7 +138,7 @@ def run_parallel(
     Signalled, KeyboardInterrupt
         When the command or a worker is stopped by a signal; every worker has ended then.
     """
-    ctx = multiprocessing.get_context("spawn")
+    ctx = _context()
     options = {
         "seed": args.seed,
         "quiet": args.quiet,
@@ -150,6 +152,7 @@ def run_parallel(
     done: dict[int, tuple[int, Path | None, Messages]] = {}
     printed = 0
     workers: list[_Worker] = []
+    cpu_s = [0.0]
     try:
         for _ in range(min(jobs, len(specs))):
             workers.append(_start(ctx, options, out_dir))
@@ -165,7 +168,7 @@ def run_parallel(
                 ready = wait([w.results for w in live] + [w.process.sentinel for w in live])
                 for worker in live:
                     if worker.results in ready or worker.process.sentinel in ready:
-                        _receive(worker, specs, pending, done, bar, workers)
+                        _receive(worker, specs, pending, done, bar, workers, cpu_s)
             while printed in done:
                 messages = done[printed][2]
                 bar.clear()
@@ -177,7 +180,7 @@ def run_parallel(
                 with contextlib.suppress(OSError):
                     worker.tasks.send(None)
         for worker in workers:
-            worker.process.join()
+            _receive(worker, specs, pending, done, bar, workers, cpu_s, until_gone=True)
     except BaseException:
         bar.clear()
         _stop(workers)
@@ -186,7 +189,31 @@ def run_parallel(
         for worker in workers:
             worker.tasks.close()
             worker.results.close()
-    return [(done[i][0], done[i][1]) for i in range(len(specs))]
+    return [(done[i][0], done[i][1]) for i in range(len(specs))], cpu_s[0]
+
+
+PRELOAD = (
+    "scenarios.commands.run",
+    "scenarios.record.recording",
+    "matplotlib.figure",
+    "matplotlib.backends.backend_agg",
+    "PIL.PngImagePlugin",
+    "pyarrow",
+    "pandas",
+)
+"""What the fork server imports once for every worker it forks (what a run imports: about
+1.5 s of CPU). Nothing here makes an OpenGL context or a Rerun recording."""
+
+
+def _context():
+    """multiprocessing's ``forkserver`` (a fresh process, which has made no OpenGL context
+    nor Rerun recording, imports ``PRELOAD`` once and forks each worker from itself), or
+    ``spawn`` where there is none."""
+    if "forkserver" not in multiprocessing.get_all_start_methods():
+        return multiprocessing.get_context("spawn")
+    ctx = multiprocessing.get_context("forkserver")
+    ctx.set_forkserver_preload(list(PRELOAD))
+    return ctx
 
 
 def _start(ctx, options: dict[str, Any], out_dir: Path) -> _Worker:
@@ -222,17 +249,22 @@ def _receive(
     done: dict[int, tuple[int, Path | None, Messages]],
     bar: _Bar,
     workers: list[_Worker],
+    cpu_s: list[float],
+    until_gone: bool = False,
 ) -> None:
-    """Read every message ``worker`` has sent; note its death."""
+    """Read every message ``worker`` has sent (``until_gone``: until it ends); note its
+    death; add the CPU seconds it says it spent to ``cpu_s[0]``."""
     while True:
         try:
-            if not worker.results.poll():
+            if not until_gone and not worker.results.poll():
                 break
             message = worker.results.recv()
         except (EOFError, OSError):
             break
         kind = message[0]
-        if kind == "ticks":
+        if kind == "cpu":
+            cpu_s[0] += message[1]
+        elif kind == "ticks":
             running = {w.index for w in workers if w.index is not None and not w.gone}
             bar.update(message[1], message[2], message[3], running)
         elif kind == "done":
@@ -249,7 +281,7 @@ def _receive(
                     [("err", f"{specs[worker.index].name}: could not complete: {message[1]}")],
                 )
                 worker.index = None
-    if worker.process.is_alive():
+    if not until_gone and worker.process.is_alive():
         return
     worker.process.join()
     worker.gone = True
@@ -290,14 +322,19 @@ def _stop(workers: list[_Worker]) -> None:
 # ------------------------------------------------------------------------ in the worker
 
 
-def _end_with_parent(parent_pid: int) -> None:
-    """Ask for SIGTERM when the command's process ends (Linux), however it ends."""
+def _end_with_parent(command_pid: int) -> int:
+    """Ask for SIGTERM when this process's parent ends (Linux), however it ends: the command,
+    or the fork server, which ends with the command. Return the parent's id."""
+    parent_pid = os.getppid()
     if sys.platform.startswith("linux"):
         with contextlib.suppress(OSError, AttributeError):
             libc = ctypes.CDLL(None, use_errno=True)
             libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0)
-    if os.getppid() != parent_pid:  # it ended before the request was made
-        raise Signalled(signal.SIGTERM)
+    try:
+        os.kill(command_pid, 0)
+    except ProcessLookupError:  # the command ended before the request was made
+        raise Signalled(signal.SIGTERM) from None
+    return parent_pid
 
 
 class _Ticks:
@@ -324,14 +361,14 @@ def _serve(
     results: Connection,
     options: dict[str, Any],
     out_dir: Path,
-    parent_pid: int,
+    command_pid: int,
 ) -> None:
     """A worker's main: run each scenario the command sends until it sends None."""
     # Ctrl-C reaches the whole process group; the command stops its workers itself.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         with stop_on_signals(once=True):
-            _end_with_parent(parent_pid)
+            parent_pid = _end_with_parent(command_pid)
             _run_tasks(tasks, results, options, out_dir, parent_pid)
     except Signalled as exc:
         with contextlib.suppress(OSError):
@@ -377,3 +414,5 @@ def _run_tasks(
                 progress=_Ticks(results, index, parent_pid, bool(options["progress"])),
             )
             results.send(("done", index, status, rrd, messages))
+    usage = resource.getrusage(resource.RUSAGE_SELF)  # this process's, since its fork
+    results.send(("cpu", usage.ru_utime + usage.ru_stime))
