@@ -117,9 +117,9 @@ def _alive(pid: int) -> bool:
 
 def _start_two(out: Path) -> tuple[subprocess.Popen, dict[str, int]]:
     """``run orbit calibration`` on two workers, once both are writing."""
+    args = ["run", "orbit", "calibration", "--jobs", "2", "--out", str(out)]
     proc = subprocess.Popen(
-        [sys.executable, "-m", "scenarios.cli", "run", "orbit", "calibration"]
-        + ["--jobs", "2", "--out", str(out)],
+        [sys.executable, "-m", "scenarios.cli", *args],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -141,9 +141,7 @@ def _wait_gone(pids, timeout_s: float = 60.0) -> None:
 
 
 @pytest.mark.parametrize("signame", ["SIGTERM", "SIGINT"])
-def test_a_signal_while_two_workers_run_stops_both_and_keeps_no_partial_file(
-    tmp_path, signame
-):
+def test_a_signal_while_two_workers_run_stops_both_and_keeps_no_partial_file(tmp_path, signame):
     """The command's exit status and one line as on one process; both workers gone, no file
     of theirs left, not even a hidden temporary one."""
     signum = getattr(signal, signame)
@@ -162,7 +160,7 @@ def test_a_killed_command_takes_its_workers_and_the_next_run_clears_their_files(
     but hidden temporary ones is left, and the next run in the directory removes those."""
     proc, writers = _start_two(tmp_path)
     proc.kill()
-    proc.communicate(timeout=60)
+    proc.communicate(timeout=120)  # its workers (and the fork server) hold its stdout too
     _wait_gone(writers.values())
     assert [p.name for p in tmp_path.iterdir() if not p.name.startswith(".")] == []
     args = ["run", str(tmp_path / "tiny.toml"), "--out", str(tmp_path), "--quiet"]

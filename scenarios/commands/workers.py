@@ -20,23 +20,23 @@ status of every scenario the same way. Signals:
 - A worker stopped by SIGTERM or SIGHUP from outside stops the command as if it had
   received the signal; a worker killed outright (SIGKILL, the out-of-memory killer) leaves
   its scenario incomplete (exit status 3) and the others run on.
-- A command killed outright (SIGKILL) takes its workers with it: on Linux each asks the
-  kernel for SIGTERM when the command's process ends (``PR_SET_PDEATHSIG``), and every
-  worker also stops at its next camera tick once the command is gone. Their temporary files
-  are removed by the next run in the directory (``remove_stale_partials``).
+- A command killed outright (SIGKILL) takes its workers with it: each watches a pipe
+  only the command holds open and stops as on SIGTERM when it closes, so that no worker
+  commits a file once its command is gone (nor holds the directory's lock). Files a worker
+  could not remove are the next run's to remove (``remove_stale_partials``).
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
-import ctypes
 import logging
 import multiprocessing
 import os
 import resource
 import signal
 import sys
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, wait
@@ -58,9 +58,6 @@ logger = logging.getLogger(__name__)
 STOP_TIMEOUT_S = 60.0
 """How long the command waits for a stopped worker to clean up before killing it."""
 
-_PR_SET_PDEATHSIG = 1
-"""``prctl``'s option: the signal this process gets when its parent ends (Linux)."""
-
 Messages = list[tuple[str, str]]
 """A scenario's printed texts, in order: ``("out", summary)`` or ``("err", error line)``."""
 
@@ -81,11 +78,12 @@ def default_jobs(n_scenarios: int) -> int:
 
 @dataclass
 class _Worker:
-    """One worker process, its two pipes and the scenario it runs (an index, or None)."""
+    """One worker process, its pipes and the scenario it runs (an index, or None)."""
 
     process: Any
     tasks: Connection
     results: Connection
+    lifeline: Connection
     index: int | None = None
     gone: bool = False
 
@@ -187,8 +185,8 @@ def run_parallel(
         raise
     finally:
         for worker in workers:
-            worker.tasks.close()
-            worker.results.close()
+            for end in (worker.tasks, worker.results, worker.lifeline):
+                end.close()
     return [(done[i][0], done[i][1]) for i in range(len(specs))], cpu_s[0]
 
 
@@ -219,16 +217,17 @@ def _context():
 def _start(ctx, options: dict[str, Any], out_dir: Path) -> _Worker:
     task_r, task_w = ctx.Pipe(duplex=False)
     result_r, result_w = ctx.Pipe(duplex=False)
+    life_r, life_w = ctx.Pipe(duplex=False)  # never written: closed when the command ends
     process = ctx.Process(
         target=_serve,
-        args=(task_r, result_w, options, out_dir, os.getpid()),
+        args=(task_r, result_w, life_r, options, out_dir),
         name="vnav-demo-run",
         daemon=True,  # ended by multiprocessing if the command leaves without stopping it
     )
     process.start()
-    task_r.close()  # the worker's ends: closed here so that its death reads as EOF
-    result_w.close()
-    return _Worker(process, task_w, result_r)
+    for end in (task_r, result_w, life_r):  # the worker's: its death reads as EOF here
+        end.close()
+    return _Worker(process, task_w, result_r, life_w)
 
 
 def _assign(worker: _Worker, pending: list[int], specs: list[ScenarioSpec]) -> None:
@@ -322,34 +321,29 @@ def _stop(workers: list[_Worker]) -> None:
 # ------------------------------------------------------------------------ in the worker
 
 
-def _end_with_parent(command_pid: int) -> int:
-    """Ask for SIGTERM when this process's parent ends (Linux), however it ends: the command,
-    or the fork server, which ends with the command. Return the parent's id."""
-    parent_pid = os.getppid()
-    if sys.platform.startswith("linux"):
-        with contextlib.suppress(OSError, AttributeError):
-            libc = ctypes.CDLL(None, use_errno=True)
-            libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0)
-    try:
-        os.kill(command_pid, 0)
-    except ProcessLookupError:  # the command ended before the request was made
-        raise Signalled(signal.SIGTERM) from None
-    return parent_pid
+def _watch(lifeline: Connection) -> None:
+    """Stop this worker as on SIGTERM once the command's end of ``lifeline`` closes: the
+    command ended without stopping it (killed outright)."""
+
+    def wait_for_the_end() -> None:
+        with contextlib.suppress(EOFError, OSError):
+            lifeline.recv()  # nothing is ever sent: this returns when the command is gone
+        os.kill(os.getpid(), signal.SIGTERM)
+
+    threading.Thread(target=wait_for_the_end, name="vnav-demo-lifeline", daemon=True).start()
 
 
 class _Ticks:
-    """A worker's ``progress``: stops the run on a signal whose exception was swallowed or
-    once the command is gone, and sends the bar's steps to the command."""
+    """A worker's ``progress``: stops the run on a signal whose exception was swallowed, and
+    sends the bar's steps to the command."""
 
-    def __init__(self, results: Connection, index: int, parent_pid: int, send: bool) -> None:
-        self.results, self.index, self.parent_pid, self.send = results, index, parent_pid, send
+    def __init__(self, results: Connection, index: int, send: bool) -> None:
+        self.results, self.index, self.send = results, index, send
         self.step = -1
 
     def __call__(self, done: int, total: int) -> None:
         if (signum := signal_caught()) is not None:
             raise Signalled(signum)
-        if os.getppid() != self.parent_pid:  # the command was killed: stop as on SIGTERM
-            raise Signalled(signal.SIGTERM)
         step = 30 * done // total  # the bar's width (run.Progress): one message a step
         if self.send and (step != self.step or done == total):
             self.step = step
@@ -359,17 +353,17 @@ class _Ticks:
 def _serve(
     tasks: Connection,
     results: Connection,
+    lifeline: Connection,
     options: dict[str, Any],
     out_dir: Path,
-    command_pid: int,
 ) -> None:
     """A worker's main: run each scenario the command sends until it sends None."""
     # Ctrl-C reaches the whole process group; the command stops its workers itself.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         with stop_on_signals(once=True):
-            parent_pid = _end_with_parent(command_pid)
-            _run_tasks(tasks, results, options, out_dir, parent_pid)
+            _watch(lifeline)
+            _run_tasks(tasks, results, options, out_dir)
     except Signalled as exc:
         with contextlib.suppress(OSError):
             results.send(("signalled", exc.signum))
@@ -383,7 +377,6 @@ def _run_tasks(
     results: Connection,
     options: dict[str, Any],
     out_dir: Path,
-    parent_pid: int,
 ) -> None:
     from scenarios.commands.run import InputError, run_one, user_methods
     from sim.scene_cache import SceneCache
@@ -411,7 +404,7 @@ def _run_tasks(
                 out_dir,
                 scenes,
                 emit=lambda stream, text, said=messages: said.append((stream, text)),
-                progress=_Ticks(results, index, parent_pid, bool(options["progress"])),
+                progress=_Ticks(results, index, bool(options["progress"])),
             )
             results.send(("done", index, status, rrd, messages))
     usage = resource.getrusage(resource.RUSAGE_SELF)  # this process's, since its fork
