@@ -115,9 +115,9 @@ def _alive(pid: int) -> bool:
         return False
 
 
-def _start_two(out: Path) -> tuple[subprocess.Popen, dict[str, int]]:
+def _start_two(out: Path, *more: str) -> tuple[subprocess.Popen, dict[str, int]]:
     """``run orbit calibration`` on two workers, once both are writing."""
-    args = ["run", "orbit", "calibration", "--jobs", "2", "--out", str(out)]
+    args = ["run", "orbit", "calibration", "--jobs", "2", "--out", str(out), *more]
     proc = subprocess.Popen(
         [sys.executable, "-m", "scenarios.cli", *args],
         stdout=subprocess.PIPE,
@@ -172,3 +172,18 @@ def test_a_killed_command_takes_its_workers_and_the_next_run_clears_their_files(
         "tiny.rrd",
         "tiny.toml",
     ]
+
+
+def test_a_worker_killed_outright_leaves_its_scenario_incomplete_and_the_other_runs(tmp_path):
+    """SIGKILL of one worker (the out-of-memory killer...): its scenario could not complete
+    (exit status 3, one line saying why), the other's files and summary as usual."""
+    proc, writers = _start_two(tmp_path, "--duration", "8")
+    os.kill(writers["orbit"], signal.SIGKILL)
+    out, err = proc.communicate(timeout=600)
+    assert proc.returncode == 3, err
+    assert err.splitlines() == [
+        "vnav-demo: error: orbit: could not complete: its worker process was killed by SIGKILL"
+    ]
+    assert out.startswith("calibration: ") and "1 incomplete (orbit)" in " ".join(out.split())
+    visible = sorted(p.name for p in tmp_path.iterdir() if not p.name.startswith("."))
+    assert visible == ["calibration.json", "calibration.rrd"]

@@ -144,6 +144,10 @@ def run_parallel(
         "estimator": list(getattr(args, "estimator", None) or []),
         "estimator_timeout_s": getattr(args, "estimator_timeout_s", None),
         "progress": not args.quiet and sys.stderr.isatty(),
+        # A fork server outlives its first command in a process that runs several (tests):
+        # its workers take this command's directory and environment, not the server's.
+        "cwd": os.getcwd(),
+        "environ": dict(os.environ),
     }
     bar = _Bar(specs, enabled=bool(options["progress"]))
     pending = list(range(len(specs)))
@@ -151,16 +155,22 @@ def run_parallel(
     printed = 0
     workers: list[_Worker] = []
     cpu_s = [0.0]
+    cannot_start = "could not run it"
     try:
         for _ in range(min(jobs, len(specs))):
-            workers.append(_start(ctx, options, out_dir))
+            try:
+                workers.append(_start(ctx, options, out_dir))
+            except OSError as exc:  # no process left to make, no fork server...
+                cannot_start = f"could not start: {exc}"
+                break
         for worker in workers:
             _assign(worker, pending, specs)
         while printed < len(specs):
             live = [w for w in workers if not w.gone]
             if not live:  # every worker died: nothing left to run the rest
                 for index in pending:
-                    done[index] = (EXIT_INCOMPLETE, None, [("err", _lost(specs[index], None))])
+                    line = f"{specs[index].name}: could not complete: its worker {cannot_start}"
+                    done[index] = (EXIT_INCOMPLETE, None, [("err", line)])
                 pending.clear()
             else:
                 ready = wait([w.results for w in live] + [w.process.sentinel for w in live])
@@ -293,14 +303,12 @@ def _receive(
         worker.index = None
 
 
-def _lost(spec: ScenarioSpec, exitcode: int | None) -> str:
+def _lost(spec: ScenarioSpec, exitcode: int) -> str:
     """The error line of a scenario whose worker ended without finishing it."""
     if exitcode is not None and exitcode < 0:
         how = f"was killed by {signal.Signals(-exitcode).name}"
-    elif exitcode is not None:
-        how = f"ended with status {exitcode}"
     else:
-        how = "could not run it"
+        how = f"ended with status {exitcode}"
     return f"{spec.name}: could not complete: its worker process {how}"
 
 
@@ -360,6 +368,9 @@ def _serve(
     """A worker's main: run each scenario the command sends until it sends None."""
     # Ctrl-C reaches the whole process group; the command stops its workers itself.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    os.chdir(options["cwd"])
+    os.environ.clear()
+    os.environ.update(options["environ"])
     try:
         with stop_on_signals(once=True):
             _watch(lifeline)
@@ -378,7 +389,7 @@ def _run_tasks(
     options: dict[str, Any],
     out_dir: Path,
 ) -> None:
-    from scenarios.commands.run import InputError, run_one, user_methods
+    from scenarios.commands.run import run_one, user_methods
     from sim.scene_cache import SceneCache
     from vnav.methods import extended
 
@@ -390,7 +401,7 @@ def _run_tasks(
         stack = contextlib.ExitStack()
         stack.enter_context(extended(methods))
         scenes = stack.enter_context(SceneCache(capacity=2))
-    except (InputError, Exception) as exc:  # checked by the command already: not expected
+    except Exception as exc:  # the command has checked the functions: not expected
         logger.debug("worker set-up failed", exc_info=True)
         results.send(("broken", f"its worker could not start: {type(exc).__name__}: {exc}"))
         sys.exit(EXIT_INCOMPLETE)
