@@ -16,6 +16,8 @@ from pathlib import Path
 import pytest
 
 from scenarios.cli import main
+from scenarios.commands.workers import cost, default_jobs, start_order
+from scenarios.scenario import builtin
 
 TINY_TOML = textwrap.dedent("""\
     name = "tiny"
@@ -76,6 +78,23 @@ def test_two_workers_write_and_print_what_one_process_does(tmp_path, monkeypatch
     assert _without_durations(serial[1]) == _without_durations(parallel[1])
     out = parallel[1]
     assert out.index("frame-problem: ") < out.index("tiny: ") < out.index("2 scenarios:")
+
+
+def test_the_costliest_scenario_starts_first_then_the_others_in_order():
+    """In ``run --all`` the calibration built-in (a third of the command's CPU time) starts
+    first, not last alone on one core; the others keep their order."""
+    specs = [builtin.load(name) for name in builtin.names()]
+    order = start_order(specs)
+    assert specs[order[0]].name == "calibration"
+    assert all(cost(specs[order[0]]) >= cost(s) for s in specs)
+    assert order[1:] == [i for i in range(len(specs)) if i != order[0]]
+
+
+def test_two_workers_by_default_where_there_are_two_cores_and_two_scenarios(monkeypatch):
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1, 2, 3})
+    assert [default_jobs(n) for n in (1, 2, 14)] == [1, 2, 2]
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0})
+    assert default_jobs(14) == 1
 
 
 @pytest.mark.parametrize("value", ["0", "-3"])

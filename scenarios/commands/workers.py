@@ -1,14 +1,20 @@
 """``vnav-demo run`` with several scenarios on several worker processes (``--jobs N``).
 
-Each worker is a fresh Python process (multiprocessing's ``spawn``: an OpenGL context, EGL's
-included, cannot be shared across processes, nor safely inherited by a fork) with its own
-``SceneCache`` and OpenGL context, kept for every scenario it runs. It inherits the
-command's environment (``MUJOCO_GL``, set before MuJoCo is imported: ``sim.gl``) and runs a
-scenario exactly as the serial command does (``scenarios.commands.run.run_one``): each
-scenario's files are written and committed by the worker that ran it, under that worker's
-temporary names (``scenarios.record.outputs``), while the command holds the directory's lock.
+Each worker has its own ``SceneCache`` and OpenGL context, kept for every scenario it runs
+(an OpenGL context, EGL's included, cannot be shared across processes, nor safely inherited
+by a fork). The workers are forked by multiprocessing's fork server, a fresh process that
+has made no OpenGL context nor Rerun recording and imports a run's modules once for them
+(``PRELOAD``); where there is none, each is a fresh Python (``spawn``). A worker takes the
+command's working directory and environment (``MUJOCO_GL`` is read when MuJoCo is imported,
+``sim.gl``: the fork server's, the command's too) and runs a scenario exactly as the serial
+command does (``scenarios.commands.run.run_one``): each scenario's files are written and
+committed by the worker that ran it, under that worker's temporary names
+(``scenarios.record.outputs``), while the command holds the directory's lock. It reports
+the CPU seconds it spent, which the command adds to its own (the fork server's imports,
+about 1.5 s, are not counted).
 
-What the user sees is the serial command's: the command prints each scenario's summary and
+The costliest scenario starts first (``start_order``), the others in order. What the user
+sees is the serial command's: the command prints each scenario's summary and
 error lines in the scenarios' order, whichever finishes first (a worker sends them back as
 text), one progress bar on a terminal (the earliest scenario still running), and the exit
 status of every scenario the same way. Signals:
@@ -22,7 +28,7 @@ status of every scenario the same way. Signals:
   its scenario incomplete (exit status 3) and the others run on.
 - A command killed outright (SIGKILL) takes its workers with it: each watches a pipe
   only the command holds open and stops as on SIGTERM when it closes, so that no worker
-  commits a file once its command is gone (nor holds the directory's lock). Files a worker
+  commits a file once its command is gone (and its directory's lock with it). Files a worker
   could not remove are the next run's to remove (``remove_stale_partials``).
 """
 
@@ -51,7 +57,7 @@ from scenarios.commands.common import (
 )
 from scenarios.scenario.spec import ScenarioSpec
 
-__all__ = ["default_jobs", "run_parallel"]
+__all__ = ["cost", "default_jobs", "run_parallel", "start_order"]
 
 logger = logging.getLogger(__name__)
 
@@ -150,7 +156,7 @@ def run_parallel(
         "environ": dict(os.environ),
     }
     bar = _Bar(specs, enabled=bool(options["progress"]))
-    pending = list(range(len(specs)))
+    pending = start_order(specs)
     done: dict[int, tuple[int, Path | None, Messages]] = {}
     printed = 0
     workers: list[_Worker] = []
@@ -198,6 +204,21 @@ def run_parallel(
             for end in (worker.tasks, worker.results, worker.lifeline):
                 end.close()
     return [(done[i][0], done[i][1]) for i in range(len(specs))], cpu_s[0]
+
+
+def cost(spec: ScenarioSpec) -> int:
+    """A rough cost of running ``spec``: its camera ticks, twice where the mount is
+    calibrated (the run's images are estimated again with the recovered mount)."""
+    return spec.n_ticks * (2 if spec.checks_calibration else 1)
+
+
+def start_order(specs: list[ScenarioSpec]) -> list[int]:
+    """The order scenarios start in: the costliest first (``cost``), then the others in
+    order. Started last, the longest would end the command alone on one core (the
+    calibration built-in is a third of ``run --all``); the others, in order, still print as
+    they finish."""
+    first = max(range(len(specs)), key=lambda i: cost(specs[i]))
+    return [first, *(i for i in range(len(specs)) if i != first)]
 
 
 PRELOAD = (
