@@ -7,6 +7,9 @@ failed, 2 bad input, 3 a run could not complete (I/O error such as a full disk, 
 simulation, out of memory, an internal error), 128 + N on signal N (SIGINT, SIGTERM, SIGHUP).
 Each scenario's ``.rrd`` and ``.json`` are written together or not at all
 (``scenarios.record.outputs``); whatever ends a run, the previous pair stays as it was.
+Several scenarios run two at a time where there are two cores, on worker processes
+(``--jobs N``, ``scenarios.commands.workers``), with the files, reports, output (in the
+scenarios' order) and exit status of ``--jobs 1``, which runs them one after the other here.
 """
 
 from __future__ import annotations
