@@ -15,6 +15,7 @@ scenarios' order) and exit status of ``--jobs 1``, which runs them one after the
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import logging
 import math
@@ -24,8 +25,9 @@ import shutil
 import sys
 import textwrap
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 from scenarios import pipeline
 from scenarios.commands.common import (
@@ -40,7 +42,7 @@ from scenarios.commands.common import (
 )
 from scenarios.commands.console import WIDTH, say
 from scenarios.commands.console import error as _error
-from scenarios.commands.workers import default_jobs, run_parallel
+from scenarios.commands.workers import RunOne, default_jobs, run_parallel
 from scenarios.export.base import ExportResult
 from scenarios.run.evaluate import MATCH_GATE_M
 from scenarios.scenario import builtin
@@ -474,6 +476,24 @@ def run_one(
     return (EXIT_PASSED if outcome.passed else EXIT_CHECK_FAILED), outcome.rrd_path
 
 
+@contextlib.contextmanager
+def worker_session(options: dict[str, Any]) -> Iterator[RunOne]:
+    """A worker process's set-up for its runs (``scenarios.commands.workers``): the user's
+    functions and one ``SceneCache`` (its OpenGL context), as the serial command's. Yields
+    ``run(spec, out_dir, emit, progress)``: ``run_one`` with the command's ``options``
+    (``seed``, ``quiet``, ``exports``, ``estimator``, ``estimator_timeout_s``)."""
+    args = argparse.Namespace(
+        seed=options["seed"], quiet=options["quiet"], exports=options["exports"]
+    )
+    methods = user_methods(options["estimator"], options["estimator_timeout_s"])
+    with extended(methods), SceneCache(capacity=2) as scenes:
+
+        def run(spec: ScenarioSpec, out_dir: Path, emit, progress) -> tuple[int, Path | None]:
+            return run_one(spec, args, out_dir, scenes, emit, progress)
+
+        yield run
+
+
 def export_lines(done: ExportResult, out_dir: Path) -> list[str]:
     """What one export format wrote (``scenarios.export.base.ExportResult``), and its note."""
     wrote = " and ".join(str(out_dir / n) for n in done.written) or "nothing"
@@ -550,7 +570,15 @@ def _body(args: argparse.Namespace):
         workers_cpu_s = 0.0
         jobs = min(args.jobs, len(specs)) if args.jobs is not None else default_jobs(len(specs))
         if jobs > 1:  # each worker process has its own OpenGL context and scenes
-            statuses, workers_cpu_s = run_parallel(specs, args, out_dir, jobs, emit=_print)
+            statuses, workers_cpu_s = run_parallel(
+                specs,
+                args,
+                out_dir,
+                jobs,
+                session=worker_session,
+                emit=_print,
+                progress_bar=lambda name: Progress(name, enabled=True),
+            )
             results = [(spec, *outcome) for spec, outcome in zip(specs, statuses, strict=True)]
         else:
             # One OpenGL context for every run: a new one costs 0.2 s of set-up per scenario.

@@ -7,7 +7,7 @@ has made no OpenGL context nor Rerun recording and imports a run's modules once 
 (``PRELOAD``); where there is none, each is a fresh Python (``spawn``). A worker takes the
 command's working directory and environment (``MUJOCO_GL`` is read when MuJoCo is imported,
 ``sim.gl``: the fork server's, the command's too) and runs a scenario exactly as the serial
-command does (``scenarios.commands.run.run_one``): each scenario's files are written and
+command does (``scenarios.commands.run.worker_session``): each scenario's files are written and
 committed by the worker that ran it, under that worker's temporary names
 (``scenarios.record.outputs``), while the command holds the directory's lock. It reports
 the CPU seconds it spent, which the command adds to its own (the fork server's imports,
@@ -67,6 +67,13 @@ STOP_TIMEOUT_S = 60.0
 Messages = list[tuple[str, str]]
 """A scenario's printed texts, in order: ``("out", summary)`` or ``("err", error line)``."""
 
+RunOne = Callable[
+    [ScenarioSpec, Path, Callable[[str, str], None], Callable[[int, int], None]],
+    tuple[int, Path | None],
+]
+"""A worker's ``run(spec, out_dir, emit, progress)``: a scenario's exit status and
+recording (``scenarios.commands.run.run_one``)."""
+
 
 def usable_cores() -> int:
     """The CPU cores this process may run on."""
@@ -100,19 +107,17 @@ class _Bar:
     stderr (``scenarios.commands.run.Progress``)."""
 
     specs: list[ScenarioSpec]
-    enabled: bool
+    draw: Callable[[str], Callable[[int, int], None]] | None
     ticks: dict[int, tuple[int, int]] = field(default_factory=dict)
     shown: bool = False
 
     def update(self, index: int, done: int, total: int, running: set[int]) -> None:
-        from scenarios.commands.run import Progress
-
         self.ticks[index] = (done, total)
         first = min(running, default=None)
-        if not self.enabled or first is None or first not in self.ticks:
+        if self.draw is None or first is None or first not in self.ticks:
             return
         done, total = self.ticks[first]
-        Progress(self.specs[first].name, enabled=True)(done, total)
+        self.draw(self.specs[first].name)(done, total)
         self.shown = done != total
 
     def clear(self) -> None:
@@ -128,14 +133,22 @@ def run_parallel(
     args: argparse.Namespace,
     out_dir: Path,
     jobs: int,
+    *,
+    session: Callable[[dict[str, Any]], contextlib.AbstractContextManager[RunOne]],
     emit: Callable[[str, str], None],
+    progress_bar: Callable[[str], Callable[[int, int], None]],
 ) -> tuple[list[tuple[int, Path | None]], float]:
     """Run ``specs`` on ``jobs`` worker processes; return each scenario's exit status and
     recording (None when nothing was written), in ``specs``' order, and the CPU seconds
     (user and system) the workers spent.
 
-    Each scenario's texts are passed to ``emit(stream, text)`` in ``specs``' order, as soon
-    as it and every scenario before it have finished.
+    Each worker enters ``session(options)`` once (a module-level function, which the worker
+    imports: ``scenarios.commands.run.worker_session``), ``options`` the command's (seed,
+    exports, ``--estimator``...), and runs each scenario it is given with the function it
+    yields, ``run(spec, out_dir, emit, progress)`` -> (exit status, recording). Each
+    scenario's texts are passed to ``emit(stream, text)`` in ``specs``' order, as soon as it
+    and every scenario before it have finished. On a terminal (and without ``--quiet``)
+    ``progress_bar(name)(done, total)`` draws the bar of the earliest scenario running.
 
     Raises
     ------
@@ -155,7 +168,7 @@ def run_parallel(
         "cwd": os.getcwd(),
         "environ": dict(os.environ),
     }
-    bar = _Bar(specs, enabled=bool(options["progress"]))
+    bar = _Bar(specs, progress_bar if options["progress"] else None)
     pending = start_order(specs)
     done: dict[int, tuple[int, Path | None, Messages]] = {}
     printed = 0
@@ -165,7 +178,7 @@ def run_parallel(
     try:
         for _ in range(min(jobs, len(specs))):
             try:
-                workers.append(_start(ctx, options, out_dir))
+                workers.append(_start(ctx, session, options, out_dir))
             except OSError as exc:  # no process left to make, no fork server...
                 cannot_start = f"could not start: {exc}"
                 break
@@ -245,13 +258,13 @@ def _context():
     return ctx
 
 
-def _start(ctx, options: dict[str, Any], out_dir: Path) -> _Worker:
+def _start(ctx, session, options: dict[str, Any], out_dir: Path) -> _Worker:
     task_r, task_w = ctx.Pipe(duplex=False)
     result_r, result_w = ctx.Pipe(duplex=False)
     life_r, life_w = ctx.Pipe(duplex=False)  # never written: closed when the command ends
     process = ctx.Process(
         target=_serve,
-        args=(task_r, result_w, life_r, options, out_dir),
+        args=(task_r, result_w, life_r, session, options, out_dir),
         name="vnav-demo-run",
         daemon=True,  # ended by multiprocessing if the command leaves without stopping it
     )
@@ -383,6 +396,7 @@ def _serve(
     tasks: Connection,
     results: Connection,
     lifeline: Connection,
+    session: Callable[[dict[str, Any]], contextlib.AbstractContextManager[RunOne]],
     options: dict[str, Any],
     out_dir: Path,
 ) -> None:
@@ -395,7 +409,7 @@ def _serve(
     try:
         with stop_on_signals(once=True):
             _watch(lifeline)
-            _run_tasks(tasks, results, options, out_dir)
+            _run_tasks(tasks, results, session, options, out_dir)
     except Signalled as exc:
         with contextlib.suppress(OSError):
             results.send(("signalled", exc.signum))
@@ -407,21 +421,13 @@ def _serve(
 def _run_tasks(
     tasks: Connection,
     results: Connection,
+    session: Callable[[dict[str, Any]], contextlib.AbstractContextManager[RunOne]],
     options: dict[str, Any],
     out_dir: Path,
 ) -> None:
-    from scenarios.commands.run import run_one, user_methods
-    from sim.scene_cache import SceneCache
-    from vnav.methods import extended
-
-    args = argparse.Namespace(
-        seed=options["seed"], quiet=options["quiet"], exports=options["exports"]
-    )
+    stack = contextlib.ExitStack()
     try:
-        methods = user_methods(options["estimator"], options["estimator_timeout_s"])
-        stack = contextlib.ExitStack()
-        stack.enter_context(extended(methods))
-        scenes = stack.enter_context(SceneCache(capacity=2))
+        run = stack.enter_context(session(options))
     except Exception as exc:  # the command has checked the functions: not expected
         logger.debug("worker set-up failed", exc_info=True)
         results.send(("broken", f"its worker could not start: {type(exc).__name__}: {exc}"))
@@ -430,13 +436,11 @@ def _run_tasks(
         while (task := tasks.recv()) is not None:
             index, spec = task
             messages: Messages = []
-            status, rrd = run_one(
+            status, rrd = run(
                 spec,
-                args,
                 out_dir,
-                scenes,
-                emit=lambda stream, text, said=messages: said.append((stream, text)),
-                progress=_Ticks(results, index, bool(options["progress"])),
+                lambda stream, text, said=messages: said.append((stream, text)),
+                _Ticks(results, index, bool(options["progress"])),
             )
             results.send(("done", index, status, rrd, messages))
     usage = resource.getrusage(resource.RUSAGE_SELF)  # this process's, since its fork
