@@ -206,3 +206,17 @@ def test_a_worker_killed_outright_leaves_its_scenario_incomplete_and_the_other_r
     assert out.startswith("calibration: ") and "1 incomplete (orbit)" in " ".join(out.split())
     visible = sorted(p.name for p in tmp_path.iterdir() if not p.name.startswith("."))
     assert visible == ["calibration.json", "calibration.rrd"]
+
+
+def test_a_worker_stopped_by_sigterm_stops_the_command_as_its_own_sigterm(tmp_path):
+    """SIGTERM to one worker (a service manager stopping the process group does so too): the
+    command stops every worker and ends as on its own SIGTERM."""
+    proc, writers = _start_two(tmp_path)
+    os.kill(writers["orbit"], signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 128 + signal.SIGTERM, err
+    assert err.strip().splitlines() == [
+        "vnav-demo: error: stopped by SIGTERM; no partial file was kept"
+    ]
+    _wait_gone(writers.values())
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".vnav-demo.lock"]
