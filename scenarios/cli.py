@@ -4,8 +4,9 @@
 - ``vnav-demo show NAME``: a built-in scenario as a TOML file named ``my-NAME``, to start your
   own from.
 - ``vnav-demo run NAME|FILE.toml [...] [--all] [--out DIR] [--seed N] [--duration S] [--quiet]
-  [--estimator SPEC] [--estimator-timeout-s S]``:
-  runs scenarios headless, writes ``DIR/<name>.rrd`` and ``DIR/<name>.json``, prints a summary.
+  [--jobs N] [--estimator SPEC] [--estimator-timeout-s S]``:
+  runs scenarios headless (two at a time where there are two cores), writes
+  ``DIR/<name>.rrd`` and ``DIR/<name>.json``, prints a summary.
 - ``vnav-demo lecture``: the lecture's worked examples next to vnav's results.
 - ``vnav-demo sweep FILE.toml [--out DIR] [--workers N] [--address ADDR] [--resume]``: a
   scenario over a grid of values and many seeds, on Ray (``scenarios.sweep``).
@@ -153,6 +154,15 @@ def _add_run_parser(sub) -> None:
         help=f"refuse runs of more than N camera ticks (default: {MAX_TICKS_DEFAULT})",
     )
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
+    p.add_argument(
+        "--jobs",
+        type=int,
+        default=None,
+        metavar="N",
+        help="run N scenarios at a time, each in a process of its own (default: 2 where "
+        "there are two cores and two scenarios, else 1; 1 runs them one after the other in "
+        "this process)",
+    )
     p.add_argument(
         "--estimator",
         action="append",

@@ -173,16 +173,19 @@ def test_a_check_with_no_data_says_why_and_fails(tmp_path, monkeypatch, capsys):
     assert "detections: cones found in the images; matched: estimated within 3 m" in out
 
 
-def test_run_prints_each_scenarios_duration_and_their_total(tmp_path, monkeypatch, capsys):
+@pytest.mark.parametrize("jobs", ["1", "2"])
+def test_run_prints_each_scenarios_duration_and_their_total(tmp_path, monkeypatch, capsys, jobs):
     """Each scenario's first line ends with its duration, wall and CPU seconds: its report's
     ``timing_s`` ``total`` and ``total_cpu`` (the whole run, stages, calibration, judging and
-    recording included); with several, the summary gives the total, no less than their sum
-    and no more than the command took."""
+    recording included); with several, the summary gives the total: one after the other
+    (``--jobs 1``) no less than their sum, two at a time no less than the longest, and no
+    more than the command took; its CPU time no less than theirs (the workers' counted)."""
     started = time.perf_counter()
-    _, out = _run_in(tmp_path, monkeypatch, capsys, "frame-problem", "yaw-sweep", "--duration", "1")
+    args = ("frame-problem", "yaw-sweep", "--duration", "1", "--jobs", jobs)
+    _, out = _run_in(tmp_path, monkeypatch, capsys, *args)
     took_s = time.perf_counter() - started
     flat = " ".join(out.split())
-    totals = []
+    totals, cpu_totals = [], []
     for name in ("frame-problem", "yaw-sweep"):
         timing = json.loads((tmp_path / "out" / f"{name}.json").read_text())["timing_s"]
         said = re.search(
@@ -193,9 +196,12 @@ def test_run_prints_each_scenarios_duration_and_their_total(tmp_path, monkeypatc
         parts = sum(v for k, v in timing.items() if not k.startswith("total"))
         assert parts <= timing["total"] + 1e-3 and timing["total_cpu"] > 0.0
         totals.append(timing["total"])
+        cpu_totals.append(timing["total_cpu"])
     said = re.search(r"2 scenarios: [^.]*? in ([\d.]+) s, ([\d.]+) s CPU", flat)
     assert said, flat
-    assert sum(totals) - 0.1 <= float(said[1]) <= took_s + 0.05
+    least_s = sum(totals) if jobs == "1" else max(totals)
+    assert least_s - 0.1 <= float(said[1]) <= took_s + 0.05
+    assert float(said[2]) >= sum(cpu_totals) - 0.1
 
 
 def test_copy_of_a_builtin_without_checks_passes_and_says_what_it_skipped(

@@ -307,6 +307,34 @@ def test_depth_scale_and_legend_are_drawn_once_per_process_as_a_fresh_draw():
     assert plots.depth_scale_png(10.0, "viridis") != scale
 
 
+def test_error_against_range_on_a_reused_figure_is_a_fresh_figures_png():
+    """The plot is drawn on this process's figure of as many panels, cleared of the last
+    run's artists: each PNG is, byte for byte, the one a new figure gives, whatever came
+    before (a panel with no matched estimate, its note; the recovered mount's crosses)."""
+    import dataclasses
+
+    from scenarios import pipeline
+    from scenarios.record import plots
+
+    def short(name: str, duration_s: float):
+        spec = dataclasses.replace(builtin.load(name), duration_s=duration_s)
+        return pipeline.run(spec, seed=1).result
+
+    frame, multi = short("frame-problem", 0.5), short("multi-cone", 1.0)
+    assert not frame.errors("known_height").size  # a panel saying "no matched estimate"
+    # The crosses of any run: only their drawing is compared here.
+    cases = [(frame, None), (multi, frame), (multi, None), (frame, multi), (frame, None)]
+    fresh = []
+    for result, recovered in cases:
+        plots._range_figures.clear()
+        fresh.append(plots.error_against_range_png(result, recovered))
+    plots._range_figures.clear()
+    reused = [plots.error_against_range_png(r, rec) for r, rec in cases]
+    assert len(plots._range_figures) == 1  # one figure drew them all
+    assert reused == fresh
+    assert len(set(fresh)) == 4  # the cases differ (the last repeats the first)
+
+
 def test_ellipsoids_of_a_batch_are_each_ellipsoid_to_the_last_bit():
     """``ellipsoids_axes`` (one decomposition of a stack) against ``ellipsoid_axes`` one by
     one: full-rank, ground-plane (rank 2, exact in z), rank-1 and zero covariances, and

@@ -54,6 +54,12 @@ def _raise_signalled(signum: int, frame: object) -> None:
     raise Signalled(signum)
 
 
+def _raise_signalled_once(signum: int, frame: object) -> None:
+    for s in (signal.SIGTERM, signal.SIGHUP):  # a second one would cut the clean-up short
+        signal.signal(s, signal.SIG_IGN)
+    _raise_signalled(signum, frame)
+
+
 def signal_caught() -> int | None:
     """The first SIGTERM or SIGHUP received inside ``stop_on_signals``, or None.
 
@@ -64,11 +70,14 @@ def signal_caught() -> int | None:
 
 
 @contextlib.contextmanager
-def stop_on_signals() -> Iterator[None]:
+def stop_on_signals(once: bool = False) -> Iterator[None]:
     """SIGTERM and SIGHUP raise ``Signalled`` in the main thread while inside, so that a
-    command ends as on Ctrl-C (``KeyboardInterrupt``): cleaning up, keeping what is finished."""
+    command ends as on Ctrl-C (``KeyboardInterrupt``): cleaning up, keeping what is finished.
+    ``once``: the first of them raises, later ones are ignored (a worker process, which its
+    command stops with SIGTERM, whatever stopped the command: its clean-up runs whole)."""
     _caught.clear()
-    previous = {s: signal.signal(s, _raise_signalled) for s in (signal.SIGTERM, signal.SIGHUP)}
+    handler = _raise_signalled_once if once else _raise_signalled
+    previous = {s: signal.signal(s, handler) for s in (signal.SIGTERM, signal.SIGHUP)}
     try:
         yield
     finally:

@@ -7,11 +7,15 @@ failed, 2 bad input, 3 a run could not complete (I/O error such as a full disk, 
 simulation, out of memory, an internal error), 128 + N on signal N (SIGINT, SIGTERM, SIGHUP).
 Each scenario's ``.rrd`` and ``.json`` are written together or not at all
 (``scenarios.record.outputs``); whatever ends a run, the previous pair stays as it was.
+Several scenarios run two at a time where there are two cores, on worker processes
+(``--jobs N``, ``scenarios.commands.workers``), with the files, reports, output (in the
+scenarios' order) and exit status of ``--jobs 1``, which runs them one after the other here.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import logging
 import math
@@ -21,7 +25,9 @@ import shutil
 import sys
 import textwrap
 import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 from scenarios import pipeline
 from scenarios.commands.common import (
@@ -36,6 +42,7 @@ from scenarios.commands.common import (
 )
 from scenarios.commands.console import WIDTH, say
 from scenarios.commands.console import error as _error
+from scenarios.commands.workers import RunOne, default_jobs, run_parallel
 from scenarios.export.base import ExportResult
 from scenarios.run.evaluate import MATCH_GATE_M
 from scenarios.scenario import builtin
@@ -404,22 +411,37 @@ def final_summary(
     return "\n".join(lines)
 
 
+def _print(stream: str, text: str) -> None:
+    """``run_one``'s default ``emit``: ``text`` to stdout (``"out"``) or as an error line."""
+    if stream == "out":
+        say(text)
+    else:
+        _error(text)
+
+
 def run_one(
     spec: ScenarioSpec,
     args: argparse.Namespace,
     out_dir: Path,
     scenes: SceneCache | None = None,
+    emit: Callable[[str, str], None] = _print,
+    progress: Callable[[int, int], None] | None = None,
 ) -> tuple[int, Path | None]:
     """Run one scenario, write its files, print its summary; return its exit status and its
     recording (None when nothing was written). ``scenes``: the command's scenes and their
-    OpenGL context, shared by its runs (``sim.scene_cache``)."""
+    OpenGL context, shared by its runs (``sim.scene_cache``). ``emit(stream, text)`` prints
+    each text, ``stream`` ``"out"`` (the summary) or ``"err"`` (an error line); a worker
+    process (``scenarios.commands.workers``) collects them instead. ``progress`` is called
+    after every camera tick (default: ``Progress``'s bar)."""
+    if progress is None:
+        progress = Progress(spec.name, enabled=not args.quiet)
     try:
         try:
             outcome = pipeline.run(
                 spec,
                 seed=args.seed,
                 out_dir=out_dir,
-                progress=Progress(spec.name, enabled=not args.quiet),
+                progress=progress,
                 exports=getattr(args, "exports", ()),
                 scenes=scenes,
             )
@@ -430,27 +452,46 @@ def run_one(
                 raise Signalled(signum) from exc
             raise
     except SimulationError as exc:
-        _error(f"{spec.name}: could not complete: the simulation diverged: {exc}")
+        emit("err", f"{spec.name}: could not complete: the simulation diverged: {exc}")
         return EXIT_INCOMPLETE, None
     except OSError as exc:
-        _error(
+        emit(
+            "err",
             f"{spec.name}: could not complete: cannot write its files: {exc}; "
-            "the previous files were kept"
+            "the previous files were kept",
         )
         return EXIT_INCOMPLETE, None
     except MemoryError:
-        _error(f"{spec.name}: could not complete: out of memory")
+        emit("err", f"{spec.name}: could not complete: out of memory")
         return EXIT_INCOMPLETE, None
     except Exception as exc:  # an internal error: say it in one line, keep the others going
         logger.debug("internal error", exc_info=True)
-        _error(f"{spec.name}: could not complete: internal error: {type(exc).__name__}: {exc}")
+        emit("err", f"{spec.name}: could not complete: internal error: {type(exc).__name__}: {exc}")
         return EXIT_INCOMPLETE, None
     if not args.quiet:
-        say(summary(outcome.report, outcome.rrd_path, outcome.json_path))
+        emit("out", summary(outcome.report, outcome.rrd_path, outcome.json_path))
     if not args.quiet:
         for done in outcome.exports:
-            say("\n".join(export_lines(done, out_dir)))
+            emit("out", "\n".join(export_lines(done, out_dir)))
     return (EXIT_PASSED if outcome.passed else EXIT_CHECK_FAILED), outcome.rrd_path
+
+
+@contextlib.contextmanager
+def worker_session(options: dict[str, Any]) -> Iterator[RunOne]:
+    """A worker process's set-up for its runs (``scenarios.commands.workers``): the user's
+    functions and one ``SceneCache`` (its OpenGL context), as the serial command's. Yields
+    ``run(spec, out_dir, emit, progress)``: ``run_one`` with the command's ``options``
+    (``seed``, ``quiet``, ``exports``, ``estimator``, ``estimator_timeout_s``)."""
+    args = argparse.Namespace(
+        seed=options["seed"], quiet=options["quiet"], exports=options["exports"]
+    )
+    methods = user_methods(options["estimator"], options["estimator_timeout_s"])
+    with extended(methods), SceneCache(capacity=2) as scenes:
+
+        def run(spec: ScenarioSpec, out_dir: Path, emit, progress) -> tuple[int, Path | None]:
+            return run_one(spec, args, out_dir, scenes, emit, progress)
+
+        yield run
 
 
 def export_lines(done: ExportResult, out_dir: Path) -> list[str]:
@@ -464,6 +505,8 @@ def _validate(args: argparse.Namespace) -> tuple[list[ScenarioSpec], Path]:
     """Every check that can be made before running; InputError on the first failure."""
     if not 0 <= args.seed <= MAX_SEED:
         raise InputError(f"--seed must be in [0, 2**63 - 1], got {args.seed}")
+    if getattr(args, "jobs", None) is not None and args.jobs < 1:
+        raise InputError(f"--jobs must be a positive number of processes, got {args.jobs}")
     if args.max_ticks < 1:
         raise InputError(f"--max-ticks must be a positive number of ticks, got {args.max_ticks}")
     specs = resolve(args.scenarios, args.all)
@@ -524,10 +567,25 @@ def command(args: argparse.Namespace) -> int:
 def _body(args: argparse.Namespace):
     def run_all(specs: list[ScenarioSpec], out_dir: Path) -> int:
         wall_s, cpu_s = time.perf_counter(), time.process_time()
-        # One OpenGL context for every run: a new one costs 0.2 s of set-up per scenario.
-        with extended(getattr(args, "user_methods", ())), SceneCache(capacity=2) as scenes:
-            results = [(spec, *run_one(spec, args, out_dir, scenes)) for spec in specs]
-        duration = (time.perf_counter() - wall_s, time.process_time() - cpu_s)
+        workers_cpu_s = 0.0
+        jobs = min(args.jobs, len(specs)) if args.jobs is not None else default_jobs(len(specs))
+        if jobs > 1:  # each worker process has its own OpenGL context and scenes
+            statuses, workers_cpu_s = run_parallel(
+                specs,
+                args,
+                out_dir,
+                jobs,
+                session=worker_session,
+                emit=_print,
+                progress_bar=lambda name: Progress(name, enabled=True),
+            )
+            results = [(spec, *outcome) for spec, outcome in zip(specs, statuses, strict=True)]
+        else:
+            # One OpenGL context for every run: a new one costs 0.2 s of set-up per scenario.
+            with extended(getattr(args, "user_methods", ())), SceneCache(capacity=2) as scenes:
+                results = [(spec, *run_one(spec, args, out_dir, scenes)) for spec in specs]
+        cpu_s = time.process_time() - cpu_s + workers_cpu_s
+        duration = (time.perf_counter() - wall_s, cpu_s)
         if not args.quiet:
             say(final_summary(results, out_dir, duration))
         return max((status for _, status, _ in results), default=EXIT_PASSED)

@@ -21,6 +21,8 @@ from scenarios.run.records import RunResult
 from vnav.methods import CONTRACT_DOMAIN, Method, active_methods
 
 if TYPE_CHECKING:  # the viewer imports Rerun; a plot needs only the entries' fields
+    from matplotlib.figure import Figure
+
     from scenarios.record.viewer import LegendEntry
 
 __all__ = ["depth_scale_png", "error_against_range_png", "legend_png"]
@@ -67,8 +69,41 @@ def error_against_range_png(result: RunResult, recovered: RunResult | None = Non
     crosses.
     """
     methods = active_methods()  # a user's function too (vnav.plugin)
+    fig, axes = _range_figure(len(methods))
+    for ax, m in zip(axes, methods, strict=False):
+        _range_panel(ax, m, result, recovered)
+    title = "error against range (filled: inside the contract's domain; grey: the bound)"
+    if recovered is not None:
+        title = title[:-1] + "; cyan crosses: with the recovered mount)"
+    fig.suptitle(
+        title,
+        color=_FOREGROUND,
+        fontsize=9.5,
+        y=1.0 - 0.12 / fig.get_figheight(),
+        va="top",
+    )
+    return _png(fig)
+
+
+_range_figures: dict[int, tuple[Figure, np.ndarray]] = {}
+"""``error_against_range_png``'s figure and panels for each number of methods, drawn again
+for each run: a new figure costs a third of the plot (its axes' ticks, made anew)."""
+
+
+def _range_figure(n_methods: int) -> tuple[Figure, np.ndarray]:
+    """The figure of ``n_methods`` panels, two a row, each empty of data (a new one, or this
+    process's last one, cleared of the previous run's artists: the same pixels either way,
+    ``tests/test_recording_views.py``)."""
+    if n_methods in _range_figures:
+        fig, axes = _range_figures[n_methods]
+        for ax in axes[:n_methods]:
+            for artist in (*ax.collections, *ax.lines, *ax.patches, *ax.texts):
+                artist.remove()
+            ax.relim()  # no data: the next run's artists set the limits as on a new figure
+            ax.set_autoscale_on(True)
+        return fig, axes
     columns = 2
-    rows = -(-len(methods) // columns)
+    rows = -(-n_methods // columns)
     width_in, height_in = 7.2, 2.8 * rows
     fig = _figure(width_in, height_in)
     # Fixed margins in inches, not tight_layout: measuring every label costs an extra draw,
@@ -82,26 +117,16 @@ def error_against_range_png(result: RunResult, recovered: RunResult | None = Non
         "hspace": 0.5,
     }
     axes = fig.subplots(rows, columns, gridspec_kw=margins).ravel()
-    for ax in axes[len(methods) :]:
+    for ax in axes[n_methods:]:
         ax.set_visible(False)
-    for ax, m in zip(axes, methods, strict=False):
-        _range_panel(ax, m, result, recovered)
-    title = "error against range (filled: inside the contract's domain; grey: the bound)"
-    if recovered is not None:
-        title = title[:-1] + "; cyan crosses: with the recovered mount)"
-    fig.suptitle(
-        title,
-        color=_FOREGROUND,
-        fontsize=9.5,
-        y=1.0 - 0.12 / height_in,
-        va="top",
-    )
-    return _png(fig)
+    for ax in axes[:n_methods]:
+        _style(ax)
+    _range_figures[n_methods] = fig, axes
+    return fig, axes
 
 
 def _range_panel(ax, m: Method, result: RunResult, recovered: RunResult | None) -> None:
-    """``error_against_range_png``'s panel of method ``m``."""
-    _style(ax)
+    """``error_against_range_png``'s panel of method ``m``, on an empty styled panel."""
     color = np.array(m.color_rgb) / 255.0
     inside_r = result.ranges_for(m.name, contract_only=True)
     inside_e = result.errors(m.name, contract_only=True)
