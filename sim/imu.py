@@ -8,9 +8,12 @@ the site frame (``+g`` up at rest: its spatial accelerations ``cacc``, computed 
 ``vnav.imu.angular_rate_i`` give the same from the body's motion (``imu_discrepancy``, to
 about 1e-15).
 
-``ImuSampler`` takes reading ``j`` after the physics step nearest ``j / rate_hz`` (as the
-pose stream samples the state), moves the gyro's rate to that instant (MuJoCo's is the rate
-of the step just taken, half a step earlier: ``ImuSampler.sample``), adds the noise of
+``ImuSampler`` takes reading ``j`` at the physics step nearest ``j / rate_hz``, as the step
+is taken (``sim.world.World.on_step``: the state it starts from, its accelerometer under the
+controls the step applies, the acceleration MuJoCo's integrator moves the body by; the
+forward pass after the previous step had it under that step's controls, a step behind),
+moves the gyro's rate to that instant (MuJoCo's is the rate of the step before, half a step
+earlier: ``ImuSampler.sample``), adds the noise of
 ``vnav.imu.ImuNoiseProcess`` (Kalibr's model: white noise and a bias random walk per axis,
 from the run's seed), and stamps it on the IMU's clock.
 """
@@ -174,12 +177,14 @@ class ImuSampler:
         """The next reading, from the world's state now: MuJoCo's sensors, the gyro's moved to
         the stamp's instant, plus the noise.
 
-        MuJoCo's (semi-implicit Euler) step turns the body by ``exp(omega_{n+1} dt)`` with the
-        rate after the step, so the gyro at step ``n`` reads the rate over the step *before*
-        it, centred half a step early; adding half a step of the angular acceleration the next
-        step applies, ``omega_n + (dt / 2) alpha_n = (omega_n + omega_{n+1}) / 2``, gives the
-        rate at the stamp (the accelerometer's ``(v_{n+1} - v_n) / dt`` is already centred
-        there)."""
+        Called as step ``n`` is taken (``World.on_step``), its controls set. MuJoCo's
+        (semi-implicit Euler) step moves the body by ``v_{n+1} = v_n + dt a_n``, ``x_{n+1} =
+        x_n + dt v_{n+1}``, so ``a_n``, the accelerometer's under those controls, is the
+        central second difference of the positions at the stamp. It turns the body by
+        ``exp(omega_{n+1} dt)`` with the rate after the step, so the gyro at step ``n`` reads
+        the rate over the step *before* it, centred half a step early; adding half a step of
+        the angular acceleration the step applies, ``omega_n + (dt / 2) alpha_n = (omega_n +
+        omega_{n+1}) / 2``, gives the rate at the stamp."""
         accel_i, gyro_i = mujoco_imu_i(world)
         # alpha_i = R_i_b alpha_b, row-wise.
         gyro_i += 0.5 * self.timestep_s * (world.angular_acceleration_b @ world.T_b_i[:3, :3])

@@ -269,9 +269,10 @@ def _run_ticks(
 
 
 class _Imu:
-    """The scenario's IMU (``[imu]``), read at the start and after every physics step
-    (``World.on_step``): a reading when one is due, and the noise-free sensors compared with
-    ``vnav.imu``'s chain at every step."""
+    """The scenario's IMU (``[imu]``), read at every physics step as it is taken
+    (``World.on_step``: the state it starts from, under the controls it applies): a reading
+    when one is due, and the noise-free sensors compared with ``vnav.imu``'s chain at every
+    step."""
 
     def __init__(self, spec: ScenarioSpec, world: World, seq: np.random.SeedSequence) -> None:
         imu = spec.scene.imu
@@ -286,8 +287,7 @@ class _Imu:
         """``vnav.imu``'s noise-free prediction of each reading (the recording plots it)."""
         self.max_discrepancy = 0.0
         self.steps_checked = 0
-        self(world)  # the start, t = 0
-        world.on_step = self
+        world.on_step = self  # the first step's call reads t = 0
 
     def __call__(self, world: World) -> None:
         chain = chain_imu_i(world)
