@@ -12,8 +12,9 @@ about 1e-15).
 is taken (``sim.world.World.on_step``: the state it starts from, its accelerometer under the
 controls the step applies, the acceleration MuJoCo's integrator moves the body by; the
 forward pass after the previous step had it under that step's controls, a step behind),
-moves the gyro's rate to that instant (MuJoCo's is the rate of the step before, half a step
-earlier: ``ImuSampler.sample``), adds the noise of
+moves both sensors to that instant (MuJoCo's gyro reads the rate of the step before, half a
+step earlier, and its accelerometer's centripetal term that rate's: ``to_stamp``), adds the
+noise of
 ``vnav.imu.ImuNoiseProcess`` (Kalibr's model: white noise and a bias random walk per axis,
 from the run's seed), and stamps it on the IMU's clock.
 """
@@ -36,6 +37,7 @@ __all__ = [
     "chain_imu_i",
     "imu_discrepancy",
     "mujoco_imu_i",
+    "to_stamp",
 ]
 
 ACCEL_SCALE_M_S2 = 1.0
@@ -118,6 +120,48 @@ def imu_discrepancy(world: World, chain: tuple[np.ndarray, np.ndarray] | None = 
     return float(max(e_a, e_g))
 
 
+def to_stamp(
+    world: World, accel_i: np.ndarray, gyro_i: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Noise-free readings of the state now (``mujoco_imu_i`` or ``chain_imu_i``) moved to
+    what the IMU's motion over the physics steps either side of now is, called as the step is
+    taken (``World.on_step``: the accelerations under the controls it applies).
+
+    MuJoCo's (semi-implicit Euler) step ``n`` moves the body by ``v_{n+1} = v_n + dt a_n``,
+    ``x_{n+1} = x_n + dt v_{n+1}`` and turns it by ``exp(omega_{n+1} dt)``, with the rate
+    after the step, ``omega_{n+1} = omega_n + dt alpha_n``. The gyro's ``omega_n`` is the rate
+    over the step *before* now, centred half a step early: the rate now is the mean of the
+    steps' either side, ``omega_n + (dt / 2) alpha_n``. The IMU's position ``x + R t_b_i``
+    then has the central second difference ``a_n + alpha_n x r + (c(omega_n) +
+    c(omega_{n+1})) / 2`` (``c(w) = w x (w x r)``, ``r`` the lever arm): the accelerometer's
+    centripetal term ``c(omega_n)`` moves by half the difference (the body-origin and
+    tangential terms are already the step's).
+
+    Parameters
+    ----------
+    world : World
+    accel_i, gyro_i : ndarray, shape (3,)
+        m/s^2 and rad/s, IMU axes.
+
+    Returns
+    -------
+    accel_i, gyro_i : ndarray, shape (3,)
+        New arrays.
+    """
+    dt_s = float(world.model.opt.timestep)
+    T_b_i = world.T_b_i
+    r_b = T_b_i[:3, 3]
+    omega_b = world.angular_velocity_b
+    omega_next_b = omega_b + dt_s * world.angular_acceleration_b
+    c_b = np.cross(omega_b, np.cross(omega_b, r_b))
+    c_next_b = np.cross(omega_next_b, np.cross(omega_next_b, r_b))
+    # Body to IMU axes, row-wise: v_i = R_i_b v_b = v_b @ R_b_i.
+    R_b_i = T_b_i[:3, :3]
+    accel = accel_i + (0.5 * (c_next_b - c_b)) @ R_b_i
+    gyro = gyro_i + (0.5 * dt_s * world.angular_acceleration_b) @ R_b_i
+    return accel, gyro
+
+
 class ImuSampler:
     """The IMU of a ``World``: readings at ``config.rate_hz``, with noise, on the IMU's clock.
 
@@ -177,17 +221,11 @@ class ImuSampler:
         """The next reading, from the world's state now: MuJoCo's sensors, the gyro's moved to
         the stamp's instant, plus the noise.
 
-        Called as step ``n`` is taken (``World.on_step``), its controls set. MuJoCo's
-        (semi-implicit Euler) step moves the body by ``v_{n+1} = v_n + dt a_n``, ``x_{n+1} =
-        x_n + dt v_{n+1}``, so ``a_n``, the accelerometer's under those controls, is the
-        central second difference of the positions at the stamp. It turns the body by
-        ``exp(omega_{n+1} dt)`` with the rate after the step, so the gyro at step ``n`` reads
-        the rate over the step *before* it, centred half a step early; adding half a step of
-        the angular acceleration the step applies, ``omega_n + (dt / 2) alpha_n = (omega_n +
-        omega_{n+1}) / 2``, gives the rate at the stamp."""
-        accel_i, gyro_i = mujoco_imu_i(world)
-        # alpha_i = R_i_b alpha_b, row-wise.
-        gyro_i += 0.5 * self.timestep_s * (world.angular_acceleration_b @ world.T_b_i[:3, :3])
+        Called as step ``n`` is taken (``World.on_step``), its controls set, so that the
+        accelerometer reads the acceleration the step applies; both sensors are then moved to
+        the motion about the stamp (``to_stamp``): the reading is the IMU's rate and the
+        central second difference of its positions, to second order."""
+        accel_i, gyro_i = to_stamp(world, *mujoco_imu_i(world))
         if not self.config.noise.is_zero:
             da, dg = self.process.next()
             accel_i += da

@@ -227,36 +227,46 @@ def test_the_sensor_names_are_the_models():
     assert world.model.sensor(names.IMU_GYRO).objid[0] == world.imu_site_id
 
 
-def test_the_accelerometer_reads_the_acceleration_the_step_applies_not_the_last_controls():
+def test_the_accelerometer_reads_the_second_difference_of_the_imus_positions():
     """MuJoCo's step from n to n + 1 moves the body by ``v_{n+1} = v_n + dt a_n``, ``x_{n+1} =
-    x_n + dt v_{n+1}``, with ``a_n`` the acceleration of state n under the controls the step
-    applies (the controller sets them from state n, just before the step). The reading stamped
-    at step n must be that ``a_n``: the central second difference of the true IMU positions
-    around it, to the lever arm's second-order remainder, not the acceleration under the
-    previous step's controls (a step, 5 ms, behind: a camera-IMU calibration finds the lag in
-    the lever arm, millimetres of it)."""
+    x_n + dt v_{n+1}`` and turns it by ``exp(omega_{n+1} dt)``, with ``a_n`` the acceleration
+    of state n under the controls the step applies (the controller sets them from state n,
+    just before the step). The reading stamped at step n must be the central second
+    difference of the true IMU positions around it, to the second-order remainder: neither
+    the acceleration under the previous step's controls (a step, 5 ms, behind: a camera-IMU
+    calibration finds the lag in the lever arm, millimetres of it), nor a centripetal term
+    ``omega x (omega x r)`` of the rate over the step before only (half a step behind)."""
     rng = np.random.default_rng(12)
     imu = _random_imu(rng)
     world = World.from_config(SceneConfig(imu=imu))
     pilot = _random_flight(world, rng)
     sampler = ImuSampler(imu, world.model.opt.timestep, np.random.default_rng(0))
-    t_s, T_w_i, accel_i = [], [], []
+    t_s, T_w_b, accel_i = [], [], []
 
     def read(w: World) -> None:
         reading = sampler.sample(w)
         t_s.append(reading.t_s)
-        T_w_i.append(w.T_w_b @ w.T_b_i)
+        T_w_b.append(w.T_w_b)
         accel_i.append(reading.accel_i)
 
     world.on_step = read  # as the runner reads it
     pilot.run_until(5.0)
     dt = world.model.opt.timestep
-    T_w_i, accel_i = np.array(T_w_i), np.array(accel_i)
+    T_b_i = world.T_b_i
+    T_w_b, accel_i = np.array(T_w_b), np.array(accel_i)
     np.testing.assert_allclose(np.diff(t_s), dt, atol=1e-12)  # one reading a step
+    T_w_i = T_w_b @ T_b_i
     p_w = T_w_i[:, :3, 3]
     a_w = (p_w[2:] - 2.0 * p_w[1:-1] + p_w[:-2]) / dt**2
     # f_i = R_i_w (a_w - g_w), row-wise.
     central = np.einsum("nji,nj->ni", T_w_i[1:-1, :3, :3], a_w - world.model.opt.gravity)
     lag = np.abs(central[1:] - central[:-1]).max()  # what a step's lag costs here
-    assert lag > 0.05  # the flight's jerk makes the lag visible
-    assert np.abs(accel_i[1:-1] - central).max() < 0.25 * lag
+    # The rate over each step (body axes, from the true attitudes) and the centripetal term
+    # of the lever arm under it: half the change from one step to the next is what reading it
+    # with the rate over the step before only costs.
+    omega_b = np.array([so3.log(a.T @ b) for a, b in itertools.pairwise(T_w_b[:, :3, :3])]) / dt
+    r_b = T_b_i[:3, 3]
+    c_b = np.cross(omega_b, np.cross(omega_b, r_b))
+    half_step = 0.5 * np.abs(c_b[1:] - c_b[:-1]).max()
+    assert lag > 0.05 and half_step > 5e-3  # the flight makes both visible
+    assert np.abs(accel_i[1:-1] - central).max() < 0.05 * half_step

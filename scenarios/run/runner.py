@@ -51,7 +51,7 @@ from sim.flight import (
     OrbitTrajectory,
     ReferenceFollower,
 )
-from sim.imu import ImuReading, ImuSampler, chain_imu_i, imu_discrepancy
+from sim.imu import ImuReading, ImuSampler, chain_imu_i, imu_discrepancy, to_stamp
 from sim.mesh import Scenery, scenery
 from sim.noise import mount_error, noisy_depth, noisy_pose, noisy_rgb
 from sim.render import Renderer
@@ -295,12 +295,9 @@ class _Imu:
         self.steps_checked += 1
         if self.sampler.due(world):
             self.readings.append(self.sampler.sample(world))
-            # The prediction at the reading's instant: the gyro moved to the stamp as the
-            # sampler moves it (``sim.imu.ImuSampler.sample``).
-            f_i, omega_i = chain
-            dt_s = self.sampler.timestep_s
-            alpha_i = world.angular_acceleration_b @ world.T_b_i[:3, :3]
-            self.chain.append((f_i, omega_i + 0.5 * dt_s * alpha_i))
+            # The prediction at the reading's instant, moved to the stamp as the sampler
+            # moves MuJoCo's sensors (``sim.imu.to_stamp``).
+            self.chain.append(to_stamp(world, *chain))
 
     def record(self) -> ImuRecord:
         r = self.readings
