@@ -13,8 +13,8 @@ is taken (``sim.world.World.on_step``: the state it starts from, its acceleromet
 controls the step applies, the acceleration MuJoCo's integrator moves the body by; the
 forward pass after the previous step had it under that step's controls, a step behind),
 moves both sensors to that instant (MuJoCo's gyro reads the rate of the step before, half a
-step earlier, and its accelerometer's centripetal term that rate's: ``to_stamp``), adds the
-noise of
+step earlier, and its accelerometer's centripetal term that rate's: ``to_stamp``; the gyro to
+fourth order once the step after is known, ``rate_correction_i``), adds the noise of
 ``vnav.imu.ImuNoiseProcess`` (Kalibr's model: white noise and a bias random walk per axis,
 from the run's seed), and stamps it on the IMU's clock.
 """
@@ -37,6 +37,7 @@ __all__ = [
     "chain_imu_i",
     "imu_discrepancy",
     "mujoco_imu_i",
+    "rate_correction_i",
     "to_stamp",
 ]
 
@@ -160,6 +161,43 @@ def to_stamp(
     accel = accel_i + (0.5 * (c_next_b - c_b)) @ R_b_i
     gyro = gyro_i + (0.5 * dt_s * world.angular_acceleration_b) @ R_b_i
     return accel, gyro
+
+
+def rate_correction_i(omega_b: np.ndarray, steps: np.ndarray, R_b_i: np.ndarray) -> np.ndarray:
+    """What to add to gyro readings (``to_stamp``'s, second order) for the rate at their
+    stamps to fourth order, (K, 3) rad/s in IMU axes.
+
+    MuJoCo turns the body over step ``k - 1 -> k`` at the constant rate ``omega_k``: the
+    rates are the averages of the body's rate over the steps, and the rate at the instant
+    between two steps is, to fourth order, ``(-omega_{n-1} + 7 omega_n + 7 omega_{n+1} -
+    omega_{n+2}) / 12`` (the cubic through four cell averages, as finite-volume schemes
+    reconstruct a point value), where ``to_stamp`` gives their mean, off by ``dt^2 / 12``
+    times the change of angular acceleration: a camera-IMU calibration (``vnav.imu_calibration``)
+    reads that as millimetres of lever arm.
+
+    Parameters
+    ----------
+    omega_b : ndarray, shape (N + 1, 3)
+        The body's rate at steps ``0 .. N`` (``World.angular_velocity_b`` as each step is
+        taken, the last the one the last step leaves), rad/s.
+    steps : ndarray of int, shape (K,)
+        The step of each reading, in ``0 .. N - 1``.
+    R_b_i : ndarray, shape (3, 3)
+        The IMU's mount rotation.
+
+    Returns
+    -------
+    ndarray, shape (K, 3)
+        The beyond ends are extrapolated linearly (the rate before step 0, after step N).
+    """
+    w = np.asarray(omega_b, dtype=np.float64).reshape(-1, 3)
+    if len(w) < 2:
+        return np.zeros((len(steps), 3))
+    w = np.concatenate([2.0 * w[:1] - w[1:2], w, 2.0 * w[-1:] - w[-2:-1]])
+    n = np.asarray(steps, dtype=np.int64) + 1  # w[n] is omega_n now
+    fourth = (-w[n - 1] + 7.0 * w[n] + 7.0 * w[n + 1] - w[n + 2]) / 12.0
+    # Body to IMU axes, row-wise.
+    return (fourth - 0.5 * (w[n] + w[n + 1])) @ R_b_i
 
 
 class ImuSampler:

@@ -17,7 +17,7 @@ import pytest
 from sim import names
 from sim.config import ImuConfig, MountError, SceneConfig
 from sim.flight import Autopilot, MinimumJerkTrajectory
-from sim.imu import ImuSampler, imu_discrepancy, mujoco_imu_i
+from sim.imu import ImuSampler, imu_discrepancy, mujoco_imu_i, rate_correction_i
 from sim.world import World
 from vnav import so3
 from vnav.imu import specific_force_i
@@ -270,3 +270,38 @@ def test_the_accelerometer_reads_the_second_difference_of_the_imus_positions():
     half_step = 0.5 * np.abs(c_b[1:] - c_b[:-1]).max()
     assert lag > 0.05 and half_step > 5e-3  # the flight makes both visible
     assert np.abs(accel_i[1:-1] - central).max() < 0.05 * half_step
+
+
+def test_the_gyro_corrected_to_fourth_order_is_the_cubic_through_the_true_step_rates():
+    """MuJoCo turns the body over each step at a constant rate (the true IMU attitudes give
+    it: ``log(R_n^T R_{n+1}) / dt``), so the rate at the instant between two steps is, to
+    fourth order, the cubic through four of those averages, ``(-w_{n-1} + 7 w_n + 7 w_{n+1} -
+    w_{n+2}) / 12``; the sampler's mean of the two around it is off by ``dt^2 / 12`` times the
+    change of angular acceleration (``vnav.imu_calibration`` integrates the readings to fourth
+    order and would read that as lever arm). ``rate_correction_i`` makes up the difference."""
+    rng = np.random.default_rng(13)
+    imu = _random_imu(rng)
+    world = World.from_config(SceneConfig(imu=imu))
+    pilot = _random_flight(world, rng)
+    sampler = ImuSampler(imu, world.model.opt.timestep, np.random.default_rng(0))
+    R_w_i, gyro_i, omega_b = [], [], []
+
+    def read(w: World) -> None:
+        R_w_i.append((w.T_w_b @ w.T_b_i)[:3, :3])
+        gyro_i.append(sampler.sample(w).gyro_i)
+        omega_b.append(w.angular_velocity_b)
+
+    world.on_step = read
+    pilot.run_until(4.0)
+    R_w_i.append((world.T_w_b @ world.T_b_i)[:3, :3])  # after the last step
+    omega_b.append(world.angular_velocity_b)
+    dt = world.model.opt.timestep
+    R_w_i = np.array(R_w_i)
+    fourth_i = np.array(gyro_i) + rate_correction_i(
+        np.array(omega_b), np.arange(len(gyro_i)), world.T_b_i[:3, :3]
+    )
+    w = np.array([so3.log(a.T @ b) for a, b in itertools.pairwise(R_w_i)]) / dt  # w[n] = w_{n+1}
+    truth = (-w[:-3] + 7.0 * w[1:-2] + 7.0 * w[2:-1] - w[3:]) / 12.0  # steps 2 .. N - 2
+    second = np.abs(np.array(gyro_i)[2:-1] - truth).max()
+    assert second > 1e-4  # what the mean of two leaves here
+    np.testing.assert_allclose(fourth_i[2:-1], truth, atol=1e-9)

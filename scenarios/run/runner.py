@@ -51,7 +51,14 @@ from sim.flight import (
     OrbitTrajectory,
     ReferenceFollower,
 )
-from sim.imu import ImuReading, ImuSampler, chain_imu_i, imu_discrepancy, to_stamp
+from sim.imu import (
+    ImuReading,
+    ImuSampler,
+    chain_imu_i,
+    imu_discrepancy,
+    rate_correction_i,
+    to_stamp,
+)
 from sim.mesh import Scenery, scenery
 from sim.noise import mount_error, noisy_depth, noisy_pose, noisy_rgb
 from sim.render import Renderer
@@ -287,13 +294,24 @@ class _Imu:
         """``vnav.imu``'s noise-free prediction of each reading (the recording plots it)."""
         self.max_discrepancy = 0.0
         self.steps_checked = 0
+        self.omega_b: list[np.ndarray] = []
+        """The body's rate at every step, for the gyro's fourth order (``record``)."""
+        self.steps: list[int] = []
+        """The step of each reading."""
+        self.omega_next_b = np.zeros(3)
+        self.R_b_i = world.T_b_i[:3, :3].copy()
         world.on_step = self  # the first step's call reads t = 0
 
     def __call__(self, world: World) -> None:
         chain = chain_imu_i(world)
         self.max_discrepancy = max(self.max_discrepancy, imu_discrepancy(world, chain))
         self.steps_checked += 1
+        omega_b = world.angular_velocity_b
+        self.omega_b.append(omega_b)
+        # MuJoCo's Euler step: the rate the step about to be taken leaves.
+        self.omega_next_b = omega_b + float(world.model.opt.timestep) * world.angular_acceleration_b
         if self.sampler.due(world):
+            self.steps.append(len(self.omega_b) - 1)
             self.readings.append(self.sampler.sample(world))
             # The prediction at the reading's instant, moved to the stamp as the sampler
             # moves MuJoCo's sensors (``sim.imu.to_stamp``).
@@ -301,14 +319,18 @@ class _Imu:
 
     def record(self) -> ImuRecord:
         r = self.readings
+        # The gyro's rate at each stamp to fourth order, now that the steps after are known.
+        fourth_i = rate_correction_i(
+            np.array([*self.omega_b, self.omega_next_b]), np.array(self.steps), self.R_b_i
+        ).reshape(-1, 3)
         return ImuRecord(
             t_s=np.array([x.t_s for x in r]),
             accel_i=np.array([x.accel_i for x in r]).reshape(-1, 3),
-            gyro_i=np.array([x.gyro_i for x in r]).reshape(-1, 3),
+            gyro_i=np.array([x.gyro_i for x in r]).reshape(-1, 3) + fourth_i,
             max_discrepancy=self.max_discrepancy,
             steps_checked=self.steps_checked,
             accel_chain_i=np.array([f for f, _ in self.chain]).reshape(-1, 3),
-            gyro_chain_i=np.array([w for _, w in self.chain]).reshape(-1, 3),
+            gyro_chain_i=np.array([w for _, w in self.chain]).reshape(-1, 3) + fourth_i,
         )
 
 
