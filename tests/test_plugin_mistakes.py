@@ -172,8 +172,8 @@ NAMED_WITHIN_BOUND = {
 within the bound: its checks pass (the estimates are as accurate as the chain's)."""
 
 NOISY = ("uncertainty", "calibration", "imu")
-"""Built-ins whose inputs are off (pose noise; a camera mount error), where depth_image itself misses
-its bound against the truth, and which do not hold it to that bound: there the reference
+"""Built-ins whose inputs are off (pose noise; a camera mount error), where depth_image itself
+misses its bound against the truth, and which do not hold it to that bound: there the reference
 solution, which gives depth_image's estimates back, does not meet it either, so a user's
 function is held only to the correct chain on its own inputs (``chain_agreement``)."""
 
