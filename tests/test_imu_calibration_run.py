@@ -60,11 +60,12 @@ def test_held_out_mounts_are_recovered_within_the_targets(held_out):
     assert summary["errors"]["time_offset_s"] == pytest.approx(offset_err, abs=1e-12)
     # Kalibr's T_cam_imu is the inverse.
     np.testing.assert_allclose(np.array(summary["T_cam_imu"]) @ T_i_c, np.eye(4), atol=1e-9)
-    # The declared mounts would not pass: the answer did not come from them.
+    # The declared mounts would not pass, by three times the targets at least: the answer
+    # did not come from them.
     T_b_c_declared = out.result.ticks[0].T_b_c_est
     T_i_c_declared = se3.invert(imu.T_b_i_declared) @ T_b_c_declared
-    assert _angle_deg(T_i_c_declared[:3, :3], T_i_c_true[:3, :3]) > 1.0
-    assert np.linalg.norm(T_i_c_declared[:3, 3] - T_i_c_true[:3, 3]) > 0.02
+    assert _angle_deg(T_i_c_declared[:3, :3], T_i_c_true[:3, :3]) > 0.3
+    assert np.linalg.norm(T_i_c_declared[:3, 3] - T_i_c_true[:3, 3]) > 0.015
 
 
 def test_a_hover_is_refused_for_want_of_excitation(tmp_path):
