@@ -8,9 +8,13 @@ the site frame (``+g`` up at rest: its spatial accelerations ``cacc``, computed 
 ``vnav.imu.angular_rate_i`` give the same from the body's motion (``imu_discrepancy``, to
 about 1e-15).
 
-``ImuSampler`` takes reading ``j`` after the physics step nearest ``j / rate_hz`` (as the
-pose stream samples the state), moves the gyro's rate to that instant (MuJoCo's is the rate
-of the step just taken, half a step earlier: ``ImuSampler.sample``), adds the noise of
+``ImuSampler`` takes reading ``j`` at the physics step nearest ``j / rate_hz``, as the step
+is taken (``sim.world.World.on_step``: the state it starts from, its accelerometer under the
+controls the step applies, the acceleration MuJoCo's integrator moves the body by; the
+forward pass after the previous step had it under that step's controls, a step behind),
+moves both sensors to that instant (MuJoCo's gyro reads the rate of the step before, half a
+step earlier, and its accelerometer's centripetal term that rate's: ``to_stamp``; the gyro to
+fourth order once the step after is known, ``rate_correction_i``), adds the noise of
 ``vnav.imu.ImuNoiseProcess`` (Kalibr's model: white noise and a bias random walk per axis,
 from the run's seed), and stamps it on the IMU's clock.
 """
@@ -33,6 +37,8 @@ __all__ = [
     "chain_imu_i",
     "imu_discrepancy",
     "mujoco_imu_i",
+    "rate_correction_i",
+    "to_stamp",
 ]
 
 ACCEL_SCALE_M_S2 = 1.0
@@ -115,6 +121,85 @@ def imu_discrepancy(world: World, chain: tuple[np.ndarray, np.ndarray] | None = 
     return float(max(e_a, e_g))
 
 
+def to_stamp(
+    world: World, accel_i: np.ndarray, gyro_i: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Noise-free readings of the state now (``mujoco_imu_i`` or ``chain_imu_i``) moved to
+    what the IMU's motion over the physics steps either side of now is, called as the step is
+    taken (``World.on_step``: the accelerations under the controls it applies).
+
+    MuJoCo's (semi-implicit Euler) step ``n`` moves the body by ``v_{n+1} = v_n + dt a_n``,
+    ``x_{n+1} = x_n + dt v_{n+1}`` and turns it by ``exp(omega_{n+1} dt)``, with the rate
+    after the step, ``omega_{n+1} = omega_n + dt alpha_n``. The gyro's ``omega_n`` is the rate
+    over the step *before* now, centred half a step early: the rate now is the mean of the
+    steps' either side, ``omega_n + (dt / 2) alpha_n``. The IMU's position ``x + R t_b_i``
+    then has the central second difference ``a_n + alpha_n x r + (c(omega_n) +
+    c(omega_{n+1})) / 2`` (``c(w) = w x (w x r)``, ``r`` the lever arm): the accelerometer's
+    centripetal term ``c(omega_n)`` moves by half the difference (the body-origin and
+    tangential terms are already the step's).
+
+    Parameters
+    ----------
+    world : World
+    accel_i, gyro_i : ndarray, shape (3,)
+        m/s^2 and rad/s, IMU axes.
+
+    Returns
+    -------
+    accel_i, gyro_i : ndarray, shape (3,)
+        New arrays.
+    """
+    dt_s = float(world.model.opt.timestep)
+    T_b_i = world.T_b_i
+    r_b = T_b_i[:3, 3]
+    omega_b = world.angular_velocity_b
+    omega_next_b = omega_b + dt_s * world.angular_acceleration_b
+    c_b = np.cross(omega_b, np.cross(omega_b, r_b))
+    c_next_b = np.cross(omega_next_b, np.cross(omega_next_b, r_b))
+    # Body to IMU axes, row-wise: v_i = R_i_b v_b = v_b @ R_b_i.
+    R_b_i = T_b_i[:3, :3]
+    accel = accel_i + (0.5 * (c_next_b - c_b)) @ R_b_i
+    gyro = gyro_i + (0.5 * dt_s * world.angular_acceleration_b) @ R_b_i
+    return accel, gyro
+
+
+def rate_correction_i(omega_b: np.ndarray, steps: np.ndarray, R_b_i: np.ndarray) -> np.ndarray:
+    """What to add to gyro readings (``to_stamp``'s, second order) for the rate at their
+    stamps to fourth order, (K, 3) rad/s in IMU axes.
+
+    MuJoCo turns the body over step ``k - 1 -> k`` at the constant rate ``omega_k``: the
+    rates are the averages of the body's rate over the steps, and the rate at the instant
+    between two steps is, to fourth order, ``(-omega_{n-1} + 7 omega_n + 7 omega_{n+1} -
+    omega_{n+2}) / 12`` (the cubic through four cell averages, as finite-volume schemes
+    reconstruct a point value), where ``to_stamp`` gives their mean, off by ``dt^2 / 12``
+    times the change of angular acceleration: a camera-IMU calibration (``vnav.imu_calibration``)
+    reads that as millimetres of lever arm.
+
+    Parameters
+    ----------
+    omega_b : ndarray, shape (N + 1, 3)
+        The body's rate at steps ``0 .. N`` (``World.angular_velocity_b`` as each step is
+        taken, the last the one the last step leaves), rad/s.
+    steps : ndarray of int, shape (K,)
+        The step of each reading, in ``0 .. N - 1``.
+    R_b_i : ndarray, shape (3, 3)
+        The IMU's mount rotation.
+
+    Returns
+    -------
+    ndarray, shape (K, 3)
+        The beyond ends are extrapolated linearly (the rate before step 0, after step N).
+    """
+    w = np.asarray(omega_b, dtype=np.float64).reshape(-1, 3)
+    if len(w) < 2:
+        return np.zeros((len(steps), 3))
+    w = np.concatenate([2.0 * w[:1] - w[1:2], w, 2.0 * w[-1:] - w[-2:-1]])
+    n = np.asarray(steps, dtype=np.int64) + 1  # w[n] is omega_n now
+    fourth = (-w[n - 1] + 7.0 * w[n] + 7.0 * w[n + 1] - w[n + 2]) / 12.0
+    # Body to IMU axes, row-wise.
+    return (fourth - 0.5 * (w[n] + w[n + 1])) @ R_b_i
+
+
 class ImuSampler:
     """The IMU of a ``World``: readings at ``config.rate_hz``, with noise, on the IMU's clock.
 
@@ -174,15 +259,11 @@ class ImuSampler:
         """The next reading, from the world's state now: MuJoCo's sensors, the gyro's moved to
         the stamp's instant, plus the noise.
 
-        MuJoCo's (semi-implicit Euler) step turns the body by ``exp(omega_{n+1} dt)`` with the
-        rate after the step, so the gyro at step ``n`` reads the rate over the step *before*
-        it, centred half a step early; adding half a step of the angular acceleration the next
-        step applies, ``omega_n + (dt / 2) alpha_n = (omega_n + omega_{n+1}) / 2``, gives the
-        rate at the stamp (the accelerometer's ``(v_{n+1} - v_n) / dt`` is already centred
-        there)."""
-        accel_i, gyro_i = mujoco_imu_i(world)
-        # alpha_i = R_i_b alpha_b, row-wise.
-        gyro_i += 0.5 * self.timestep_s * (world.angular_acceleration_b @ world.T_b_i[:3, :3])
+        Called as step ``n`` is taken (``World.on_step``), its controls set, so that the
+        accelerometer reads the acceleration the step applies; both sensors are then moved to
+        the motion about the stamp (``to_stamp``): the reading is the IMU's rate and the
+        central second difference of its positions, to second order."""
+        accel_i, gyro_i = to_stamp(world, *mujoco_imu_i(world))
         if not self.config.noise.is_zero:
             da, dg = self.process.next()
             accel_i += da

@@ -252,9 +252,11 @@ class World:
     spec : mujoco.MjSpec
         The spec the model was compiled from (add elements and call ``recompile``).
     on_step : callable(World) or None
-        Called at the end of every ``step`` call, with the world in its new state (a sensor
-        that reads every physics step: ``sim.imu``; the controllers step one physics step per
-        call). ``reset`` clears it.
+        Called at every physics step, just before it is taken (the controllers set the
+        controls, then ``step``), with the world in the state the step starts from and its
+        accelerations and sensors recomputed under the controls the step applies: what
+        MuJoCo's integrator moves the body by (a sensor that reads every physics step:
+        ``sim.imu``). ``reset`` clears it.
     """
 
     def __init__(self, spec: mujoco.MjSpec, config: SceneConfig) -> None:
@@ -480,9 +482,10 @@ class World:
     def step(self, n: int = 1) -> None:
         """Advance the physics by ``n`` time steps.
 
-        Afterwards every derived quantity (``T_w_b``, camera poses, what is rendered, the
-        sensors and accelerations under the current controls) is that of the new state at
-        ``time_s``; then ``on_step`` is called, if set.
+        Before each step ``on_step`` is called, if set, with the accelerations and sensors
+        recomputed under the controls now set. Afterwards every derived quantity (``T_w_b``,
+        camera poses, what is rendered, the sensors and accelerations under the current
+        controls) is that of the new state at ``time_s``.
 
         Raises
         ------
@@ -494,8 +497,16 @@ class World:
         d, m = self.data, self.model
         step = mujoco.mj_step
         counts = d.warning.number[_WARNING_INDEX]
+        on_step = self.on_step
         for _ in range(int(n)):
             t_s = d.time + m.opt.timestep
+            if on_step is not None:
+                # The last forward pass computed the accelerations (and the accelerometer)
+                # under the previous step's controls, and, after the first step of this call,
+                # for the state before it; the step about to be taken moves the body by those
+                # of this state under the controls just set (a forward pass is a few us).
+                mujoco.mj_forward(m, d)
+                on_step(self)
             step(m, d)
             # MuJoCo resets the data itself on a NaN/huge qpos, qvel or qacc and only warns.
             now = d.warning.number[_WARNING_INDEX]
@@ -511,8 +522,6 @@ class World:
         # mj_step leaves xpos/xmat/cam_xpos (what T_w_b reports and the renderer draws) at the
         # state before its integration; recompute them for the current qpos and time.
         mujoco.mj_forward(m, d)
-        if self.on_step is not None:
-            self.on_step(self)
 
     def _check_state(self) -> None:
         """Raise SimulationError naming the time and cause on a NaN/inf or exploding state."""

@@ -85,7 +85,9 @@ def test_euroc_imu_table_read_by_pandas_is_the_runs_readings(imu_run):
     table = pd.read_csv(path)
     assert list(table.columns) == EUROC_IMU_HEADER.split(",")
     readings = imu_run.result.imu
-    assert len(table) == len(readings.t_s) == 201  # 200 Hz over 1 s, both ends
+    # 200 Hz over 1 s: a reading as each physics step is taken, from t = 0 (none after the
+    # last, whose controls are never set).
+    assert len(table) == len(readings.t_s) == 200
     np.testing.assert_array_equal(
         table.iloc[:, 0].to_numpy(), np.round(readings.t_s * 1e9).astype(np.int64)
     )

@@ -1,7 +1,9 @@
 """The camera-IMU calibration of a simulated flight: a scenario with an ``[imu]`` and the
 ``calibration_imu_*`` checks recovers ``T_i_c`` and the clock offset from the run's images
 and IMU readings (``scenarios.judge.imu_calibration``), both mounts being off their declared
-poses, and judges them against the simulator's truth; a flight that does not turn is refused.
+poses, and judges them against the simulator's truth, on mounts and clock offsets the
+``imu`` built-in was not tuned on (``benchmarks.calibrate.imu_held_out``, noise-free); a
+flight that does not turn is refused.
 """
 
 from __future__ import annotations
@@ -12,7 +14,7 @@ import math
 import numpy as np
 import pytest
 
-from benchmarks.calibrate import imu_flight
+from benchmarks.calibrate import imu_held_out
 from scenarios import pipeline
 from scenarios.judge.imu_calibration import calibrate_imu_run
 from scenarios.run.records import ImuRecord, RunResult
@@ -24,17 +26,16 @@ def _angle_deg(R_a: np.ndarray, R_b: np.ndarray) -> float:
     return math.degrees(float(np.linalg.norm(so3.log(R_a.T @ R_b))))
 
 
-@pytest.fixture(scope="module")
-def rocking(tmp_path_factory):
-    """The benchmark's rocking flight, 30 s: 600 images at 20 Hz, a 200 Hz IMU (20 s gives the
-    translation to 5-9 mm depending on the mounts: too close to the target)."""
-    spec = from_dict(imu_flight(duration_s=30.0))
+@pytest.fixture(scope="module", params=[0, 1], ids=lambda seed: f"held-out-{seed}")
+def held_out(request, tmp_path_factory):
+    """The ``imu`` built-in's flight with held-out mounts and offset, noise-free."""
+    spec = from_dict(imu_held_out(request.param))
     out = pipeline.run(spec, seed=1, out_dir=tmp_path_factory.mktemp("imu-calibration"))
     return spec, out, json.loads(out.json_path.read_text())
 
 
-def test_a_rocking_flight_recovers_T_i_c_and_the_offset_within_the_targets(rocking):
-    spec, out, report = rocking
+def test_held_out_mounts_are_recovered_within_the_targets(held_out):
+    spec, out, report = held_out
     # The targets: 0.1 deg, 5 mm and 1 ms (the scenario's checks).
     assert [c["kind"] for c in report["checks"]] == [
         "calibration_imu_rotation",
@@ -59,17 +60,19 @@ def test_a_rocking_flight_recovers_T_i_c_and_the_offset_within_the_targets(rocki
     assert summary["errors"]["time_offset_s"] == pytest.approx(offset_err, abs=1e-12)
     # Kalibr's T_cam_imu is the inverse.
     np.testing.assert_allclose(np.array(summary["T_cam_imu"]) @ T_i_c, np.eye(4), atol=1e-9)
-    # The declared mounts would not pass: the answer did not come from them.
+    # The declared mounts would not pass, by three times the targets at least: the answer
+    # did not come from them.
     T_b_c_declared = out.result.ticks[0].T_b_c_est
     T_i_c_declared = se3.invert(imu.T_b_i_declared) @ T_b_c_declared
-    assert _angle_deg(T_i_c_declared[:3, :3], T_i_c_true[:3, :3]) > 1.0
-    assert np.linalg.norm(T_i_c_declared[:3, 3] - T_i_c_true[:3, 3]) > 0.02
+    assert _angle_deg(T_i_c_declared[:3, :3], T_i_c_true[:3, :3]) > 0.3
+    assert np.linalg.norm(T_i_c_declared[:3, 3] - T_i_c_true[:3, 3]) > 0.015
 
 
 def test_a_hover_is_refused_for_want_of_excitation(tmp_path):
     """Kalibr warns of "not enough excitation": hovering, the camera and the IMU do not turn,
     and the checks have no data, with the reason."""
-    data = imu_flight(duration_s=4.0)
+    data = imu_held_out(0)
+    data["duration_s"] = 4.0
     data["flight"]["waypoints"] = [
         {"t": 0.0, "position_w": [0.0, 0.0, 3.0]},
         {"t": 4.0, "position_w": [0.0, 0.0, 3.0]},

@@ -146,7 +146,7 @@ MISTAKES = [name for name in hypothesis_names() if name != "correct"]
 
 SHOWN_ONLY_ON = {
     # Rx Ry Rz and Rz Ry Rx differ only for a rotation about more than one axis: the banked
-    # orbit, calibration's rocking flight, imu's zigzags (tilts of 20-30 deg while yawing)
+    # orbit, calibration's rocking flight, imu's (tilts of 20-30 deg while yawing)
     # and avoid-yawed's pitch while it heads north (yaw 90 deg); the other flights yaw only,
     # or tilt too little (``NAMED_WITHIN_BOUND``).
     "Euler order reversed": ("orbit", "calibration", "imu", "avoid-yawed"),
@@ -171,9 +171,9 @@ NAMED_WITHIN_BOUND = {
 """The built-ins where a mistake changes the estimates, enough for the doctor to name it, but
 within the bound: its checks pass (the estimates are as accurate as the chain's)."""
 
-NOISY = ("uncertainty", "calibration")
-"""Built-ins whose inputs are off (pose noise; a mount error), where depth_image itself misses
-its bound against the truth, and which do not hold it to that bound: there the reference
+NOISY = ("uncertainty", "calibration", "imu")
+"""Built-ins whose inputs are off (pose noise; a camera mount error), where depth_image itself
+misses its bound against the truth, and which do not hold it to that bound: there the reference
 solution, which gives depth_image's estimates back, does not meet it either, so a user's
 function is held only to the correct chain on its own inputs (``chain_agreement``)."""
 

@@ -17,7 +17,7 @@ import pytest
 from sim import names
 from sim.config import ImuConfig, MountError, SceneConfig
 from sim.flight import Autopilot, MinimumJerkTrajectory
-from sim.imu import ImuSampler, imu_discrepancy, mujoco_imu_i
+from sim.imu import ImuSampler, imu_discrepancy, mujoco_imu_i, rate_correction_i
 from sim.world import World
 from vnav import so3
 from vnav.imu import specific_force_i
@@ -225,3 +225,83 @@ def test_the_sensor_names_are_the_models():
     world = World.from_config(SceneConfig())
     assert world.model.sensor(names.IMU_ACCEL).type[0] == 1  # mjSENS_ACCELEROMETER
     assert world.model.sensor(names.IMU_GYRO).objid[0] == world.imu_site_id
+
+
+def test_the_accelerometer_reads_the_second_difference_of_the_imus_positions():
+    """MuJoCo's step from n to n + 1 moves the body by ``v_{n+1} = v_n + dt a_n``, ``x_{n+1} =
+    x_n + dt v_{n+1}`` and turns it by ``exp(omega_{n+1} dt)``, with ``a_n`` the acceleration
+    of state n under the controls the step applies (the controller sets them from state n,
+    just before the step). The reading stamped at step n must be the central second
+    difference of the true IMU positions around it, to the second-order remainder: neither
+    the acceleration under the previous step's controls (a step, 5 ms, behind: a camera-IMU
+    calibration finds the lag in the lever arm, millimetres of it), nor a centripetal term
+    ``omega x (omega x r)`` of the rate over the step before only (half a step behind)."""
+    rng = np.random.default_rng(12)
+    imu = _random_imu(rng)
+    world = World.from_config(SceneConfig(imu=imu))
+    pilot = _random_flight(world, rng)
+    sampler = ImuSampler(imu, world.model.opt.timestep, np.random.default_rng(0))
+    t_s, T_w_b, accel_i = [], [], []
+
+    def read(w: World) -> None:
+        reading = sampler.sample(w)
+        t_s.append(reading.t_s)
+        T_w_b.append(w.T_w_b)
+        accel_i.append(reading.accel_i)
+
+    world.on_step = read  # as the runner reads it
+    pilot.run_until(5.0)
+    dt = world.model.opt.timestep
+    T_b_i = world.T_b_i
+    T_w_b, accel_i = np.array(T_w_b), np.array(accel_i)
+    np.testing.assert_allclose(np.diff(t_s), dt, atol=1e-12)  # one reading a step
+    T_w_i = T_w_b @ T_b_i
+    p_w = T_w_i[:, :3, 3]
+    a_w = (p_w[2:] - 2.0 * p_w[1:-1] + p_w[:-2]) / dt**2
+    # f_i = R_i_w (a_w - g_w), row-wise.
+    central = np.einsum("nji,nj->ni", T_w_i[1:-1, :3, :3], a_w - world.model.opt.gravity)
+    lag = np.abs(central[1:] - central[:-1]).max()  # what a step's lag costs here
+    # The rate over each step (body axes, from the true attitudes) and the centripetal term
+    # of the lever arm under it: half the change from one step to the next is what reading it
+    # with the rate over the step before only costs.
+    omega_b = np.array([so3.log(a.T @ b) for a, b in itertools.pairwise(T_w_b[:, :3, :3])]) / dt
+    r_b = T_b_i[:3, 3]
+    c_b = np.cross(omega_b, np.cross(omega_b, r_b))
+    half_step = 0.5 * np.abs(c_b[1:] - c_b[:-1]).max()
+    assert lag > 0.05 and half_step > 5e-3  # the flight makes both visible
+    assert np.abs(accel_i[1:-1] - central).max() < 0.05 * half_step
+
+
+def test_the_gyro_corrected_to_fourth_order_is_the_cubic_through_the_true_step_rates():
+    """MuJoCo turns the body over each step at a constant rate (the true IMU attitudes give
+    it: ``log(R_n^T R_{n+1}) / dt``), so the rate at the instant between two steps is, to
+    fourth order, the cubic through four of those averages, ``(-w_{n-1} + 7 w_n + 7 w_{n+1} -
+    w_{n+2}) / 12``; the sampler's mean of the two around it is off by ``dt^2 / 12`` times the
+    change of angular acceleration (``vnav.imu_calibration`` integrates the readings to fourth
+    order and would read that as lever arm). ``rate_correction_i`` makes up the difference."""
+    rng = np.random.default_rng(13)
+    imu = _random_imu(rng)
+    world = World.from_config(SceneConfig(imu=imu))
+    pilot = _random_flight(world, rng)
+    sampler = ImuSampler(imu, world.model.opt.timestep, np.random.default_rng(0))
+    R_w_i, gyro_i, omega_b = [], [], []
+
+    def read(w: World) -> None:
+        R_w_i.append((w.T_w_b @ w.T_b_i)[:3, :3])
+        gyro_i.append(sampler.sample(w).gyro_i)
+        omega_b.append(w.angular_velocity_b)
+
+    world.on_step = read
+    pilot.run_until(4.0)
+    R_w_i.append((world.T_w_b @ world.T_b_i)[:3, :3])  # after the last step
+    omega_b.append(world.angular_velocity_b)
+    dt = world.model.opt.timestep
+    R_w_i = np.array(R_w_i)
+    fourth_i = np.array(gyro_i) + rate_correction_i(
+        np.array(omega_b), np.arange(len(gyro_i)), world.T_b_i[:3, :3]
+    )
+    w = np.array([so3.log(a.T @ b) for a, b in itertools.pairwise(R_w_i)]) / dt  # w[n] = w_{n+1}
+    truth = (-w[:-3] + 7.0 * w[1:-2] + 7.0 * w[2:-1] - w[3:]) / 12.0  # steps 2 .. N - 2
+    second = np.abs(np.array(gyro_i)[2:-1] - truth).max()
+    assert second > 1e-4  # what the mean of two leaves here
+    np.testing.assert_allclose(fourth_i[2:-1], truth, atol=1e-9)

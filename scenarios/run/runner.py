@@ -51,7 +51,14 @@ from sim.flight import (
     OrbitTrajectory,
     ReferenceFollower,
 )
-from sim.imu import ImuReading, ImuSampler, chain_imu_i, imu_discrepancy
+from sim.imu import (
+    ImuReading,
+    ImuSampler,
+    chain_imu_i,
+    imu_discrepancy,
+    rate_correction_i,
+    to_stamp,
+)
 from sim.mesh import Scenery, scenery
 from sim.noise import mount_error, noisy_depth, noisy_pose, noisy_rgb
 from sim.render import Renderer
@@ -269,9 +276,10 @@ def _run_ticks(
 
 
 class _Imu:
-    """The scenario's IMU (``[imu]``), read at the start and after every physics step
-    (``World.on_step``): a reading when one is due, and the noise-free sensors compared with
-    ``vnav.imu``'s chain at every step."""
+    """The scenario's IMU (``[imu]``), read at every physics step as it is taken
+    (``World.on_step``: the state it starts from, under the controls it applies): a reading
+    when one is due, and the noise-free sensors compared with ``vnav.imu``'s chain at every
+    step."""
 
     def __init__(self, spec: ScenarioSpec, world: World, seq: np.random.SeedSequence) -> None:
         imu = spec.scene.imu
@@ -286,32 +294,43 @@ class _Imu:
         """``vnav.imu``'s noise-free prediction of each reading (the recording plots it)."""
         self.max_discrepancy = 0.0
         self.steps_checked = 0
-        self(world)  # the start, t = 0
-        world.on_step = self
+        self.omega_b: list[np.ndarray] = []
+        """The body's rate at every step, for the gyro's fourth order (``record``)."""
+        self.steps: list[int] = []
+        """The step of each reading."""
+        self.omega_next_b = np.zeros(3)
+        self.R_b_i = world.T_b_i[:3, :3].copy()
+        world.on_step = self  # the first step's call reads t = 0
 
     def __call__(self, world: World) -> None:
         chain = chain_imu_i(world)
         self.max_discrepancy = max(self.max_discrepancy, imu_discrepancy(world, chain))
         self.steps_checked += 1
+        omega_b = world.angular_velocity_b
+        self.omega_b.append(omega_b)
+        # MuJoCo's Euler step: the rate the step about to be taken leaves.
+        self.omega_next_b = omega_b + float(world.model.opt.timestep) * world.angular_acceleration_b
         if self.sampler.due(world):
+            self.steps.append(len(self.omega_b) - 1)
             self.readings.append(self.sampler.sample(world))
-            # The prediction at the reading's instant: the gyro moved to the stamp as the
-            # sampler moves it (``sim.imu.ImuSampler.sample``).
-            f_i, omega_i = chain
-            dt_s = self.sampler.timestep_s
-            alpha_i = world.angular_acceleration_b @ world.T_b_i[:3, :3]
-            self.chain.append((f_i, omega_i + 0.5 * dt_s * alpha_i))
+            # The prediction at the reading's instant, moved to the stamp as the sampler
+            # moves MuJoCo's sensors (``sim.imu.to_stamp``).
+            self.chain.append(to_stamp(world, *chain))
 
     def record(self) -> ImuRecord:
         r = self.readings
+        # The gyro's rate at each stamp to fourth order, now that the steps after are known.
+        fourth_i = rate_correction_i(
+            np.array([*self.omega_b, self.omega_next_b]), np.array(self.steps), self.R_b_i
+        ).reshape(-1, 3)
         return ImuRecord(
             t_s=np.array([x.t_s for x in r]),
             accel_i=np.array([x.accel_i for x in r]).reshape(-1, 3),
-            gyro_i=np.array([x.gyro_i for x in r]).reshape(-1, 3),
+            gyro_i=np.array([x.gyro_i for x in r]).reshape(-1, 3) + fourth_i,
             max_discrepancy=self.max_discrepancy,
             steps_checked=self.steps_checked,
             accel_chain_i=np.array([f for f, _ in self.chain]).reshape(-1, 3),
-            gyro_chain_i=np.array([w for _, w in self.chain]).reshape(-1, 3),
+            gyro_chain_i=np.array([w for _, w in self.chain]).reshape(-1, 3) + fourth_i,
         )
 
 

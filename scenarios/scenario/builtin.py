@@ -480,34 +480,50 @@ IMU_NOISE = {
 EuRoC MAV dataset for its ADIS16448 (``imu0``, 200 Hz)."""
 
 
+IMU_FLIGHT_S = 15.0
+"""The ``imu`` built-in's flight: a second's hover, then rocking to the end."""
+
+
+def imu_waypoints(duration_s: float = IMU_FLIGHT_S) -> list[dict[str, Any]]:
+    """The ``imu`` built-in's waypoints: a second's hover at 3 m, then a waypoint every half
+    second, 15 cm to either side in turn (the controller rolls the body 20-30 deg to get
+    there and back), 20 cm forward or back every one and a half seconds (pitch), 20 cm up or
+    down and a yaw of +-15 deg every second, so that the IMU turns and accelerates about and
+    along every axis, fast (the lever arm shows in the accelerometer through angular rate and
+    acceleration), while the cones stay in view."""
+    hover = {"position_w": [0.0, 0.0, 3.0], "yaw_deg": 0.0}
+    waypoints = [{"t": 0.0, **hover}, {"t": 1.0, **hover}]
+    for k in range(3, round(2.0 * duration_s)):
+        waypoints.append(
+            {
+                "t": 0.5 * k,
+                "position_w": [
+                    0.2 * (-1) ** (k // 3),
+                    0.15 * (-1) ** k,
+                    3.0 + 0.2 * (-1) ** (k // 2),
+                ],
+                "yaw_deg": 15.0 * (-1) ** (k // 2),
+            }
+        )
+    return waypoints
+
+
 def imu() -> Scenario:
     # An IMU 4 cm forward, 2.5 cm right and 1.5 cm up of the body origin, yawed 90 deg and
     # pitched 30 deg on the body (a board mounted sideways on a wedge), a few millimetres and
-    # about a degree off where it is declared, its clock 15 ms ahead of the camera's. The
-    # controller flies rest-to-rest zigzags (as the calibration built-in rocks, but a
-    # quadrotor turns its thrust to accelerate): forward and back pitch it, left and right
-    # roll it, the yaw swings, the climbs and drops change the thrust, so that every
-    # accelerometer and gyroscope axis sees motion.
-    moves = [
-        (0.5, 0.0, 0.0, 25.0),
-        (0.0, 0.5, 0.3, -25.0),
-        (-0.5, 0.0, -0.3, 30.0),
-        (0.0, -0.5, 0.0, -30.0),
-    ]
-    # A second of hover first: at rest the accelerometer reads gravity's reaction, +9.81 m/s^2
-    # up, turned into the IMU's axes.
-    hover = {"position_w": [0.0, 0.0, 3.0], "yaw_deg": 0.0}
-    waypoints = [{"t": 0.0, **hover}, {"t": 1.0, **hover}]
-    for k in range(8):
-        dx, dy, dz, yaw = moves[k % len(moves)]
-        waypoints.append({"t": 2.0 + k, "position_w": [dx, dy, 3.0 + dz], "yaw_deg": yaw})
-    waypoints.append({"t": 10.0, **hover})
-    cones = [[8.0, 0.0], [9.0, 2.5], [10.0, -2.0]]
+    # about a degree off where it is declared, its clock 15 ms ahead of the camera's; the
+    # camera off its declared mount too (as calibration's), so that the calibration cannot
+    # take T_i_c from the declared mounts. Four cones (PnP needs four points: with three no
+    # image gives a camera pose) 5-6.5 m ahead, near enough that each image places the
+    # camera to about a centimetre.
+    cones = [[5.0, 0.0], [5.5, 1.5], [6.0, -1.3], [6.5, 0.6]]
     return {
         "name": "imu",
         "description": "An IMU mounted off-centre and turned on the body, its mount a little "
         "off what is declared, its clock 15 ms off the camera's, with a consumer MEMS IMU's "
-        "noise; a flight that turns about every axis and accelerates along each.",
+        "noise, and the camera off its declared mount; a flight that rocks about every axis "
+        "and accelerates along each, in front of four cones, calibrates the camera against "
+        "the IMU from the images and readings alone.",
         "lesson": "'An IMU measures accelerations in a body frame': its own. The accelerometer "
         "reads the specific force f_i = R_i_w (a_w(p_i) - g_w) in the IMU frame i, where the "
         "body's acceleration is carried to the IMU's position by the lever arm, a_w(p_i) = a_w "
@@ -517,12 +533,23 @@ def imu() -> Scenario:
         "in free fall it would read 0), here along the IMU's axes that point up, turned by "
         "R_b_i. MuJoCo's own accelerometer and gyro agree with that chain at every physics "
         "step (imu_consistent), and the readings carry Kalibr's noise model with the figures "
-        "of EuRoC's ADIS16448.",
+        "of EuRoC's ADIS16448. As Kalibr does, the camera in the IMU frame T_i_c and the "
+        "clock offset come back from the cones' images and the IMU's readings alone "
+        "(calibration_imu_*): the rotation from the gyro's turns, the offset from when they "
+        "start and stop, the translation from the lever arm the accelerometer feels.",
         "camera_rate_hz": 10.0,
-        "camera": {"pitch_down_deg": 15.0},
+        "camera": {
+            "pitch_down_deg": 25.0,
+            "width": 1280,
+            "height": 960,
+            "mount_error": {
+                "position_m": list(CALIBRATION_MOUNT_ERROR.position_m),
+                "rpy_deg": list(CALIBRATION_MOUNT_ERROR.rpy_deg),
+            },
+        },
         "cones": [{"position_w": [x, y, 0.0]} for x, y in cones],
-        "flight": {"mode": "controlled", "waypoints": waypoints},
-        "duration_s": 10.0,
+        "flight": {"mode": "controlled", "waypoints": imu_waypoints()},
+        "duration_s": IMU_FLIGHT_S,
         "imu": {
             "rate_hz": 200.0,
             "position_b": [0.04, -0.025, 0.015],
@@ -540,9 +567,12 @@ def imu() -> Scenario:
                 1e-9,
                 name="MuJoCo's IMU = vnav.imu's chain at every physics step",
             ),
-            *ACCURACY_CHECKS,
+            _check("calibration_imu_rotation", 0.1, name="T_i_c rotation within 0.1 deg"),
+            _check("calibration_imu_translation", 0.005, name="T_i_c translation within 5 mm"),
+            _check("calibration_imu_time_offset", 0.001, name="clock offset within 1 ms"),
+            # No tracking check: the rocking asks for more than the controller follows (it
+            # lags by decimetres), and the calibration needs the motion, not the reference.
             _check("detection_rate", 0.9, name="cones detected whenever fully in view"),
-            _check("tracking_error", 0.5, name="controller tracking error"),
         ],
     }
 
