@@ -132,15 +132,23 @@ test_grading's judge, once per process) or ``SHARED``."""
 LONGEST_FIRST = (
     "tests/test_readme.py::test_vnav_demo_commands_run_in_order",
     "tests/test_sweep.py::test_an_existing_cluster_gives_the_serial_rows",
-    "builtin-runs",
-    "tests/test_plugin_mistakes.py",
     "tests/test_readme.py::test_sweep_commands_run",
-    "tests/test_readme.py::test_avoid_sweep_shows_what_the_readme_says",
+    "builtin-runs",
+    "tests/test_outputs.py",
+    "tests/test_calibrate_command.py",
+    "tests/test_imu_calibration_run.py",
+    "tests/test_plugin_mistakes.py",
     "tests/test_sweep.py::test_resume_after_an_interruption_runs_only_the_missing_episodes",
-    "tests/test_sweep.py::test_a_killed_worker_costs_no_episode",
+    "tests/test_readme.py::test_avoid_sweep_shows_what_the_readme_says",
     "tests/test_sweep.py::test_on_ray_an_episode_that_raises_or_kills_its_worker_costs_",
-    "tests/test_sweep.py::test_ray_workers_give_the_serial_rows",
     "tests/test_sweep.py::test_ray_engine_reuses_each_workers_scene",
+    "tests/test_sweep.py::test_ray_workers_give_the_serial_rows",
+    "tests/test_readme.py::test_vnav_demo_command_on_its_own",
+    "tests/test_readme.py::test_the_walk_through_finds_the_mistake_and_the_fix_passes",
+    "tests/test_grading.py::test_a_calibrated_runs_verdict_is_what_vnav_demo_run_reports",
+    "tests/test_sweep.py::test_a_killed_worker_costs_no_episode",
+    "tests/test_localize.py",
+    "tests/test_cli.py::test_progress_bar_only_on_a_terminal",
 )
 """Units (node id prefixes) that start first, longest first."""
 
