@@ -138,12 +138,21 @@ def test_first_command_writes_what_the_readme_says(first_run: Path) -> None:
 # ------------------------------------------------------------------------- vnav-demo
 
 
+def _stands_alone(command: str) -> bool:
+    """Whether ``command`` reads and writes nothing of the directory it runs in: it writes only
+    under its own ``--out /tmp/...`` or nothing at all (``list``, ``lecture``), which its test
+    checks. Such commands run each in a directory of their own (the two test processes share
+    them out); the others run in the README's order in one directory."""
+    words = command.split()[1:]
+    return words in (["list"], ["lecture"]) or re.search(r" --out /tmp/\S+", command) is not None
+
+
 def test_vnav_demo_commands_run_in_order(tmp_path: Path) -> None:
-    """Every ``vnav-demo`` command of the README, in its order, in one directory: each exits
-    0; ``show orbit > my-orbit.toml`` then ``run my-orbit.toml`` writes ``my-orbit`` files and
-    leaves ``orbit``'s alone."""
-    commands = [c for c in COMMANDS if _kind(c) == "run"]
-    assert len(commands) >= 6
+    """Every ``vnav-demo`` command of the README that works in its directory, in the README's
+    order, in one directory: each exits 0; ``show orbit > my-orbit.toml`` then
+    ``run my-orbit.toml`` writes ``my-orbit`` files and leaves ``orbit``'s alone."""
+    commands = [c for c in COMMANDS if _kind(c) == "run" and not _stands_alone(c)]
+    assert len(commands) >= 4
     orbit_report = tmp_path / "recordings" / "orbit.json"
     before = None
     for command in commands:
@@ -159,7 +168,27 @@ def test_vnav_demo_commands_run_in_order(tmp_path: Path) -> None:
     assert json.loads((tmp_path / "recordings" / f"{name}.json").read_text())["passed"]
     for builtin_name in builtin.names():
         assert (tmp_path / "recordings" / f"{builtin_name}.rrd").is_file()
-    assert (tmp_path / "tmp" / "r" / "orbit.json").is_file()  # --out /tmp/r, moved
+
+
+@pytest.mark.parametrize("command", [c for c in COMMANDS if _kind(c) == "run" and _stands_alone(c)])
+def test_vnav_demo_command_on_its_own(command: str, tmp_path: Path) -> None:
+    """The README's ``vnav-demo`` commands that write only under their ``--out /tmp/DIR`` or
+    nothing, each in an empty directory: it exits 0 with nothing on stderr, and writes nothing
+    but ``DIR`` (moved into the directory), there the report of every scenario it names."""
+    proc = _shell(command, tmp_path)
+    assert proc.returncode == 0, f"{command}\n{proc.stdout}\n{proc.stderr}"
+    assert proc.stderr == "", proc.stderr
+    out = re.search(r" --out /tmp/(\S+)", command)
+    if out is None:
+        assert list(tmp_path.iterdir()) == []
+        return
+    assert [p.name for p in tmp_path.iterdir()] == ["tmp"]
+    assert [p.name for p in (tmp_path / "tmp").iterdir()] == [out[1].split("/")[0]]
+    words = command.split()
+    names = words[words.index("run") + 1 : next(i for i, w in enumerate(words) if w[:2] == "--")]
+    assert names
+    for name in names:
+        assert json.loads((tmp_path / "tmp" / out[1] / f"{name}.json").read_text())["passed"]
 
 
 # ------------------------------------------------------------------------ recordings

@@ -59,6 +59,9 @@ def raises(obs):
 SMALL = 'estimator = "est/funcs.py:ref"\n' + SWEEP
 """The sweep of the session's ``small.toml``: SWEEP, with the reference as a user's function."""
 
+ONE_EPISODE = SWEEP.replace("seeds = 3", "seeds = 1").replace("[0.0, 1.0]", "[1.0]")
+"""SWEEP cut to one episode: the noisy point, seed 1."""
+
 
 def sweep_cli(*args: str, cwd: Path, timeout: float = 300) -> subprocess.CompletedProcess:
     return subprocess.run(
@@ -371,7 +374,10 @@ def test_an_existing_cluster_gives_the_serial_rows(work, serial, ray_cluster):
         assert proc.returncode == 1, proc.stderr
         assert f"on the Ray cluster at {given} (2 workers)" in proc.stdout
         assert_same_rows(rows(work / out), rows(serial))
-    args = [sys.executable, "-m", "scenarios", "sweep", "small.toml", "--address", address]
+    # Without --workers, a worker per CPU: said as the sweep starts, so one episode shows it
+    # (the noisy point's first seed, which fails its checks as in the serial sweep).
+    (work / "one.toml").write_text(ONE_EPISODE)
+    args = [sys.executable, "-m", "scenarios", "sweep", "one.toml", "--address", address]
     proc = subprocess.run(
         [*args, "--out", "percpu"], cwd=work, env=env, capture_output=True, text=True, timeout=300
     )
