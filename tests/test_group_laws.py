@@ -181,7 +181,11 @@ def test_exp_log_round_trip(group: Group, data) -> None:
     x = group.exp(v)
     assert group.is_member(x)
     assert_same_rotvec(group.log(x), v, atol=1e-12)
-    group.same_element(group.exp(group.log(x)), x, atol=1e-15)
+    # A few roundings in exp, a few in log: 50 000 random rotations per band of angle gave at
+    # most 2.5 ulp below 1 rad and 9-10 ulp from 1 rad to pi (the axis read off the
+    # antisymmetric or the symmetric part of R), so 16 ulp; 1e-15 (4.5 ulp) failed at random
+    # draws near pi (e.g. [0.7936, 0, 3.0397]) once the draws were not derandomized.
+    group.same_element(group.exp(group.log(x)), x, atol=16 * np.finfo(float).eps)
     a = data.draw(group.elements)
     group.same_element(group.exp(group.log(a)), a, atol=1e-12)
 
