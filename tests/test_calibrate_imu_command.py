@@ -17,39 +17,23 @@ import numpy as np
 import pytest
 import yaml
 
-from benchmarks.calibrate import imu_flight
+from benchmarks.calibrate import imu_held_out
 from scenarios import pipeline
 from scenarios.cli import main
 from scenarios.record.reader import imu_calibration_inputs
 from scenarios.scenario.spec import ScenarioSpec, from_dict
 from vnav import se3, so3
 
-FLIGHT_S = 30.0
-"""The rocking flight's length: the translation, seen only through the accelerometer's lever
-arm, needs it (20 s gave 5-9 mm, ``benchmarks.calibrate``)."""
-
 SEEDS = (1, 2)
 
 
 def _held_out(seed: int, checks: bool) -> ScenarioSpec:
-    """``benchmarks.calibrate.imu_flight`` (a controlled flight that rocks in front of 8
-    cones, camera at 20 Hz, a 200 Hz noise-free IMU turned on the body) with mounts and a
-    clock the calibration was not tuned on, drawn from ``seed``: the camera's mount error
-    within +-2 deg about each axis and +-3 cm along each, the IMU's within +-2 deg and +-1 cm,
-    the IMU's clock within +-40 ms of the camera's. With ``checks`` the run calibrates itself
-    too (``calibration_imu_*``); without, it has none."""
-    rng = np.random.default_rng(seed)
-    data = imu_flight(duration_s=FLIGHT_S)
-    data["name"] = f"imu-held-out-{seed}"
-    data["camera"]["mount_error"] = {
-        "position_m": rng.uniform(-0.03, 0.03, 3).tolist(),
-        "rpy_deg": rng.uniform(-2.0, 2.0, 3).tolist(),
-    }
-    data["imu"]["mount_error"] = {
-        "position_m": rng.uniform(-0.01, 0.01, 3).tolist(),
-        "rpy_deg": rng.uniform(-2.0, 2.0, 3).tolist(),
-    }
-    data["imu"]["time_offset_s"] = float(rng.uniform(-0.04, 0.04))
+    """``benchmarks.calibrate.imu_held_out``: the ``imu`` built-in's flight, noise-free, with
+    mounts and a clock the calibration was not tuned on, drawn from ``seed``: the camera's
+    mount error within +-2 deg about each axis and +-3 cm along each, the IMU's within +-2 deg
+    and +-1 cm, the IMU's clock within +-40 ms of the camera's. With ``checks`` the run
+    calibrates itself too (``calibration_imu_*``); without, it has none."""
+    data = imu_held_out(seed)
     if not checks:
         data["checks"] = []
     return from_dict(data)
@@ -123,17 +107,10 @@ def test_calibrate_imu_recovers_held_out_rotation_and_clock(flights, seed):
     # Not the declared mounts' answer: those are off by more than the targets.
     cam, imu = spec.scene.camera, spec.scene.imu
     T_i_c_declared = se3.invert(imu.T_b_i_declared) @ cam.T_b_c_declared
-    assert _angle_deg(T_i_c_declared[:3, :3], T_i_c_true[:3, :3]) > 0.5
-    assert np.linalg.norm(T_i_c_declared[:3, 3] - T_i_c_true[:3, 3]) > 0.01
+    assert _angle_deg(T_i_c_declared[:3, :3], T_i_c_true[:3, :3]) > 0.3
+    assert np.linalg.norm(T_i_c_declared[:3, 3] - T_i_c_true[:3, 3]) > 0.015
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="vnav.imu_calibration's t_i_c is 5.8 and 6.2 mm off on these mounts in 30 s (2.5 mm "
-    "on benchmarks.calibrate.imu_flight's own), 3 standard errors: a bias of the solver's "
-    "(seed 1 fed the apexes projected exactly: 1.5 mm and 0.03 deg, 18 standard errors), "
-    "not of the recording (the run's own answer is the same)",
-)
 @pytest.mark.parametrize("seed", SEEDS)
 def test_calibrate_imu_recovers_held_out_translation(flights, seed):
     """The same flights: ``t_i_c`` within 5 mm of the truth, as printed and as written."""
@@ -207,11 +184,10 @@ def test_the_camchain_holds_the_calibrated_T_cam_imu(flights):
 
 @pytest.fixture(scope="module")
 def short_recordings(tmp_path_factory):
-    """Two cheap recordings: the rocking flight cut to 1 s (too few images to calibrate) and
+    """Two cheap recordings: the held-out flight cut to 1 s (too few images to calibrate) and
     the same without its IMU."""
     out = tmp_path_factory.mktemp("imu-short")
-    data = imu_flight(duration_s=1.0)
-    data["checks"] = []
+    data = {**imu_held_out(1), "duration_s": 1.0, "checks": []}
     with_imu = pipeline.run(from_dict({**data, "name": "short"}), seed=1, out_dir=out)
     no_imu = {k: v for k, v in data.items() if k != "imu"}
     without = pipeline.run(from_dict({**no_imu, "name": "no-imu"}), seed=1, out_dir=out)
@@ -246,16 +222,17 @@ def test_calibrate_imu_refuses_what_it_cannot_use(short_recordings, tmp_path, ca
 
 
 def test_the_imu_builtin_recording(builtin_runs, capsys):
-    """The ``imu`` built-in's recording: with 3 cones no image gives a camera pose (PnP needs
-    4 apexes) and ``calibrate --imu`` says so in one line, exit 2; with 4 or more it answers,
-    with its errors against the truth the recording holds."""
+    """The ``imu`` built-in's recording (four cones): ``calibrate --imu`` answers, with its
+    errors against the truth the recording holds, within the built-in's own gates."""
     run = builtin_runs["imu"]
     status = main(["calibrate", str(run.rrd), "--imu"])
     captured = capsys.readouterr()
-    if len(run.spec.scene.cones) < 4:
-        assert status == 2
-        assert len(captured.err.strip().splitlines()) == 1
-        assert "each needs 4 cones' apexes" in captured.err
-    else:
-        assert status == 0, captured.err
-        assert "against the truth" in captured.out
+    assert status == 0, captured.err
+    errors = re.search(
+        r"against the truth: rotation ([0-9.]+) deg, translation ([0-9.]+) mm, offset "
+        r"([0-9.]+) ms",
+        captured.out,
+    )
+    assert errors is not None, captured.out
+    rotation_deg, translation_mm, offset_ms = (float(v) for v in errors.groups())
+    assert rotation_deg < 0.1 and translation_mm < 5.0 and offset_ms < 1.0, captured.out
