@@ -261,14 +261,30 @@ def _time_s(fn, repeat: int) -> tuple[float, float, object]:
 
 
 def run(args: argparse.Namespace) -> dict:
-    from scenarios import pipeline
-    from scenarios.judge.calibration import errors_against
-    from scenarios.record.reader import calibration_inputs
-    from vnav import so3
-    from vnav.calibration import calibrate_camera
-
     repeat = getattr(args, "repeat", 3)
     quiet = getattr(args, "json", False)
+    figures, synthetic_line = _synthetic_figures(repeat)
+    imu_figures, imu_lines = _imu_figures(repeat)
+    figures.update(imu_figures)
+    if not quiet:
+        print(f"calibration, best and median of {repeat}, seconds (target < {TARGET_S:g} s)")
+        print(synthetic_line)
+    figures.update(_recording_figures(repeat, quiet))
+    seeds = getattr(args, "seeds", 20)
+    rate = getattr(args, "rate", 10.0)
+    if seeds > 0:
+        figures.update(_coverage_figures(seeds, rate, quiet))
+    if not quiet:
+        for line in imu_lines:
+            print(line)
+    return figures
+
+
+def _synthetic_figures(repeat: int) -> tuple[dict[str, object], str]:
+    """``synthetic``: the solver alone on ``_synthetic_flight``, timed; its figures and its
+    printed line."""
+    from vnav.calibration import calibrate_camera
+
     flight = _synthetic_flight()
     med, best, result = _time_s(lambda: calibrate_camera(*flight), repeat)
     figures: dict[str, object] = {
@@ -277,6 +293,16 @@ def run(args: argparse.Namespace) -> dict:
         "synthetic_median_s": med,
         "synthetic_best_s": best,
     }
+    line = (
+        f"synthetic 30 s at 30 Hz ({len(flight[3])} images, {result.observations_used} "
+        f"apexes): best {best:.2f}, median {med:.2f}"
+    )
+    return figures, line
+
+
+def _imu_figures(repeat: int) -> tuple[dict[str, object], list[str]]:
+    """``imu``: the camera-IMU calibration of ``imu_flight``, timed, and of its readings with
+    ``IMU_NOISE`` added; its figures and its printed lines."""
     from scenarios.judge.imu_calibration import calibrate_imu_run
     from scenarios.run.runner import run_scenario
     from scenarios.scenario.spec import from_dict
@@ -284,6 +310,7 @@ def run(args: argparse.Namespace) -> dict:
     imu_run = run_scenario(from_dict(imu_flight()), seed=1)
     med_i, best_i, imu_record = _time_s(lambda: calibrate_imu_run(imu_run), repeat)
     noisy_record = calibrate_imu_run(_with_imu_noise(imu_run))
+    figures: dict[str, object] = {}
     for key, rec in (("imu", imu_record), ("imu_noisy", noisy_record)):
         figures[f"{key}_refused"] = rec.refused
         for name, value in rec.errors.items():
@@ -291,12 +318,22 @@ def run(args: argparse.Namespace) -> dict:
         for name, value in rec.std.items():
             figures[f"{key}_std_{name}"] = value
     figures.update(imu_images=len(imu_run.ticks), imu_median_s=med_i, imu_best_s=best_i)
-    if not quiet:
-        print(f"calibration, best and median of {repeat}, seconds (target < {TARGET_S:g} s)")
-        print(
-            f"synthetic 30 s at 30 Hz ({len(flight[3])} images, {result.observations_used} "
-            f"apexes): best {best:.2f}, median {med:.2f}"
-        )
+    lines = [
+        f"camera-IMU, 30 s rocking flight ({len(imu_run.ticks)} images, two passes)",
+        _imu_line("  noise-free IMU", imu_record, med_i, best_i),
+        _imu_line("  Kalibr-style IMU noise", noisy_record),
+    ]
+    return figures, lines
+
+
+def _recording_figures(repeat: int, quiet: bool) -> dict[str, object]:
+    """``recording``: ``vnav-demo calibrate``'s work on the recording of ``long_flight_spec``,
+    timed (not the run), against the truth and the run's own calibration; printed unless
+    ``quiet``."""
+    from scenarios import pipeline
+    from scenarios.judge.calibration import errors_against
+    from scenarios.record.reader import calibration_inputs
+    from vnav import so3
 
     with tempfile.TemporaryDirectory(prefix="vnav-bench-calibrate-") as tmp:
         outcome = pipeline.run(long_flight_spec(30.0), seed=1, out_dir=Path(tmp))
@@ -313,16 +350,6 @@ def run(args: argparse.Namespace) -> dict:
         float(np.linalg.norm(so3.log(solved.T_b_c[:3, :3].T @ in_run.T_b_c[:3, :3])))
     )
     apart_mm = 1e3 * float(np.linalg.norm(solved.T_b_c[:3, 3] - in_run.T_b_c[:3, 3]))
-    figures.update(
-        recording_images=len(outcome.result.ticks),
-        recording_median_s=med_r,
-        recording_best_s=best_r,
-        recording_rotation_error_deg=e["rotation_deg"],
-        recording_translation_error_mm=e["translation_mm"],
-        recording_offset_error_ms=e["time_offset_ms"],
-        recording_from_in_run_deg=apart_deg,
-        recording_from_in_run_mm=apart_mm,
-    )
     if not quiet:
         print(
             f"vnav-demo calibrate on the recording of a 30 s flight ({len(outcome.result.ticks)} "
@@ -334,30 +361,36 @@ def run(args: argparse.Namespace) -> dict:
             f"{1e3 * solved.std_translation_m:.2f} mm, {1e3 * solved.std_offset_s:.3f} ms); "
             f"from the run's own: {apart_deg:.1e} deg, {apart_mm:.1e} mm"
         )
+    return {
+        "recording_images": len(outcome.result.ticks),
+        "recording_median_s": med_r,
+        "recording_best_s": best_r,
+        "recording_rotation_error_deg": e["rotation_deg"],
+        "recording_translation_error_mm": e["translation_mm"],
+        "recording_offset_error_ms": e["time_offset_ms"],
+        "recording_from_in_run_deg": apart_deg,
+        "recording_from_in_run_mm": apart_mm,
+    }
 
-    seeds = getattr(args, "seeds", 20)
-    rate = getattr(args, "rate", 10.0)
-    if seeds > 0:
-        ratios = coverage(range(seeds), rate)
-        answered = [r for r in ratios if not isinstance(r, str)]
-        within = sum(bool(np.all(np.abs(r) <= COVERAGE_SIGMAS)) for r in answered)
-        worst = max((float(np.max(np.abs(r))) for r in answered), default=math.nan)
-        figures.update(
-            coverage_seeds=seeds,
-            coverage_rate_hz=rate,
-            coverage_refused=len(ratios) - len(answered),
-            coverage_within=within,
-            coverage_worst_ratio=worst,
-        )
-        if not quiet:
-            print(
-                f"standard errors over {seeds} held-out mounts at {rate:g} Hz: the truth within "
-                f"{COVERAGE_SIGMAS:g} standard errors on all 7 parameters in {within} of "
-                f"{len(answered)} answered ({len(ratios) - len(answered)} refused); largest "
-                f"error / standard error {worst:.2f}"
-            )
+
+def _coverage_figures(seeds: int, rate: float, quiet: bool) -> dict[str, object]:
+    """``coverage``: over ``seeds`` held-out mounts at ``rate`` Hz, how many answers hold the
+    truth within ``COVERAGE_SIGMAS`` standard errors; printed unless ``quiet``."""
+    ratios = coverage(range(seeds), rate)
+    answered = [r for r in ratios if not isinstance(r, str)]
+    within = sum(bool(np.all(np.abs(r) <= COVERAGE_SIGMAS)) for r in answered)
+    worst = max((float(np.max(np.abs(r))) for r in answered), default=math.nan)
     if not quiet:
-        print(f"camera-IMU, 30 s rocking flight ({len(imu_run.ticks)} images, two passes)")
-        print(_imu_line("  noise-free IMU", imu_record, med_i, best_i))
-        print(_imu_line("  Kalibr-style IMU noise", noisy_record))
-    return figures
+        print(
+            f"standard errors over {seeds} held-out mounts at {rate:g} Hz: the truth within "
+            f"{COVERAGE_SIGMAS:g} standard errors on all 7 parameters in {within} of "
+            f"{len(answered)} answered ({len(ratios) - len(answered)} refused); largest "
+            f"error / standard error {worst:.2f}"
+        )
+    return {
+        "coverage_seeds": seeds,
+        "coverage_rate_hz": rate,
+        "coverage_refused": len(ratios) - len(answered),
+        "coverage_within": within,
+        "coverage_worst_ratio": worst,
+    }
