@@ -240,31 +240,50 @@ def _time_s(fn, repeat: int) -> tuple[float, float, object]:
 
 
 def run(args: argparse.Namespace) -> dict:
-    from scenarios import pipeline
-    from scenarios.judge.calibration import errors_against
-    from scenarios.record.reader import calibration_inputs
-    from vnav import so3
-    from vnav.calibration import calibrate_camera
-
     repeat = getattr(args, "repeat", 3)
     quiet = getattr(args, "json", False)
     imu_seeds = getattr(args, "imu_seeds", 3)
     if getattr(args, "only_imu", False):
         return imu_noise(imu_seeds, repeat, quiet)
+    figures = _synthetic_figures(repeat, quiet)
+    figures.update(_recording_figures(repeat, quiet))
+    seeds = getattr(args, "seeds", 20)
+    rate = getattr(args, "rate", 10.0)
+    if seeds > 0:
+        figures.update(_coverage_figures(seeds, rate, quiet))
+    figures.update(imu_noise(imu_seeds, repeat, quiet))
+    return figures
+
+
+def _synthetic_figures(repeat: int, quiet: bool) -> dict[str, object]:
+    """``synthetic``: the solver alone on ``_synthetic_flight``, timed; printed (with the
+    table's heading) unless ``quiet``."""
+    from vnav.calibration import calibrate_camera
+
     flight = _synthetic_flight()
     med, best, result = _time_s(lambda: calibrate_camera(*flight), repeat)
-    figures: dict[str, object] = {
-        "synthetic_images": len(flight[3]),
-        "synthetic_observations": result.observations_used,
-        "synthetic_median_s": med,
-        "synthetic_best_s": best,
-    }
     if not quiet:
         print(f"calibration, best and median of {repeat}, seconds (target < {TARGET_S:g} s)")
         print(
             f"synthetic 30 s at 30 Hz ({len(flight[3])} images, {result.observations_used} "
             f"apexes): best {best:.2f}, median {med:.2f}"
         )
+    return {
+        "synthetic_images": len(flight[3]),
+        "synthetic_observations": result.observations_used,
+        "synthetic_median_s": med,
+        "synthetic_best_s": best,
+    }
+
+
+def _recording_figures(repeat: int, quiet: bool) -> dict[str, object]:
+    """``recording``: ``vnav-demo calibrate``'s work on the recording of ``long_flight_spec``,
+    timed (not the run), against the truth and the run's own calibration; printed unless
+    ``quiet``."""
+    from scenarios import pipeline
+    from scenarios.judge.calibration import errors_against
+    from scenarios.record.reader import calibration_inputs
+    from vnav import so3
 
     with tempfile.TemporaryDirectory(prefix="vnav-bench-calibrate-") as tmp:
         outcome = pipeline.run(long_flight_spec(30.0), seed=1, out_dir=Path(tmp))
@@ -281,16 +300,6 @@ def run(args: argparse.Namespace) -> dict:
         float(np.linalg.norm(so3.log(solved.T_b_c[:3, :3].T @ in_run.T_b_c[:3, :3])))
     )
     apart_mm = 1e3 * float(np.linalg.norm(solved.T_b_c[:3, 3] - in_run.T_b_c[:3, 3]))
-    figures.update(
-        recording_images=len(outcome.result.ticks),
-        recording_median_s=med_r,
-        recording_best_s=best_r,
-        recording_rotation_error_deg=e["rotation_deg"],
-        recording_translation_error_mm=e["translation_mm"],
-        recording_offset_error_ms=e["time_offset_ms"],
-        recording_from_in_run_deg=apart_deg,
-        recording_from_in_run_mm=apart_mm,
-    )
     if not quiet:
         print(
             f"vnav-demo calibrate on the recording of a 30 s flight ({len(outcome.result.ticks)} "
@@ -302,30 +311,39 @@ def run(args: argparse.Namespace) -> dict:
             f"{1e3 * solved.std_translation_m:.2f} mm, {1e3 * solved.std_offset_s:.3f} ms); "
             f"from the run's own: {apart_deg:.1e} deg, {apart_mm:.1e} mm"
         )
+    return {
+        "recording_images": len(outcome.result.ticks),
+        "recording_median_s": med_r,
+        "recording_best_s": best_r,
+        "recording_rotation_error_deg": e["rotation_deg"],
+        "recording_translation_error_mm": e["translation_mm"],
+        "recording_offset_error_ms": e["time_offset_ms"],
+        "recording_from_in_run_deg": apart_deg,
+        "recording_from_in_run_mm": apart_mm,
+    }
 
-    seeds = getattr(args, "seeds", 20)
-    rate = getattr(args, "rate", 10.0)
-    if seeds > 0:
-        ratios = coverage(range(seeds), rate)
-        answered = [r for r in ratios if not isinstance(r, str)]
-        within = sum(bool(np.all(np.abs(r) <= COVERAGE_SIGMAS)) for r in answered)
-        worst = max((float(np.max(np.abs(r))) for r in answered), default=math.nan)
-        figures.update(
-            coverage_seeds=seeds,
-            coverage_rate_hz=rate,
-            coverage_refused=len(ratios) - len(answered),
-            coverage_within=within,
-            coverage_worst_ratio=worst,
+
+def _coverage_figures(seeds: int, rate: float, quiet: bool) -> dict[str, object]:
+    """``coverage``: over ``seeds`` held-out mounts at ``rate`` Hz, how many answers hold the
+    truth within ``COVERAGE_SIGMAS`` standard errors; printed unless ``quiet``."""
+    ratios = coverage(range(seeds), rate)
+    answered = [r for r in ratios if not isinstance(r, str)]
+    within = sum(bool(np.all(np.abs(r) <= COVERAGE_SIGMAS)) for r in answered)
+    worst = max((float(np.max(np.abs(r))) for r in answered), default=math.nan)
+    if not quiet:
+        print(
+            f"standard errors over {seeds} held-out mounts at {rate:g} Hz: the truth within "
+            f"{COVERAGE_SIGMAS:g} standard errors on all 7 parameters in {within} of "
+            f"{len(answered)} answered ({len(ratios) - len(answered)} refused); largest "
+            f"error / standard error {worst:.2f}"
         )
-        if not quiet:
-            print(
-                f"standard errors over {seeds} held-out mounts at {rate:g} Hz: the truth within "
-                f"{COVERAGE_SIGMAS:g} standard errors on all 7 parameters in {within} of "
-                f"{len(answered)} answered ({len(ratios) - len(answered)} refused); largest "
-                f"error / standard error {worst:.2f}"
-            )
-    figures.update(imu_noise(imu_seeds, repeat, quiet))
-    return figures
+    return {
+        "coverage_seeds": seeds,
+        "coverage_rate_hz": rate,
+        "coverage_refused": len(ratios) - len(answered),
+        "coverage_within": within,
+        "coverage_worst_ratio": worst,
+    }
 
 
 def imu_noise(seeds: int, repeat: int = 3, quiet: bool = False) -> dict:

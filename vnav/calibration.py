@@ -197,6 +197,25 @@ def calibrate_camera(
         pose_stamps_s, T_w_b, image_stamps_cam_s, apex_uv, apex_w, max_offset_s
     )
     T_b_c_guess = se3.check_pose(T_b_c_guess, "T_b_c_guess")
+    problem = _problem(camera, stamps, T_w_b, t_cam, apex_uv, P, T_b_c_guess, max_offset_s)
+    x = _fit_gated(problem)
+    x = _fit_without_outliers(problem, x)
+    return problem.result(x, refuse_undetermined=refuse_undetermined)
+
+
+def _problem(
+    camera: PinholeCamera,
+    stamps: np.ndarray,
+    T_w_b: np.ndarray,
+    t_cam: np.ndarray,
+    apex_uv: list[np.ndarray],
+    P: np.ndarray,
+    T_b_c_guess: np.ndarray,
+    max_offset_s: float,
+) -> _Problem:
+    """The problem of ``calibrate_camera``'s checked inputs: the pose stream in a frame
+    buffer, and the images that have apexes and whose stamp +- ``max_offset_s`` lies inside
+    the stream, each ``(t_cam_s, uv (K, 2))``."""
     buffer = FrameBuffer(cache_s=max(float(stamps[-1] - stamps[0]) + 1.0, 1.0))
     buffer.set_transform("world", "body", stamps, T_w_b)
     inside = (t_cam - max_offset_s >= stamps[0]) & (t_cam + max_offset_s <= stamps[-1])
@@ -205,7 +224,18 @@ def calibrate_camera(
         for i in np.flatnonzero(inside)
     ]
     images = [(t, uv) for t, uv in images if len(uv)]
-    problem = _Problem(camera, buffer, images, P, T_b_c_guess, max_offset_s=max_offset_s)
+    return _Problem(camera, buffer, images, P, T_b_c_guess, max_offset_s=max_offset_s)
+
+
+def _fit_gated(problem: _Problem) -> np.ndarray:
+    """``x = [xi, offset]`` (7,) from PnP's first mount, matched and solved once per gate of
+    ``GATES_PX`` (each round's match made with the previous round's answer).
+
+    Raises
+    ------
+    CalibrationError
+        If a round matches fewer than ``MIN_OBSERVATIONS`` apexes or ``MIN_FRAMES`` images.
+    """
     x = np.zeros(7)
     x[:6] = problem.first_mount()
     for gate in GATES_PX:
@@ -216,6 +246,12 @@ def calibrate_camera(
                 f"{problem.n_frames} images (need {MIN_OBSERVATIONS} in {MIN_FRAMES})"
             )
         x = _levenberg_marquardt(problem.residuals, x)
+    return x
+
+
+def _fit_without_outliers(problem: _Problem, x: np.ndarray) -> np.ndarray:
+    """``x`` solved again without the outlying apexes (up to twice), which ``problem`` then
+    no longer holds."""
     # Outliers (a cone's blob merged with another's, a mismatch the gate let through) would
     # pull a least-squares fit: drop apexes off by more than OUTLIER_SIGMAS robust standard
     # deviations (the median absolute deviation's, 1.4826 MAD) and solve again.
@@ -227,7 +263,7 @@ def calibrate_camera(
             break
         problem.keep(keep)
         x = _levenberg_marquardt(problem.residuals, x)
-    return problem.result(x, refuse_undetermined=refuse_undetermined)
+    return x
 
 
 def _checked(

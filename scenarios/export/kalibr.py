@@ -139,27 +139,7 @@ def camchain_yaml(
     """
     T_b_c = se3.check_pose(T_b_c, "T_b_c")
     T_cam_body = se3.invert(T_b_c)
-    if imu is None:
-        head = [
-            "# No IMU: T_cam_body and timeshift_cam_body stand where Kalibr writes T_cam_imu and",
-            "# timeshift_cam_imu, the body (base_link, x forward, y left, z up) in place of the "
-            "IMU.",
-        ]
-        imu_lines = []
-    else:
-        T_b_i = se3.check_pose(imu.T_b_i, "T_b_i")
-        T_cam_imu = T_cam_body @ T_b_i
-        head = [
-            "# T_cam_imu and timeshift_cam_imu refer the camera to the IMU (cam0.vnav_sim.",
-            "# imu_extrinsics says where the IMU's come from); T_cam_body and timeshift_cam_body",
-            "# refer it to the body (base_link, x forward, y left, z up), as it was calibrated.",
-        ]
-        imu_lines = [
-            "  T_cam_imu:  # IMU to camera: p_cam = T_cam_imu p_imu = inverse(T_b_c) T_b_i p_imu",
-            *(f"  - {_row(row)}" for row in T_cam_imu),
-            f"  timeshift_cam_imu: {yaml_float(imu.timeshift_cam_imu_s)}  # t_imu = t_cam + shift",
-        ]
-        vnav_sim = {**vnav_sim, "T_b_i": T_b_i, "imu_extrinsics": imu.source}
+    head, imu_lines, vnav_sim = _imu_parts(T_cam_body, imu, vnav_sim)
     return _text(
         camera,
         head,
@@ -171,6 +151,42 @@ def camchain_yaml(
         ],
         vnav_sim,
     )
+
+
+def _imu_parts(
+    T_cam_body: np.ndarray,
+    imu: ImuExtrinsics | None,
+    vnav_sim: dict[str, float | int | str | np.ndarray],
+) -> tuple[list[str], list[str], dict[str, float | int | str | np.ndarray]]:
+    """What ``camchain_yaml`` writes of the IMU: the comment heading the file, the lines of
+    ``T_cam_imu`` and ``timeshift_cam_imu`` (none without ``imu``), and ``vnav_sim`` with the
+    IMU's mount and its source added.
+
+    Raises
+    ------
+    ValueError
+        If ``imu.T_b_i`` is not a rigid transform or its shift is not finite.
+    """
+    if imu is None:
+        head = [
+            "# No IMU: T_cam_body and timeshift_cam_body stand where Kalibr writes T_cam_imu and",
+            "# timeshift_cam_imu, the body (base_link, x forward, y left, z up) in place of the "
+            "IMU.",
+        ]
+        return head, [], vnav_sim
+    T_b_i = se3.check_pose(imu.T_b_i, "T_b_i")
+    T_cam_imu = T_cam_body @ T_b_i
+    head = [
+        "# T_cam_imu and timeshift_cam_imu refer the camera to the IMU (cam0.vnav_sim.",
+        "# imu_extrinsics says where the IMU's come from); T_cam_body and timeshift_cam_body",
+        "# refer it to the body (base_link, x forward, y left, z up), as it was calibrated.",
+    ]
+    imu_lines = [
+        "  T_cam_imu:  # IMU to camera: p_cam = T_cam_imu p_imu = inverse(T_b_c) T_b_i p_imu",
+        *(f"  - {_row(row)}" for row in T_cam_imu),
+        f"  timeshift_cam_imu: {yaml_float(imu.timeshift_cam_imu_s)}  # t_imu = t_cam + shift",
+    ]
+    return head, imu_lines, {**vnav_sim, "T_b_i": T_b_i, "imu_extrinsics": imu.source}
 
 
 def imu_camchain_yaml(

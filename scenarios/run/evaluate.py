@@ -29,6 +29,7 @@ import numpy as np
 
 from scenarios.run.records import DetectionRecord, ImageTiming, TickRecord
 from vnav import metrics, se3, so3
+from vnav.camera import PinholeCamera
 from vnav.cone import cones_fully_in_view
 from vnav.detect import ConeDetection
 from vnav.estimators import NoEstimate
@@ -106,8 +107,8 @@ def evaluate_tick(
         The body pose the estimator looked up at the exposure stamp (the truth plus any pose
         noise, interpolated in the pose stream).
     timing : ImageTiming, optional
-        The image's stamps and the newest pose received when it arrived: with it, every
-        matched detection also gets the ``NEWEST_POSE_METHOD`` estimate made with that pose
+        The image's stamps and the newest pose received when it arrived: with it, every matched
+        detection also gets the ``NEWEST_POSE_METHOD`` estimate made with that pose
         (``DetectionRecord.latest_w``), its error and its predicted error; and the estimator's
         clock stamps the image (else the simulator's time does).
     T_b_c_est : ndarray, shape (4, 4), optional
@@ -115,81 +116,193 @@ def evaluate_tick(
     cov_T_w_b, cov_T_b_c : ndarray, shape (6, 6), optional
         The covariances the estimator is told for ``T_w_b_est`` and ``T_b_c_est``.
     keep_depth : bool
-        Keep each detection's depth under its mask (``DetectionRecord.depth_under_mask_m``),
-        so that ``reevaluate`` can estimate the tick again (a calibrated run's).
+        Keep each detection's depth under its mask (``DetectionRecord.depth_under_mask_m``), so
+        that ``reevaluate`` can estimate the tick again (a calibrated run's).
     T_w_b_newest : ndarray, shape (4, 4), optional
         The newest pose received when the image arrived, as users' functions are shown it
         (``vnav.plugin``); default ``timing.T_w_b_latest``.
     seen : TickRecord, optional
-        A record of this tick with this truth (``reevaluate``'s): its attitude, gimbal-lock
-        flag and cones in view, which depend on the truth alone, are taken from it rather
-        than computed again.
+        A record of this tick with this truth (``reevaluate``'s): its attitude, gimbal-lock flag
+        and cones in view, which depend on the truth alone, are taken from it, not recomputed.
 
     Returns
     -------
     TickRecord
     """
-    camera = localizer.camera
-    T_w_c = truth.T_w_b @ truth.T_b_c
+    told = _Told.of(truth, timing, T_w_b_est, T_b_c_est, cov_T_w_b, cov_T_b_c, T_w_b_newest)
+    view = _truth_view(truth, localizer.camera, seen)
+    estimates = told.update(localizer, detections, depth_m)
+    records = _detection_records(truth, detections, estimates, view.cones_in_view)
+    records = _with_newest_pose(records, truth, told, timing, localizer, depth_m)
+    records = _with_depth_kept(records, depth_m) if keep_depth else records
+    return _tick_record(truth, told, view, records, timing)
+
+
+@dataclass(frozen=True)
+class _Told:
+    """What the estimator is told with one image (``evaluate_tick``'s defaults resolved).
+
+    Attributes
+    ----------
+    t_s : float
+        The image's stamp: its exposure on the pose clock, or the simulator's time without
+        timing.
+    T_w_b_est, T_b_c_est : ndarray, shape (4, 4)
+        The body pose at that stamp and the camera mount.
+    cov_T_w_b, cov_T_b_c : ndarray, shape (6, 6), or None
+        Their covariances.
+    T_w_b_newest : ndarray, shape (4, 4), or None
+        The newest pose received when the image arrived.
+    """
+
+    t_s: float
+    T_w_b_est: np.ndarray
+    T_b_c_est: np.ndarray
+    cov_T_w_b: np.ndarray | None
+    cov_T_b_c: np.ndarray | None
+    T_w_b_newest: np.ndarray | None
+
+    @classmethod
+    def of(
+        cls,
+        truth: TickTruth,
+        timing: ImageTiming | None,
+        T_w_b_est: np.ndarray,
+        T_b_c_est: np.ndarray | None,
+        cov_T_w_b: np.ndarray | None,
+        cov_T_b_c: np.ndarray | None,
+        T_w_b_newest: np.ndarray | None,
+    ) -> _Told:
+        """``evaluate_tick``'s arguments with its defaults: the true mount, the newest pose
+        of ``timing``, the simulator's time."""
+        T_b_c_est = truth.T_b_c if T_b_c_est is None else T_b_c_est
+        # The estimator stamps the image with its exposure time, not the simulator's.
+        t_s = truth.t_s if timing is None else timing.exposure_pose_s
+        if T_w_b_newest is None and timing is not None:
+            # A user's function is shown the newest pose too (the stale-pose mistake, vnav.plugin).
+            T_w_b_newest = timing.T_w_b_latest
+        return cls(t_s, T_w_b_est, T_b_c_est, cov_T_w_b, cov_T_b_c, T_w_b_newest)
+
+    def update(
+        self, localizer: Localizer, detections: list[ConeDetection], depth_m: np.ndarray | None
+    ) -> list[ConeEstimates]:
+        """Every estimate of each detection, from ``localizer`` told this (``Localizer.update``)."""
+        return localizer.update(
+            self.t_s,
+            detections,
+            depth_m,
+            self.T_w_b_est,
+            self.T_b_c_est,
+            cov_T_w_b=self.cov_T_w_b,
+            cov_T_b_c=self.cov_T_b_c,
+            T_w_b_newest=self.T_w_b_newest,
+        )
+
+
+@dataclass(frozen=True)
+class _TruthView:
+    """What a tick's record holds that depends on the truth alone.
+
+    Attributes
+    ----------
+    gimbal_locked : bool
+        Whether ``rpy_rad`` is at the gimbal lock.
+    rpy_rad : ndarray, shape (3,)
+        Roll, pitch, yaw of ``R_w_b`` (``vnav.so3.to_rpy``), radians.
+    cones_in_view : list of int
+        True cones fully in view and tall enough to count (``CONTRACT_DOMAIN``).
+    """
+
+    gimbal_locked: bool
+    rpy_rad: np.ndarray
+    cones_in_view: list[int]
+
+
+def _truth_view(truth: TickTruth, camera: PinholeCamera, seen: TickRecord | None) -> _TruthView:
+    """The attitude, gimbal-lock flag and cones in view at ``truth``: ``seen``'s if given."""
     if seen is not None:
-        locked, rpy_rad, in_view = seen.gimbal_locked, seen.rpy_rad, seen.cones_in_view
-    else:
-        R_w_b = truth.T_w_b[:3, :3]
-        # One tolerance for the flag and for the angles (so3's default): a tick flagged
-        # locked is exactly one whose angles to_rpy computed with roll = 0.
-        locked = bool(so3.gimbal_locked(R_w_b))
-        rpy_rad = so3.to_rpy(R_w_b, warn=False)
-        in_view = cones_fully_in_view(truth.cones_w, camera, T_w_c, CONTRACT_DOMAIN.min_height_px)
-    T_b_c_est = truth.T_b_c if T_b_c_est is None else T_b_c_est
-    # The estimator stamps the image with its exposure time, not the simulator's.
-    t_s = truth.t_s if timing is None else timing.exposure_pose_s
-    if T_w_b_newest is None and timing is not None:
-        # A user's function is shown the newest pose too (the stale-pose mistake, vnav.plugin).
-        T_w_b_newest = timing.T_w_b_latest
-    estimates = localizer.update(
-        t_s,
-        detections,
-        depth_m,
-        T_w_b_est,
-        T_b_c_est,
-        cov_T_w_b=cov_T_w_b,
-        cov_T_b_c=cov_T_b_c,
-        T_w_b_newest=T_w_b_newest,
-    )
+        return _TruthView(seen.gimbal_locked, seen.rpy_rad, seen.cones_in_view)
+    R_w_b = truth.T_w_b[:3, :3]
+    T_w_c = truth.T_w_b @ truth.T_b_c
+    # One tolerance for the flag and for the angles (so3's default): a tick flagged
+    # locked is exactly one whose angles to_rpy computed with roll = 0.
+    locked = bool(so3.gimbal_locked(R_w_b))
+    rpy_rad = so3.to_rpy(R_w_b, warn=False)
+    in_view = cones_fully_in_view(truth.cones_w, camera, T_w_c, CONTRACT_DOMAIN.min_height_px)
+    return _TruthView(locked, rpy_rad, in_view)
+
+
+def _detection_records(
+    truth: TickTruth,
+    detections: list[ConeDetection],
+    estimates: list[ConeEstimates],
+    in_view: list[int],
+) -> list[DetectionRecord]:
+    """Each detection's estimates matched to the nearest true cone and compared with it."""
     cone_of = _match(estimates, truth.cones_w)
-    T_c_w = se3.invert(T_w_c)
+    T_c_w = se3.invert(truth.T_w_b @ truth.T_b_c)
     estimates_w = [{m: p for m, p in e.items() if p is not None} for e in estimates]
     scores = _nees_by_detection(estimates, estimates_w, cone_of, truth.cones_w)
-    records = [
+    return [
         _compare(d, e, est_w, cone_of.get(i), truth.cones_w, T_c_w, in_view, scores[i])
         for i, (d, e, est_w) in enumerate(zip(detections, estimates, estimates_w, strict=True))
     ]
-    if timing is not None and timing.T_w_b_latest is not None:
-        records = [
-            _with_latest(r, timing, T_w_b_est, T_b_c_est, truth, localizer, depth_m)
-            for r in records
-        ]
-    if keep_depth and depth_m is not None:
-        records = [
-            dataclasses.replace(r, depth_under_mask_m=_under_mask(r.detection, depth_m))
-            for r in records
-        ]
+
+
+def _with_newest_pose(
+    records: list[DetectionRecord],
+    truth: TickTruth,
+    told: _Told,
+    timing: ImageTiming | None,
+    localizer: Localizer,
+    depth_m: np.ndarray | None,
+) -> list[DetectionRecord]:
+    """``records`` with the newest-pose estimate (``_with_latest``) when ``timing`` has that
+    pose."""
+    if timing is None or timing.T_w_b_latest is None:
+        return records
+    return [
+        _with_latest(r, timing, told.T_w_b_est, told.T_b_c_est, truth, localizer, depth_m)
+        for r in records
+    ]
+
+
+def _with_depth_kept(
+    records: list[DetectionRecord], depth_m: np.ndarray | None
+) -> list[DetectionRecord]:
+    """``records`` with each detection's depth under its mask, when there is a depth image."""
+    if depth_m is None:
+        return records
+    return [
+        dataclasses.replace(r, depth_under_mask_m=_under_mask(r.detection, depth_m))
+        for r in records
+    ]
+
+
+def _tick_record(
+    truth: TickTruth,
+    told: _Told,
+    view: _TruthView,
+    records: list[DetectionRecord],
+    timing: ImageTiming | None,
+) -> TickRecord:
+    """The tick's record: the truth, what the estimator was told, and its detections."""
     return TickRecord(
         tick=truth.tick,
         t_s=truth.t_s,
         T_w_b=truth.T_w_b,
-        T_w_b_est=T_w_b_est,
+        T_w_b_est=told.T_w_b_est,
         T_b_c=truth.T_b_c,
-        T_b_c_est=T_b_c_est,
+        T_b_c_est=told.T_b_c_est,
         quat_xyzw=truth.quat_xyzw,
-        rpy_rad=rpy_rad,
-        gimbal_locked=locked,
-        cones_in_view=in_view,
+        rpy_rad=view.rpy_rad,
+        gimbal_locked=view.gimbal_locked,
+        cones_in_view=view.cones_in_view,
         detections=records,
         reference_error_m=truth.reference_error_m,
         v_w_b_mps=truth.v_w_b_mps,
         timing=timing,
-        cov_T_w_b_est=cov_T_w_b,
+        cov_T_w_b_est=told.cov_T_w_b,
     )
 
 

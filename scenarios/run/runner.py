@@ -218,20 +218,48 @@ def _run_ticks(
     exposure pose can be looked up (``scenarios.run.streams``). After the last exposure the
     simulation runs on until every image has been evaluated.
     """
-    timing = result.timing_s
-    n_ticks = spec.n_ticks
     flow = _Flow(spec, world, result.seed)
     camera_track = _camera_track(spec)
     cones_w = world.cones_w
-    done = 0
+    evaluate = _Evaluator(flow, result, observer, progress, spec.n_ticks)
+    for k in range(spec.n_ticks):
+        evaluate(flow.advance_to(flow.step_of(k / spec.camera_rate_hz)))
+        if flow.navigator is not None and flow.navigator.ended:
+            break  # at the goal or a cone: no more images
+        image = _capture(k, flow, world, renderer, camera_track, cones_w, result.timing_s)
+        evaluate(flow.expose(image))
+    evaluate(flow.drain())
+    _finish(flow, world, result)
 
-    def evaluate(delivered: list[Delivered]) -> None:
-        nonlocal done
+
+class _Evaluator:
+    """Evaluates the images the camera's link delivers, in order: each one's record appended
+    to the run's, the navigator steered by it and the observer told, each stage timed."""
+
+    def __init__(
+        self,
+        flow: _Flow,
+        result: RunResult,
+        observer: TickObserver | None,
+        progress: Callable[[int, int], None] | None,
+        n_ticks: int,
+    ) -> None:
+        self.flow = flow
+        self.result = result
+        self.observer = observer
+        self.progress = progress
+        self.n_ticks = n_ticks
+        self.done = 0
+        """Images evaluated so far."""
+
+    def __call__(self, delivered: list[Delivered]) -> None:
+        """Evaluate ``delivered``, in order."""
+        flow, observer, timing = self.flow, self.observer, self.result.timing_s
         for d in delivered:
             t0 = time.perf_counter()
             image: _Image = d.payload
             record = flow.evaluate(d)
-            result.ticks.append(record)
+            self.result.ticks.append(record)
             t1 = time.perf_counter()
             if flow.navigator is not None:  # the closed loop: what was seen steers
                 newest = d.T_w_b_latest if d.T_w_b_latest is not None else d.T_w_b_at_exposure
@@ -242,28 +270,43 @@ def _run_ticks(
             timing["localize"] += t1 - t0
             timing["navigate"] += t2 - t1
             timing["log"] += time.perf_counter() - t2
-            done += 1
-            if progress:
-                progress(done, n_ticks)
+            self.done += 1
+            if self.progress:
+                self.progress(self.done, self.n_ticks)
 
-    for k in range(n_ticks):
-        evaluate(flow.advance_to(flow.step_of(k / spec.camera_rate_hz)))
-        if flow.navigator is not None and flow.navigator.ended:
-            break  # at the goal or a cone: no more images
-        t0 = time.perf_counter()
-        if camera_track:
-            world.set_camera_position_b(_interpolate(camera_track, world.time_s))
-        t1 = time.perf_counter()
-        rgb, depth = flow.render(renderer)
-        t2 = time.perf_counter()
-        detections = detect_cones(rgb)
-        t3 = time.perf_counter()
-        timing["physics"] += t1 - t0
-        timing["render"] += t2 - t1
-        timing["detect"] += t3 - t2
-        truth = _truth(k, world, flow.driver, cones_w)
-        evaluate(flow.expose(_Image(truth, detections, rgb, depth)))
-    evaluate(flow.drain())
+
+def _capture(
+    k: int,
+    flow: _Flow,
+    world: World,
+    renderer: Renderer,
+    camera_track: list[tuple[float, np.ndarray]],
+    cones_w: np.ndarray,
+    timing: dict[str, float],
+) -> _Image:
+    """Camera tick ``k``'s image now: the camera moved along its track, the image rendered
+    (with the scenario's noise) and its cones detected, with the truth at this instant (its
+    ``cones_w`` the run's)."""
+    t0 = time.perf_counter()
+    if camera_track:
+        world.set_camera_position_b(_interpolate(camera_track, world.time_s))
+    t1 = time.perf_counter()
+    rgb, depth = flow.render(renderer)
+    t2 = time.perf_counter()
+    detections = detect_cones(rgb)
+    t3 = time.perf_counter()
+    timing["physics"] += t1 - t0
+    timing["render"] += t2 - t1
+    timing["detect"] += t3 - t2
+    truth = _truth(k, world, flow.driver, cones_w)
+    return _Image(truth, detections, rgb, depth)
+
+
+def _finish(flow: _Flow, world: World, result: RunResult) -> None:
+    """The run's streams' times and records into ``result`` once every image is evaluated:
+    the pose stream, the IMU's readings (its reading on every step stopped) and the closed
+    loop's record."""
+    timing = result.timing_s
     timing["physics"] += flow.physics_s
     timing["clearance"] += flow.clearance_s
     timing["streams"] += flow.streams_s
