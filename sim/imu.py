@@ -17,6 +17,11 @@ step earlier, and its accelerometer's centripetal term that rate's: ``to_stamp``
 fourth order once the step after is known, ``rate_correction_i``), adds the noise of
 ``vnav.imu.ImuNoiseProcess`` (Kalibr's model: white noise and a bias random walk per axis,
 from the run's seed), and stamps it on the IMU's clock.
+
+A run reads the IMU at every physics step: there ``ImuSteps`` keeps each step's state (one
+array) and the readings, the chain and the discrepancy are made for every step at once at the
+end (``to_stamp_many``, ``chain_imu_many_i``, ``imu_discrepancy_many``,
+``ImuSampler.sample_many``), equal to the per-step functions' to the last bit.
 """
 
 from __future__ import annotations
