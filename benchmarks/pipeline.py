@@ -35,6 +35,19 @@ exporters' writers): the exporters encode and write on threads of their own, whi
 core carries, so that on a quiet 2-core machine the wall time follows the run's thread as
 long as the others' CPU time stays below it.
 
+``--imu`` measures the simulated IMU (``sim.imu``, read at every physics step): one scenario
+(``--scenario``, default orbit) run with the ``imu`` built-in's ``[imu]`` table added and
+without, alternating for ``--rounds`` rounds, in this process, recording to a temporary
+directory as ``vnav-demo run`` does (``--duration S`` shortens the flight). Per camera tick it
+prints each stage's milliseconds (the report's ``timing_s`` over the ticks: the stage timers
+read wall time, ``time.perf_counter``) with and without, the whole tick's CPU milliseconds
+(``time.process_time``, every thread, from the first tick's end to the last's) and wall
+milliseconds, the ratio with / without against the target (the IMU adds at most 5% to a
+tick: <= 1.05) and the stages that grew; what comes after the last tick (the IMU's readings
+and chain made, the recording finished) and the judging in it (checks such as
+``imu_consistent``, calibrations) are printed apart, not as tick time. Best of the rounds for
+each figure.
+
 ``--against REV`` measures a change: the same scenarios (those both versions have) are run by
 this checkout and by git revision REV (checked out in a temporary worktree), each in a fresh
 process, alternating for ``--rounds`` rounds; the best wall time of each counts, and the ratio
@@ -44,7 +57,9 @@ now / REV is printed per scenario and in total.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
+import math
 import os
 import subprocess
 import sys
@@ -55,6 +70,7 @@ from pathlib import Path
 from scenarios import pipeline
 from scenarios.run.runner import STAGES
 from scenarios.scenario import builtin
+from scenarios.scenario.spec import ScenarioSpec, from_dict
 from sim.scene_cache import SceneCache
 
 TARGETS = {
@@ -83,6 +99,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--export",
         metavar="FORMAT[,FORMAT]",
         help="a 30 s flight at 30 Hz with these exports against without (see the module docstring)",
+    )
+    parser.add_argument(
+        "--imu",
+        action="store_true",
+        help="a scenario with the imu built-in's [imu] table against without (see the module "
+        "docstring)",
+    )
+    parser.add_argument(
+        "--duration",
+        type=_positive_seconds,
+        metavar="S",
+        help="with --imu: stop the flight after S simulated seconds",
     )
     parser.add_argument(
         "--plugin",
@@ -114,6 +142,17 @@ def _run_one(name: str, out: Path, scenes: SceneCache | None = None) -> dict:
     }
 
 
+def _positive_seconds(text: str) -> float:
+    """``--duration``'s value: a positive, finite number of seconds (argparse's error else)."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value > 0.0):
+        raise argparse.ArgumentTypeError(f"must be a positive number of seconds, got {text!r}")
+    return value
+
+
 def run(args: argparse.Namespace) -> dict:
     if getattr(args, "against", None):
         return _against(args)
@@ -121,6 +160,8 @@ def run(args: argparse.Namespace) -> dict:
         return _plugin(args)
     if getattr(args, "export", None):
         return _export(args)
+    if getattr(args, "imu", False):
+        return _imu(args)
     names = getattr(args, "scenario", None) or builtin.names()
     with tempfile.TemporaryDirectory(prefix="vnav-bench-") as tmp:
         start = time.perf_counter()
@@ -290,8 +331,6 @@ EXPORT_TARGET = 1.30
 
 def _export(args: argparse.Namespace) -> dict:
     """A 30 s flight at 30 Hz with ``args.export`` against without, alternating (ABBA)."""
-    import dataclasses
-
     from scenarios import export
 
     formats = export.parse(args.export)
@@ -359,6 +398,139 @@ def _export(args: argparse.Namespace) -> dict:
             print(
                 f"  CPU {label}: the run's thread {run_s:.2f} s, the other threads {other_s:.2f} s"
             )
+    return figures
+
+
+IMU_TARGET = 1.05
+"""A camera tick with the IMU takes at most this times one without."""
+
+
+def _imu_specs(name: str, duration_s: float | None) -> dict[str, ScenarioSpec]:
+    """Scenario ``name`` without an IMU (``plain``) and with the ``imu`` built-in's ``[imu]``
+    table added (``imu``), stopped after ``duration_s`` if given.
+
+    Raises
+    ------
+    ValueError
+        If ``name`` has an ``[imu]`` of its own.
+    """
+    table = builtin.REGISTRY[name]()
+    if "imu" in table:
+        raise ValueError(f"scenario {name!r} has an [imu] already: choose one without")
+    specs = {
+        "plain": from_dict(table, where=f"built-in {name}"),
+        "imu": from_dict(
+            {**table, "imu": builtin.imu()["imu"]}, where=f"built-in {name} with [imu]"
+        ),
+    }
+    if duration_s is not None:
+        specs = {
+            k: dataclasses.replace(s, duration_s=min(duration_s, s.end_s)) for k, s in specs.items()
+        }
+    return specs
+
+
+def _imu_run(spec: ScenarioSpec, out: Path) -> dict:
+    """One run as ``vnav-demo run`` makes it: the stages' milliseconds per tick, the ticks' CPU
+    and wall milliseconds (from the first tick's end to the last's), the CPU seconds after the
+    last tick (the images still in flight, the IMU's readings made, the judging, the
+    recording finished, the report written) and the judging's own (wall) seconds."""
+    marks: list[tuple[float, float]] = []
+
+    def progress(done: int, total: int) -> None:
+        marks.append((time.process_time(), time.perf_counter()))
+
+    outcome = pipeline.run(spec, seed=1, out_dir=out, progress=progress)
+    after_ticks_cpu_s = time.process_time() - marks[-1][0]
+    timing = outcome.result.timing_s
+    ticks = len(outcome.result.ticks)
+    timed = max(len(marks) - 1, 1)  # the ticks between the first mark and the last
+    return {
+        "ticks": ticks,
+        "stage_ms": {k: 1e3 * timing[k] / ticks for k in STAGES},
+        "tick_cpu_ms": 1e3 * (marks[-1][0] - marks[0][0]) / timed,
+        "tick_wall_ms": 1e3 * (marks[-1][1] - marks[0][1]) / timed,
+        "after_ticks_cpu_s": after_ticks_cpu_s,
+        "judge_s": timing["calibrate"] + timing["judge"],
+        "total_cpu_s": timing["total_cpu"],
+    }
+
+
+def _imu(args: argparse.Namespace) -> dict:
+    """A scenario with the ``imu`` built-in's ``[imu]`` against without, alternating (ABBA),
+    best of the rounds for each figure."""
+    name = (getattr(args, "scenario", None) or ["orbit"])[0]
+    try:
+        specs = _imu_specs(name, getattr(args, "duration", None))
+    except ValueError as e:
+        print(f"python -m benchmarks pipeline --imu: {e}", file=sys.stderr)
+        raise SystemExit(2) from None
+    best: dict[str, dict] = {}
+    with tempfile.TemporaryDirectory(prefix="vnav-bench-imu-") as tmp:
+        _imu_run(specs["plain"], Path(tmp))  # warm: imports, the first OpenGL context
+        for i in range(max(1, args.rounds)):
+            for side in ("plain", "imu")[:: 1 if i % 2 == 0 else -1]:
+                got = _imu_run(specs[side], Path(tmp))
+                if side not in best:
+                    best[side] = got
+                    continue
+                b = best[side]
+                b["stage_ms"] = {k: min(v, got["stage_ms"][k]) for k, v in b["stage_ms"].items()}
+                for k in (
+                    "tick_cpu_ms",
+                    "tick_wall_ms",
+                    "after_ticks_cpu_s",
+                    "judge_s",
+                    "total_cpu_s",
+                ):
+                    b[k] = min(b[k], got[k])
+    plain, imu = best["plain"], best["imu"]
+    ratio = imu["tick_cpu_ms"] / plain["tick_cpu_ms"]
+    # A stage grew by at least what its figure prints (0.01 ms): not a rounding's difference.
+    grew = {
+        k: imu["stage_ms"][k] - plain["stage_ms"][k]
+        for k in STAGES
+        if imu["stage_ms"][k] - plain["stage_ms"][k] >= 0.005
+    }
+    figures = {
+        "scenario": name,
+        "ticks": imu["ticks"],
+        "rounds": args.rounds,
+        "plain": plain,
+        "imu": imu,
+        "tick_cpu_ratio": ratio,
+        "tick_wall_ratio": imu["tick_wall_ms"] / plain["tick_wall_ms"],
+        "stages_grew_ms": grew,
+        "load_average": os.getloadavg(),
+        "target_ratio": IMU_TARGET,
+    }
+    if not args.json:
+        print(
+            f"{name}, {imu['ticks']} camera ticks, with the imu built-in's [imu] and without, "
+            f"best of {args.rounds} alternating rounds, recording as vnav-demo run does "
+            f"(load average {os.getloadavg()[0]:.1f})"
+        )
+        print("ms per camera tick by stage (the stage timers read wall time):")
+        print(f"  {'stage':<12}{'without':>10}{'with':>10}{'change':>10}")
+        for k in STAGES:
+            a, b = plain["stage_ms"][k], imu["stage_ms"][k]
+            print(f"  {k:<12}{a:>10.2f}{b:>10.2f}{b - a:>+10.2f}")
+        for key, label in (("tick_cpu_ms", "CPU"), ("tick_wall_ms", "wall")):
+            print(f"  {'tick, ' + label:<12}{plain[key]:>10.2f}{imu[key]:>10.2f}")
+        print(
+            f"ratio with / without, a tick's CPU: {ratio:.3f} (target <= {IMU_TARGET:.2f}); "
+            f"wall {figures['tick_wall_ratio']:.3f}"
+        )
+        where = ", ".join(f"{k} {v:+.2f} ms" for k, v in sorted(grew.items(), key=lambda x: -x[1]))
+        print(f"where the IMU's time goes (stages that grew): {where or 'none'}")
+        print(
+            "not tick time: after the last tick (the IMU's readings made, judging, the "
+            f"recording finished) {plain['after_ticks_cpu_s']:.2f} -> "
+            f"{imu['after_ticks_cpu_s']:.2f} s CPU, of which judging (checks such as "
+            f"imu_consistent, calibrations) {plain['judge_s']:.3f} -> {imu['judge_s']:.3f} s "
+            "wall; the whole run "
+            f"{plain['total_cpu_s']:.2f} -> {imu['total_cpu_s']:.2f} s CPU"
+        )
     return figures
 
 

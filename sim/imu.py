@@ -17,6 +17,11 @@ step earlier, and its accelerometer's centripetal term that rate's: ``to_stamp``
 fourth order once the step after is known, ``rate_correction_i``), adds the noise of
 ``vnav.imu.ImuNoiseProcess`` (Kalibr's model: white noise and a bias random walk per axis,
 from the run's seed), and stamps it on the IMU's clock.
+
+A run reads the IMU at every physics step: there ``ImuSteps`` keeps each step's state (one
+array) and the readings, the chain and the discrepancy are made for every step at once at the
+end (``to_stamp_many``, ``chain_imu_many_i``, ``imu_discrepancy_many``,
+``ImuSampler.sample_many``), equal to the per-step functions' to the last bit.
 """
 
 from __future__ import annotations
@@ -25,6 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sim import names
 from sim.config import ImuConfig
 from sim.world import World
 from vnav.imu import ImuNoiseProcess, angular_rate_i, specific_force_i
@@ -34,11 +40,15 @@ __all__ = [
     "GYRO_SCALE_RAD_S",
     "ImuReading",
     "ImuSampler",
+    "ImuSteps",
     "chain_imu_i",
+    "chain_imu_many_i",
     "imu_discrepancy",
+    "imu_discrepancy_many",
     "mujoco_imu_i",
     "rate_correction_i",
     "to_stamp",
+    "to_stamp_many",
 ]
 
 ACCEL_SCALE_M_S2 = 1.0
@@ -121,6 +131,70 @@ def imu_discrepancy(world: World, chain: tuple[np.ndarray, np.ndarray] | None = 
     return float(max(e_a, e_g))
 
 
+def chain_imu_many_i(
+    T_w_b: np.ndarray,
+    T_b_i: np.ndarray,
+    acceleration_w: np.ndarray,
+    angular_velocity_b: np.ndarray,
+    angular_acceleration_b: np.ndarray,
+    gravity_w: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """``chain_imu_i`` of many states at once, from the body's motion at each.
+
+    The same numpy operations on stacks (``vnav.imu``'s functions are batched), so each row
+    equals ``chain_imu_i`` of its state to the last bit (``tests/test_sim_imu.py``).
+
+    Parameters
+    ----------
+    T_w_b : ndarray, shape (N, 4, 4)
+    T_b_i : ndarray, shape (4, 4)
+    acceleration_w : ndarray, shape (N, 3)
+        m/s^2.
+    angular_velocity_b, angular_acceleration_b : ndarray, shape (N, 3)
+        rad/s and rad/s^2, body axes.
+    gravity_w : ndarray, shape (3,)
+        The model's gravity, m/s^2.
+
+    Returns
+    -------
+    f_i, omega_i : ndarray, shape (N, 3)
+        m/s^2 and rad/s, IMU axes.
+
+    Raises
+    ------
+    ValueError
+        As ``vnav.imu.specific_force_i``: a transform not rigid, a vector not (N, 3) or not
+        finite.
+    """
+    f_i = specific_force_i(
+        T_w_b,
+        T_b_i,
+        acceleration_w,
+        angular_velocity_b,
+        angular_acceleration_b,
+        gravity_w=gravity_w,
+    )
+    return f_i, angular_rate_i(T_b_i, angular_velocity_b)
+
+
+def imu_discrepancy_many(
+    accel_i: np.ndarray, gyro_i: np.ndarray, f_i: np.ndarray, omega_i: np.ndarray
+) -> np.ndarray:
+    """``imu_discrepancy`` of many states, (N,): MuJoCo's sensors ``accel_i``, ``gyro_i``
+    against the chain's ``f_i``, ``omega_i``, each (N, 3).
+
+    The norms are ``np.vecdot``'s, the dot product ``np.linalg.norm`` takes of a vector: each
+    element equals ``imu_discrepancy`` of its state to the last bit.
+    """
+
+    def norm(v: np.ndarray) -> np.ndarray:
+        return np.sqrt(np.vecdot(v, v))
+
+    e_a = norm(accel_i - f_i) / np.maximum(norm(accel_i), ACCEL_SCALE_M_S2)
+    e_g = norm(gyro_i - omega_i) / np.maximum(norm(gyro_i), GYRO_SCALE_RAD_S)
+    return np.maximum(e_a, e_g)
+
+
 def to_stamp(
     world: World, accel_i: np.ndarray, gyro_i: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -160,6 +234,48 @@ def to_stamp(
     R_b_i = T_b_i[:3, :3]
     accel = accel_i + (0.5 * (c_next_b - c_b)) @ R_b_i
     gyro = gyro_i + (0.5 * dt_s * world.angular_acceleration_b) @ R_b_i
+    return accel, gyro
+
+
+def to_stamp_many(
+    timestep_s: float,
+    T_b_i: np.ndarray,
+    accel_i: np.ndarray,
+    gyro_i: np.ndarray,
+    angular_velocity_b: np.ndarray,
+    angular_acceleration_b: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """``to_stamp`` of many readings at once, from the body's rate and angular acceleration
+    at each reading's step (what ``to_stamp`` reads of the world).
+
+    The same operations on stacks: each row equals ``to_stamp``'s to the last bit
+    (``tests/test_sim_imu.py``).
+
+    Parameters
+    ----------
+    timestep_s : float
+        The physics step, seconds.
+    T_b_i : ndarray, shape (4, 4)
+        The IMU's mount.
+    accel_i, gyro_i : ndarray, shape (K, 3)
+        m/s^2 and rad/s, IMU axes.
+    angular_velocity_b, angular_acceleration_b : ndarray, shape (K, 3)
+        rad/s and rad/s^2, body axes.
+
+    Returns
+    -------
+    accel_i, gyro_i : ndarray, shape (K, 3)
+        New arrays.
+    """
+    dt_s = float(timestep_s)
+    r_b = T_b_i[:3, 3]
+    omega_b = angular_velocity_b
+    omega_next_b = omega_b + dt_s * angular_acceleration_b
+    c_b = np.cross(omega_b, np.cross(omega_b, r_b))
+    c_next_b = np.cross(omega_next_b, np.cross(omega_next_b, r_b))
+    R_b_i = T_b_i[:3, :3]
+    accel = accel_i + (0.5 * (c_next_b - c_b)) @ R_b_i
+    gyro = gyro_i + (0.5 * dt_s * angular_acceleration_b) @ R_b_i
     return accel, gyro
 
 
@@ -270,3 +386,118 @@ class ImuSampler:
             gyro_i += dg
         self.count += 1
         return ImuReading(world.time_s + self.clock_offset_s, accel_i, gyro_i)
+
+    def take_due(self, world: World) -> bool:
+        """Whether the world's current physics step is the next reading's; if so, counts it
+        as taken (its value is made afterwards, with the others, by ``sample_many``)."""
+        if self.due(world):
+            self.count += 1
+            return True
+        return False
+
+    def sample_many(
+        self, time_s: np.ndarray, accel_i: np.ndarray, gyro_i: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The readings of noise-free sensors already moved to their stamps (``to_stamp_many``),
+        at simulated times ``time_s``: the noise of as many readings added, stamped on the
+        IMU's clock.
+
+        The noise is ``ImuNoiseProcess.series``'s, which equals as many ``sample`` calls' to
+        the last bit when the process starts with zero biases (a new sampler's): made once,
+        at the end of a run, this is what ``sample`` at each reading would have given.
+
+        Parameters
+        ----------
+        time_s : ndarray, shape (K,)
+            Simulated seconds.
+        accel_i, gyro_i : ndarray, shape (K, 3)
+            m/s^2 and rad/s, IMU axes.
+
+        Returns
+        -------
+        t_s : ndarray, shape (K,)
+            The stamps, IMU clock, seconds.
+        accel_i, gyro_i : ndarray, shape (K, 3)
+            New arrays.
+        """
+        accel_i, gyro_i = accel_i.copy(), gyro_i.copy()
+        if not self.config.noise.is_zero:
+            da, dg = self.process.series(len(time_s))
+            accel_i += da
+            gyro_i += dg
+        return time_s + self.clock_offset_s, accel_i, gyro_i
+
+
+# Columns of a step's row: the time, MuJoCo's accelerometer and gyro, the body's rate,
+# its acceleration and angular acceleration (the free joint's qacc), its pose.
+_STEP_COLUMNS = {
+    "time_s": slice(0, 1),
+    "accel_i": slice(1, 4),
+    "gyro_i": slice(4, 7),
+    "angular_velocity_b": slice(7, 10),
+    "acceleration_w": slice(10, 13),
+    "angular_acceleration_b": slice(13, 16),
+    "R_w_b": slice(16, 25),
+    "t_w_b": slice(25, 28),
+}
+
+
+class ImuSteps:
+    """What the IMU reads of a ``World`` at each physics step, kept as the step is taken
+    (``take``, from ``World.on_step``) and stacked afterwards (``stacked``): the readings, the
+    chain and the discrepancy are then computed for every step at once (``to_stamp_many``,
+    ``chain_imu_many_i``, ``imu_discrepancy_many``), equal to the last bit to what the
+    per-step functions give, at a few microseconds a step instead of a millisecond.
+
+    Parameters
+    ----------
+    world : World
+        The world whose steps are read (its model's addresses are looked up once).
+    """
+
+    def __init__(self, world: World) -> None:
+        m = world.model
+        self._accel = slice(world.imu_accel_adr, world.imu_accel_adr + 3)
+        self._gyro = slice(world.imu_gyro_adr, world.imu_gyro_adr + 3)
+        dof = int(m.joint(names.DRONE_JOINT).dofadr[0])
+        self._omega = slice(dof + 3, dof + 6)
+        self._qacc = slice(dof, dof + 6)
+        self._body = world.body_id
+        self._rows: list[np.ndarray] = []
+
+    def __len__(self) -> int:
+        return len(self._rows)
+
+    def take(self, world: World) -> None:
+        """Keep the world's state now (one array a step: no other object is made)."""
+        d = world.data
+        sd = d.sensordata
+        self._rows.append(
+            np.concatenate(
+                (
+                    (d.time,),
+                    sd[self._accel],
+                    sd[self._gyro],
+                    d.qvel[self._omega],
+                    d.qacc[self._qacc],
+                    d.xmat[self._body],
+                    d.xpos[self._body],
+                )
+            )
+        )
+
+    def stacked(self) -> dict[str, np.ndarray]:
+        """Every step's state: ``time_s`` (N,), ``accel_i``, ``gyro_i`` (MuJoCo's sensors,
+        IMU axes), ``angular_velocity_b``, ``acceleration_w``, ``angular_acceleration_b``
+        (N, 3) and ``T_w_b`` (N, 4, 4), as ``World``'s properties read them."""
+        rows = np.array(self._rows).reshape(-1, 28)
+        # Contiguous columns, as the properties' copies are (numpy's kernels for a strided
+        # operand could sum in another order).
+        out = {k: np.ascontiguousarray(rows[:, c]) for k, c in _STEP_COLUMNS.items()}
+        out["time_s"] = out["time_s"][:, 0]
+        T_w_b = np.zeros((len(rows), 4, 4))
+        T_w_b[:, :3, :3] = out.pop("R_w_b").reshape(-1, 3, 3)
+        T_w_b[:, :3, 3] = out.pop("t_w_b")
+        T_w_b[:, 3, 3] = 1.0
+        out["T_w_b"] = T_w_b
+        return out

@@ -8,6 +8,7 @@ numbers worked out on paper; the sampler's rate, stamps and noise come from its 
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 
@@ -17,7 +18,18 @@ import pytest
 from sim import names
 from sim.config import ImuConfig, MountError, SceneConfig
 from sim.flight import Autopilot, MinimumJerkTrajectory
-from sim.imu import ImuSampler, imu_discrepancy, mujoco_imu_i, rate_correction_i
+from sim.imu import (
+    ImuSampler,
+    ImuSteps,
+    chain_imu_i,
+    chain_imu_many_i,
+    imu_discrepancy,
+    imu_discrepancy_many,
+    mujoco_imu_i,
+    rate_correction_i,
+    to_stamp,
+    to_stamp_many,
+)
 from sim.world import World
 from vnav import so3
 from vnav.imu import specific_force_i
@@ -305,3 +317,76 @@ def test_the_gyro_corrected_to_fourth_order_is_the_cubic_through_the_true_step_r
     second = np.abs(np.array(gyro_i)[2:-1] - truth).max()
     assert second > 1e-4  # what the mean of two leaves here
     np.testing.assert_allclose(fourth_i[2:-1], truth, atol=1e-9)
+
+
+@pytest.mark.parametrize("rate_hz", [200.0, 70.0])
+def test_the_steps_computed_at_once_equal_the_per_step_functions_to_the_last_bit(rate_hz):
+    """The runner keeps each physics step's state (``ImuSteps``) and computes the readings,
+    the chain and the discrepancy at the run's end: every number must be what the per-step
+    functions (``chain_imu_i``, ``imu_discrepancy``, ``to_stamp``, ``ImuSampler.sample``,
+    the references) give at the step, bit for bit, noise included; at 70 Hz not every step
+    has a reading."""
+    rng = np.random.default_rng(21)
+    imu = dataclasses.replace(
+        _random_imu(rng),
+        rate_hz=rate_hz,
+        accelerometer_noise_density=0.002,
+        accelerometer_random_walk=0.003,
+        gyroscope_noise_density=1.7e-4,
+        gyroscope_random_walk=1.9e-5,
+    )
+    world = World.from_config(SceneConfig(imu=imu))
+    pilot = _random_flight(world, rng)
+    dt = world.model.opt.timestep
+    reference = ImuSampler(imu, dt, np.random.default_rng(5), 0.015)
+    batched = ImuSampler(imu, dt, np.random.default_rng(5), 0.015)
+    state = ImuSteps(world)
+    want: dict[str, list] = {k: [] for k in ("f", "w", "e", "t", "a", "g", "fc", "wc")}
+    steps: list[int] = []
+
+    def read(w: World) -> None:
+        chain = chain_imu_i(w)
+        want["f"].append(chain[0])
+        want["w"].append(chain[1])
+        want["e"].append(imu_discrepancy(w, chain))
+        if reference.due(w):
+            reading = reference.sample(w)
+            want["t"].append(reading.t_s)
+            want["a"].append(reading.accel_i)
+            want["g"].append(reading.gyro_i)
+            stamped = to_stamp(w, *chain)
+            want["fc"].append(stamped[0])
+            want["wc"].append(stamped[1])
+        state.take(w)
+        if batched.take_due(w):
+            steps.append(len(state) - 1)
+
+    world.on_step = read
+    pilot.run_until(3.0)
+    s = state.stacked()
+    f_i, omega_i = chain_imu_many_i(
+        s["T_w_b"],
+        world.T_b_i,
+        s["acceleration_w"],
+        s["angular_velocity_b"],
+        s["angular_acceleration_b"],
+        world.model.opt.gravity,
+    )
+    np.testing.assert_array_equal(f_i, want["f"])
+    np.testing.assert_array_equal(omega_i, want["w"])
+    np.testing.assert_array_equal(
+        imu_discrepancy_many(s["accel_i"], s["gyro_i"], f_i, omega_i), want["e"]
+    )
+    assert len(steps) == len(want["t"])
+    assert (len(steps) == len(state)) == (rate_hz == 200.0)  # a reading a step at 200 Hz
+    omega_b, alpha_b = s["angular_velocity_b"][steps], s["angular_acceleration_b"][steps]
+    accel_i, gyro_i = to_stamp_many(
+        dt, world.T_b_i, s["accel_i"][steps], s["gyro_i"][steps], omega_b, alpha_b
+    )
+    t_s, accel_i, gyro_i = batched.sample_many(s["time_s"][steps], accel_i, gyro_i)
+    np.testing.assert_array_equal(t_s, want["t"])
+    np.testing.assert_array_equal(accel_i, want["a"])
+    np.testing.assert_array_equal(gyro_i, want["g"])
+    chain_a, chain_g = to_stamp_many(dt, world.T_b_i, f_i[steps], omega_i[steps], omega_b, alpha_b)
+    np.testing.assert_array_equal(chain_a, want["fc"])
+    np.testing.assert_array_equal(chain_g, want["wc"])

@@ -52,12 +52,12 @@ from sim.flight import (
     ReferenceFollower,
 )
 from sim.imu import (
-    ImuReading,
     ImuSampler,
-    chain_imu_i,
-    imu_discrepancy,
+    ImuSteps,
+    chain_imu_many_i,
+    imu_discrepancy_many,
     rate_correction_i,
-    to_stamp,
+    to_stamp_many,
 )
 from sim.mesh import Scenery, scenery
 from sim.noise import mount_error, noisy_depth, noisy_pose, noisy_rgb
@@ -322,7 +322,12 @@ class _Imu:
     """The scenario's IMU (``[imu]``), read at every physics step as it is taken
     (``World.on_step``: the state it starts from, under the controls it applies): a reading
     when one is due, and the noise-free sensors compared with ``vnav.imu``'s chain at every
-    step."""
+    step.
+
+    Each step only keeps the state the IMU reads (``sim.imu.ImuSteps``) and whether a reading
+    is due; the readings, their noise, the chain and the discrepancy are computed for every
+    step at once in ``record`` (equal to the last bit to the per-step functions':
+    ``tests/test_sim_imu.py``), so that the IMU adds little to a camera tick."""
 
     def __init__(self, spec: ScenarioSpec, world: World, seq: np.random.SeedSequence) -> None:
         imu = spec.scene.imu
@@ -332,48 +337,66 @@ class _Imu:
         self.sampler = ImuSampler(
             imu, float(world.model.opt.timestep), np.random.default_rng(seq), clock_offset_s
         )
-        self.readings: list[ImuReading] = []
-        self.chain: list[tuple[np.ndarray, np.ndarray]] = []
-        """``vnav.imu``'s noise-free prediction of each reading (the recording plots it)."""
-        self.max_discrepancy = 0.0
-        self.steps_checked = 0
-        self.omega_b: list[np.ndarray] = []
-        """The body's rate at every step, for the gyro's fourth order (``record``)."""
+        self.timestep_s = float(world.model.opt.timestep)
+        self.gravity_w = world.model.opt.gravity.copy()
+        self.T_b_i = world.T_b_i
+        self.state = ImuSteps(world)
         self.steps: list[int] = []
         """The step of each reading."""
-        self.omega_next_b = np.zeros(3)
-        self.R_b_i = world.T_b_i[:3, :3].copy()
         world.on_step = self  # the first step's call reads t = 0
 
     def __call__(self, world: World) -> None:
-        chain = chain_imu_i(world)
-        self.max_discrepancy = max(self.max_discrepancy, imu_discrepancy(world, chain))
-        self.steps_checked += 1
-        omega_b = world.angular_velocity_b
-        self.omega_b.append(omega_b)
-        # MuJoCo's Euler step: the rate the step about to be taken leaves.
-        self.omega_next_b = omega_b + float(world.model.opt.timestep) * world.angular_acceleration_b
-        if self.sampler.due(world):
-            self.steps.append(len(self.omega_b) - 1)
-            self.readings.append(self.sampler.sample(world))
-            # The prediction at the reading's instant, moved to the stamp as the sampler
-            # moves MuJoCo's sensors (``sim.imu.to_stamp``).
-            self.chain.append(to_stamp(world, *chain))
+        self.state.take(world)
+        if self.sampler.take_due(world):
+            self.steps.append(len(self.state) - 1)
 
     def record(self) -> ImuRecord:
-        r = self.readings
+        s = self.state.stacked()
+        chain_i = chain_imu_many_i(
+            s["T_w_b"],
+            self.T_b_i,
+            s["acceleration_w"],
+            s["angular_velocity_b"],
+            s["angular_acceleration_b"],
+            self.gravity_w,
+        )
+        discrepancy = imu_discrepancy_many(s["accel_i"], s["gyro_i"], *chain_i)
+        # The largest, NaN aside, 0 without a step (as a running max from 0 would be).
+        max_discrepancy = float(np.nanmax(discrepancy, initial=0.0))
+        steps = np.array(self.steps, dtype=np.int64)
+        omega_b, alpha_b = s["angular_velocity_b"], s["angular_acceleration_b"]
+        # The readings and the chain's prediction at their instants, moved to the stamps.
+        accel_i, gyro_i = to_stamp_many(
+            self.timestep_s,
+            self.T_b_i,
+            s["accel_i"][steps],
+            s["gyro_i"][steps],
+            omega_b[steps],
+            alpha_b[steps],
+        )
+        t_s, accel_i, gyro_i = self.sampler.sample_many(s["time_s"][steps], accel_i, gyro_i)
+        accel_chain_i, gyro_chain_i = to_stamp_many(
+            self.timestep_s,
+            self.T_b_i,
+            chain_i[0][steps],
+            chain_i[1][steps],
+            omega_b[steps],
+            alpha_b[steps],
+        )
+        # MuJoCo's Euler step: the rate the last step leaves.
+        omega_next_b = omega_b[-1] + self.timestep_s * alpha_b[-1] if len(omega_b) else np.zeros(3)
         # The gyro's rate at each stamp to fourth order, now that the steps after are known.
         fourth_i = rate_correction_i(
-            np.array([*self.omega_b, self.omega_next_b]), np.array(self.steps), self.R_b_i
+            np.concatenate([omega_b, omega_next_b[None]]), steps, self.T_b_i[:3, :3].copy()
         ).reshape(-1, 3)
         return ImuRecord(
-            t_s=np.array([x.t_s for x in r]),
-            accel_i=np.array([x.accel_i for x in r]).reshape(-1, 3),
-            gyro_i=np.array([x.gyro_i for x in r]).reshape(-1, 3) + fourth_i,
-            max_discrepancy=self.max_discrepancy,
-            steps_checked=self.steps_checked,
-            accel_chain_i=np.array([f for f, _ in self.chain]).reshape(-1, 3),
-            gyro_chain_i=np.array([w for _, w in self.chain]).reshape(-1, 3) + fourth_i,
+            t_s=t_s,
+            accel_i=accel_i.reshape(-1, 3),
+            gyro_i=gyro_i.reshape(-1, 3) + fourth_i,
+            max_discrepancy=max_discrepancy,
+            steps_checked=len(self.state),
+            accel_chain_i=accel_chain_i.reshape(-1, 3),
+            gyro_chain_i=gyro_chain_i.reshape(-1, 3) + fourth_i,
         )
 
 
