@@ -174,13 +174,14 @@ def _relative_difference(a: np.ndarray, b: np.ndarray) -> float:
 def _compare_with_reference(tracker: ApexTracker, tracked: list) -> tuple[int, float]:
     """Each ``TrackedApex`` of the latest image against ``_estimate_reference`` (the
     triangulation and ``midpoint_covariance`` of every view of the window again): the same
-    track, parallax, views and decisions; how many had a covariance and the largest relative
-    difference of the points and covariances."""
+    track, views and decisions; how many had a covariance and the largest relative
+    difference of the parallaxes, points and covariances."""
     by_id = {tr.id: tr for tr in tracker._tracks}
     compared, worst = 0, 0.0
     for got in tracked:
         ref = tracker._estimate_reference(by_id[got.track])
-        assert (got.track, got.parallax_deg, got.views) == (ref.track, ref.parallax_deg, ref.views)
+        assert (got.track, got.views) == (ref.track, ref.views)
+        worst = max(worst, abs(got.parallax_deg - ref.parallax_deg) / max(ref.parallax_deg, 1e-3))
         for a, b in ((got.p_w, ref.p_w), (got.apex_w, ref.apex_w), (got.cov_w, ref.cov_w)):
             assert (a is None) == (b is None)
             if a is not None:
@@ -228,7 +229,7 @@ def test_window_sums_do_not_drift_over_a_long_track() -> None:
     terms out of the window's sums by a subtraction, which would leave the rounding of the
     large terms behind in the small sums for good; the sums made again as the window turns
     over keep every estimate once it has turned over after they left (every tenth compared)
-    within 1e-9 of the reference's (without that: 5e-8)."""
+    within 1e-9 of the reference's (without that: 2e-6)."""
     rng = np.random.default_rng(11)
     offset_w = np.array([300.0, -200.0, 0.0])
     apex_w = APEX_W[0] + offset_w

@@ -80,6 +80,10 @@ _WINDOW_SHAPES: dict[str, tuple[int, ...]] = {
     "cov_uv": (2, 2),  # zero for exact pixels
     "Pw": (3,),  # P (c - origin): the ray's term of the normal equations' right side
     "Q": (12, 12),  # the ray's terms of the covariance (``_ray_terms``)
+    # The least cosine between the ray and itself or a later ray of the window, of each of
+    # the two kinds of ray: the least of them is ``parallax_deg``'s over the window.
+    "cos_dirs": (),
+    "cos_d": (),
 }
 """A ray's quantities a ``_Window`` keeps, with their shapes."""
 
@@ -123,6 +127,11 @@ class _Window:
         for key, value in rows.items():
             buf[key][i] = value[k]
         self.beside[i] = beside
+        for key in ("dirs", "d"):
+            ray, least = buf[key], buf["cos_" + key]
+            least[i] = ray[i] @ ray[i]
+            if i > self.lo:
+                np.minimum(least[self.lo : i], ray[self.lo : i] @ ray[i], out=least[self.lo : i])
         self.hi += 1
         if moved:
             self.rebuild(buf["T"][i, :3, 3])
@@ -150,6 +159,13 @@ class _Window:
         self.A = w["P"].sum(axis=0)
         self.b = w["Pw"].sum(axis=0)
         self.Q = w["Q"].sum(axis=0)
+
+    def parallax_deg(self, key: str) -> float:
+        """``multiview.parallax_deg`` of the window's rays ``key`` (``"dirs"`` or ``"d"``):
+        the least of the rays' least cosines with themselves and the later rays, which were
+        computed as each ray joined (a ray leaves from the front: the rays after one stay)."""
+        least = float(self.buf["cos_" + key][self.lo : self.hi].min())
+        return math.degrees(math.acos(min(1.0, max(-1.0, least))))
 
     def __getitem__(self, key: str) -> np.ndarray:
         return self.buf[key][self.lo : self.hi]
@@ -379,12 +395,12 @@ class ApexTracker:
         (``_views``, ``_ray_terms``) and summed as views join and leave."""
         w = track.window
         n = w.hi - w.lo
-        angle = parallax_deg(w["dirs"]) if n >= 2 else 0.0
+        angle = w.parallax_deg("dirs") if n >= 2 else 0.0
         if angle < self.min_parallax_deg:
             return TrackedApex(track.id, None, track.apex_w, angle, n)
         # triangulate_checked: the same checks, in its order.
         T = w["T"]
-        if w.beside[w.lo : w.hi].any() or not parallax_deg(w["d"]) >= self.min_parallax_deg:
+        if w.beside[w.lo : w.hi].any() or not w.parallax_deg("d") >= self.min_parallax_deg:
             return TrackedApex(track.id, None, None, angle, n)
         A_inv = np.linalg.inv(w.A)
         p_o = A_inv @ w.b  # the apex less the window's origin
