@@ -101,7 +101,9 @@ def evaluate_tick(
         This tick's planar depth image, metres.
     localizer : vnav.localize.Localizer
         The run's estimator (its camera, far plane, the sensor noise it is told, and the
-        several-image methods' state).
+        several-image methods' state). One made ``with_covariance=False`` gives no
+        single-image covariances: the records then have no NEES
+        (``DetectionRecord.nees``), their errors are the same.
     T_w_b_est : ndarray, shape (4, 4)
         The body pose the estimator looked up at the exposure stamp (the truth plus any pose
         noise, interpolated in the pose stream).
@@ -159,7 +161,11 @@ def evaluate_tick(
     cone_of = _match(estimates, truth.cones_w)
     T_c_w = se3.invert(T_w_c)
     estimates_w = [{m: p for m, p in e.items() if p is not None} for e in estimates]
-    scores = _nees_by_detection(estimates, estimates_w, cone_of, truth.cones_w)
+    scores = (
+        _nees_by_detection(estimates, estimates_w, cone_of, truth.cones_w)
+        if localizer.with_covariance
+        else [None] * len(estimates)
+    )
     records = [
         _compare(d, e, est_w, cone_of.get(i), truth.cones_w, T_c_w, in_view, scores[i])
         for i, (d, e, est_w) in enumerate(zip(detections, estimates, estimates_w, strict=True))
@@ -442,7 +448,7 @@ def _compare(
 ) -> DetectionRecord:
     """One detection's record: its estimates (``estimates_w``, those ``estimates`` gives)
     and, if matched, their errors, NEES (``scores``, in ``estimates_w``'s order,
-    ``_nees_by_detection``) and the range."""
+    ``_nees_by_detection``; None: not scored) and the range."""
     no_estimate = dict(estimates.no_estimate)
     covariances_w = dict(estimates.cov_w_by_method)
     if cone_index is None:
@@ -453,8 +459,7 @@ def _compare(
     p_c_true = se3.apply(T_c_w, p_true_w)
     range_m = float(np.linalg.norm(p_c_true))
     errors_m = _errors_m(p_true_w, estimates_w)
-    assert scores is not None  # matched: scored by _nees_by_detection
-    scored = dict(zip(estimates_w, scores, strict=True))
+    scored = {} if scores is None else dict(zip(estimates_w, scores, strict=True))
     nees_by_method = {m: v for m, v in scored.items() if _has_nees(v)}
     in_contract = cone_index in in_view and CONTRACT_DOMAIN.contains_range(range_m)
     return DetectionRecord(
