@@ -101,9 +101,7 @@ def evaluate_tick(
         This tick's planar depth image, metres.
     localizer : vnav.localize.Localizer
         The run's estimator (its camera, far plane, the sensor noise it is told, and the
-        several-image methods' state). One made ``with_covariance=False`` gives no
-        single-image covariances: the records then have no NEES
-        (``DetectionRecord.nees``), their errors are the same.
+        several-image methods' state).
     T_w_b_est : ndarray, shape (4, 4)
         The body pose the estimator looked up at the exposure stamp (the truth plus any pose
         noise, interpolated in the pose stream).
@@ -161,11 +159,7 @@ def evaluate_tick(
     cone_of = _match(estimates, truth.cones_w)
     T_c_w = se3.invert(T_w_c)
     estimates_w = [{m: p for m, p in e.items() if p is not None} for e in estimates]
-    scores = (
-        _nees_by_detection(estimates, estimates_w, cone_of, truth.cones_w)
-        if localizer.with_covariance
-        else [None] * len(estimates)
-    )
+    scores = _nees_by_detection(estimates, estimates_w, cone_of, truth.cones_w)
     records = [
         _compare(d, e, est_w, cone_of.get(i), truth.cones_w, T_c_w, in_view, scores[i])
         for i, (d, e, est_w) in enumerate(zip(detections, estimates, estimates_w, strict=True))
@@ -416,11 +410,15 @@ def _nees_by_detection(
 ) -> list[list[tuple[float, int]] | None]:
     """Each matched detection's ``nees_many`` of its estimates (in ``estimates_w``'s order)
     against its true cone, None for an unmatched one: every detection's as one stack (the
-    same numbers as a call per detection: ``nees_many`` scores a stack matrix by matrix)."""
+    same numbers as a call per detection: ``nees_many`` scores a stack matrix by matrix).
+    None too for a detection estimated without its covariances (a ``Localizer`` made
+    ``with_covariance=False``, the calibrated run's second pass: its errors alone are
+    read), whose records then have no NEES."""
     errors, covs, counts = [], [], []
     for i, (e, est_w) in enumerate(zip(estimates, estimates_w, strict=True)):
         cone_index = cone_of.get(i)
-        if cone_index is None:
+        covariances = e.cov_w_by_method
+        if cone_index is None or not all(m in covariances for m in est_w):
             counts.append(None)
             continue
         p_true_w = cones_w[cone_index]
