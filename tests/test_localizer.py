@@ -127,6 +127,37 @@ def test_the_localizer_is_localize_with_the_apex_tracker_driven_by_hand() -> Non
         assert np.linalg.norm(p_w - cone) <= max(0.05, 0.01 * range_m)
 
 
+def test_a_localizer_without_covariances_gives_the_same_estimates() -> None:
+    """``Localizer(with_covariance=False)`` (the calibrated run's second pass): every method's
+    estimate and reason equal to the last bit to those of a localizer with them, on noisy
+    poses; no covariance but the several-image methods', equal to the other's."""
+    world, images = _flight()
+    far_m = 0.99 * world.model.vis.map.zfar * world.model.stat.extent
+    noise = NoiseModel(position_std_m=0.02, attitude_std_deg=0.2)
+    full = Localizer(world.camera, far_m=far_m, noise=noise)
+    bare = Localizer(world.camera, far_m=far_m, noise=noise, with_covariance=False)
+    several = {m.name for m in METHODS if m.needs_several_images}
+    triangulated = 0
+    for t_s, T_w_b, detections, depth in images:
+        args = (t_s, detections, depth, T_w_b, world.T_b_c)
+        cov_T_w_b = body_pose_covariance(T_w_b, noise)
+        for a, b in zip(
+            full.update(*args, cov_T_w_b=cov_T_w_b),
+            bare.update(*args, cov_T_w_b=cov_T_w_b),
+            strict=True,
+        ):
+            assert a.no_estimate == b.no_estimate
+            for name in METHOD_NAMES:
+                assert (a[name] is None) == (b[name] is None), name
+                if a[name] is not None:
+                    np.testing.assert_array_equal(a[name], b[name])
+            assert set(b.cov_w_by_method) == set(a.cov_w_by_method) & several
+            for name, cov_w in b.cov_w_by_method.items():
+                np.testing.assert_array_equal(cov_w, a.cov_w_by_method[name])
+            triangulated += b.triangulated is not None
+    assert triangulated > 0
+
+
 def test_estimate_with_another_pose_is_the_estimator_alone(one_view) -> None:
     world, frame, detection = one_view["world"], one_view["frame"], one_view["detection"]
     far_m = one_view["far_m"]

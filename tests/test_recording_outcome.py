@@ -243,7 +243,9 @@ def test_the_recovered_mount_brings_depth_image_within_its_contract(builtin_runs
 def test_estimating_again_with_the_declared_mount_gives_the_runs_estimates(builtin_runs):
     """The second estimate reuses the run's evaluation, not a copy of it: with the declared
     mount in place of the recovered one it gives every estimate of the run, bit for bit
-    (same detections, depth under their masks, poses and covariances, a new Localizer)."""
+    (same detections, depth under their masks, poses and covariances, a new Localizer), and
+    their errors; not their NEES nor the single-image covariances, which nothing reads
+    (the tracker's covariance, by which it refuses an estimate, the run's)."""
     from scenarios.judge.calibration import estimate_with_mount
 
     result = builtin_runs["calibration"].result
@@ -251,10 +253,18 @@ def test_estimating_again_with_the_declared_mount_gives_the_runs_estimates(built
     camera = PinholeCamera.from_fovy(cam.fovy_deg, cam.width, cam.height)
     again = estimate_with_mount(result, camera, result.ticks[0].T_b_c_est)
     assert len(again) == len(result.ticks)
+    several = {name for name in METHOD_NAMES if method(name).needs_several_images}
     for a, b in zip(result.ticks, again, strict=True):
         for name in METHOD_NAMES:
             assert np.array_equal(a.estimates_w(name), b.estimates_w(name)), (a.tick, name)
         assert [d.errors_m for d in a.detections] == [d.errors_m for d in b.detections]
+        for da, db in zip(a.detections, b.detections, strict=True):
+            # Scored only where every estimate has its covariance: the tracker's alone.
+            if not set(db.estimates_w) <= several:
+                assert db.nees == {}
+            assert set(db.covariances_w) == set(da.covariances_w) & several
+            for name, cov_w in db.covariances_w.items():
+                assert np.array_equal(cov_w, da.covariances_w[name])
 
 
 def test_report_gives_each_methods_errors_with_both_mounts(builtin_runs):

@@ -355,6 +355,11 @@ class Localizer:
     methods : tuple of Method, optional
         The methods to run, ``vnav.methods.active_methods()`` by default (the built-ins, and a
         run's user functions within ``vnav.methods.extended``).
+    with_covariance : bool
+        False skips the covariances of the methods that estimate from one image (and of
+        those built from them, and the users'), as ``localize``'s ``with_covariance``, for
+        the points alone; the estimates are the same. The several-image methods still give
+        theirs (the apex tracker refuses an estimate by its covariance).
     """
 
     def __init__(
@@ -365,9 +370,11 @@ class Localizer:
         *,
         noise: NoiseModel = NOISELESS,
         methods: tuple[Method, ...] | None = None,
+        with_covariance: bool = True,
     ) -> None:
         self.camera, self.cone, self.far_m, self.noise = camera, cone, far_m, noise
         self.methods = active_methods() if methods is None else methods
+        self.with_covariance = bool(with_covariance)
         self._tracks = {
             name: estimator.start(camera, cone) for name, estimator in _by_kind(self.methods)[2]
         }
@@ -384,7 +391,8 @@ class Localizer:
         cov_T_b_c: np.ndarray | None = None,
         T_w_b_newest: np.ndarray | None = None,
     ) -> list[ConeEstimates]:
-        """Every estimate of each detection in one image, with its covariance.
+        """Every estimate of each detection in one image, with its covariance (unless the
+        localizer was made ``with_covariance=False``).
 
         Parameters
         ----------
@@ -419,7 +427,7 @@ class Localizer:
             T_w_b_newest = se3.check_pose(T_w_b_newest, "T_w_b_newest")
         observations = [_observation(exposure, d, depth) for d in detections]
         estimates = [
-            _localize(o, d, True, self.methods, t_s, T_w_b_newest)
+            _localize(o, d, self.with_covariance, self.methods, t_s, T_w_b_newest)
             for o, d in zip(observations, detections, strict=True)
         ]
         for name, track in self._tracks.items():

@@ -76,62 +76,139 @@ _WINDOW_SHAPES: dict[str, tuple[int, ...]] = {
     "PcS": (3, 3),  # -P [c]x
     "Sd": (3, 3),  # [d]x
     "D": (3, 2),  # the unit ray's change per pixel
-    "cov_T": (6, 6),
-    "cov_uv": (2, 2),
+    "cov_T": (6, 6),  # zero for an exact pose
+    "cov_uv": (2, 2),  # zero for exact pixels
+    "Pw": (3,),  # P (c - origin): the ray's term of the normal equations' right side
+    "Q": (12, 12),  # the ray's terms of the covariance (``_ray_terms``)
+    # The least cosine between the ray and itself or a later ray of the window, of each of
+    # the two kinds of ray: the least of them is ``parallax_deg``'s over the window.
+    "cos_dirs": (),
+    "cos_d": (),
 }
 """A ray's quantities a ``_Window`` keeps, with their shapes."""
+
+_REBUILT_BY_RAY = ("Pw", "Q")
+"""The quantities that depend on the window's origin, made again when it moves."""
 
 
 class _Window:
     """A track's rays as stacked arrays, each ray's own quantities computed once, when it
-    joins: what ``triangulate_checked`` and ``midpoint_covariance`` compute from every
-    view of the window at each image (rays, projectors, the Jacobians' parts that do not
-    depend on the estimate). Rows ``lo:hi`` of buffers twice ``max_views`` long; when full,
-    the window's rows move to the front."""
+    joins, and the window's sums over them kept as rays join and leave: what
+    ``triangulate_checked`` and ``midpoint_covariance`` compute from every view of the
+    window at each image (``_ray_terms``). Rows ``lo:hi`` of buffers twice ``max_views``
+    long; when full, the window's rows move to the front, and the sums are made again from
+    its rows about a new origin (the newest ray's centre): a ray that left took its terms
+    out of the sums by a subtraction, which leaves the rounding of its terms behind, and
+    the sums are never more than ``2 max_views`` joins and leaves away from a fresh sum."""
 
-    __slots__ = ("beside", "buf", "hi", "lo", "pixels", "posed")
+    __slots__ = ("A", "Q", "b", "beside", "buf", "hi", "lo", "origin")
 
-    def __init__(self, capacity: int) -> None:
+    def __init__(self, capacity: int, origin: np.ndarray) -> None:
         self.buf = {k: np.zeros((capacity, *s)) for k, s in _WINDOW_SHAPES.items()}
         self.beside = np.zeros(capacity, dtype=bool)
-        self.posed = np.zeros(capacity, dtype=bool)
-        self.pixels = np.zeros(capacity, dtype=bool)
         self.lo = self.hi = 0
+        self.origin = origin.copy()
+        self.A = np.zeros((3, 3))  # sum P_i
+        self.b = np.zeros(3)  # sum P_i (c_i - origin)
+        self.Q = np.zeros((12, 12))  # sum of the rays' covariance terms
 
-    def append(
-        self,
-        rows: dict[str, np.ndarray],
-        k: int,
-        beside: bool,
-        cov_T: np.ndarray | None,
-        cov_uv: np.ndarray | None,
-    ) -> None:
-        """Row ``k`` of ``rows`` (``ApexTracker._views``) and the view's covariances (None:
-        exact) as the window's newest ray."""
+    def append(self, rows: dict[str, np.ndarray], k: int, beside: bool) -> None:
+        """Row ``k`` of ``rows`` (``ApexTracker._views``, with ``_ray_terms`` about this
+        window's origin) as the window's newest ray."""
         capacity = self.beside.size
-        if self.hi == capacity:
+        moved = self.hi == capacity
+        if moved:
             n = self.hi - self.lo
-            for a in (*self.buf.values(), self.beside, self.posed, self.pixels):
+            for a in (*self.buf.values(), self.beside):
                 a[:n] = a[self.lo : self.hi]
             self.lo, self.hi = 0, n
         i = self.hi
         buf = self.buf
         for key, value in rows.items():
             buf[key][i] = value[k]
-        if cov_T is not None:
-            buf["cov_T"][i] = cov_T
-        if cov_uv is not None:
-            buf["cov_uv"][i] = cov_uv
         self.beside[i] = beside
-        self.posed[i] = cov_T is not None
-        self.pixels[i] = cov_uv is not None
+        for key in ("dirs", "d"):
+            ray, least = buf[key], buf["cos_" + key]
+            least[i] = ray[i] @ ray[i]
+            if i > self.lo:
+                np.minimum(least[self.lo : i], ray[self.lo : i] @ ray[i], out=least[self.lo : i])
         self.hi += 1
+        if moved:
+            self.rebuild(buf["T"][i, :3, 3])
+        else:
+            self.A += buf["P"][i]
+            self.b += buf["Pw"][i]
+            self.Q += buf["Q"][i]
 
     def popleft(self) -> None:
+        i = self.lo
+        buf = self.buf
+        self.A -= buf["P"][i]
+        self.b -= buf["Pw"][i]
+        self.Q -= buf["Q"][i]
         self.lo += 1
+
+    def rebuild(self, origin: np.ndarray) -> None:
+        """The rays' terms about ``origin`` and the sums made again from the window's rows."""
+        self.origin = origin.copy()
+        lo, hi = self.lo, self.hi
+        w = {k: self.buf[k][lo:hi] for k in _WINDOW_SHAPES}
+        origins = np.broadcast_to(self.origin, (hi - lo, 3))
+        for key, value in zip(_REBUILT_BY_RAY, _ray_terms(w, origins), strict=True):
+            self.buf[key][lo:hi] = value
+        self.A = w["P"].sum(axis=0)
+        self.b = w["Pw"].sum(axis=0)
+        self.Q = w["Q"].sum(axis=0)
+
+    def parallax_deg(self, key: str) -> float:
+        """``multiview.parallax_deg`` of the window's rays ``key`` (``"dirs"`` or ``"d"``):
+        the least of the rays' least cosines with themselves and the later rays, which were
+        computed as each ray joined (a ray leaves from the front: the rays after one stay)."""
+        least = float(self.buf["cos_" + key][self.lo : self.hi].min())
+        return math.degrees(math.acos(min(1.0, max(-1.0, least))))
 
     def __getitem__(self, key: str) -> np.ndarray:
         return self.buf[key][self.lo : self.hi]
+
+
+_EYE3 = np.eye(3)
+# E[k, i, j] = delta_ij at d_k, delta_jk at d_i: ``M(w) = sum_k w_k E_k``, ``E_k = d_k I +
+# d e_k^T`` (``_ray_terms``) as two broadcasts of the identity.
+_E_FIRST = _EYE3[None, None, :, :]
+_E_SECOND = _EYE3[:, None, :][None]
+
+
+def _ray_terms(w: dict[str, np.ndarray], origins: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each ray's terms of the window's sums, (K, 3) and (K, 12, 12), about ``origins``
+    (K, 3): ``P_i (c_i - o)`` and the covariance's terms.
+
+    ``midpoint_covariance`` of views about the midpoint ``p`` is ``A^-1 S A^-T`` with
+    ``S = sum_i J_i C_i J_i^T``, ``J_i`` each view's Jacobian (pose ``[P, -P [c]x + M [d]x]``,
+    pixel ``-M D``), whose ``M = (d . w) I + d w^T`` is linear in ``w = c - p``:
+    ``M(w) = sum_k w_k E_k``, ``E_k = d_k I + d e_k^T``. With ``w = (c - o) - (p - o)`` and
+    ``q = [1, -(p - o)]``, ``J_i = sum_a q_a H_ia``: ``H_i0`` the Jacobian at ``p = o``,
+    ``H_ik`` ``[0, E_k [d]x]`` (pose) and ``-E_k D`` (pixel). So
+    ``S = sum_ab q_a q_b sum_i H_ia C_i H_ib^T``: the sum over the rays of the (12, 12)
+    ``H_i C_i H_i^T`` (``H_i`` the four ``H_ia`` stacked) holds the covariance at any ``p``.
+    An origin near the rays keeps ``|p - o|`` to the range, and the quadratic form's
+    cancellation to that of the reference's ``w``.
+    """
+    d, P = w["d"], w["P"]
+    n = len(d)
+    w0 = w["T"][:, :3, 3] - origins
+    M0 = np.einsum("ni,ni->n", d, w0)[:, None, None] * _EYE3 + d[:, :, None] * w0[:, None, :]
+    E = d[:, :, None, None] * _E_FIRST + d[:, None, :, None] * _E_SECOND
+    Hp = np.zeros((n, 4, 3, 6))
+    Hp[:, 0, :, :3] = P
+    Hp[:, 0, :, 3:] = w["PcS"] + M0 @ w["Sd"]
+    Hp[:, 1:, :, 3:] = E @ w["Sd"][:, None]
+    Hu = np.empty((n, 4, 3, 2))
+    Hu[:, 0] = -(M0 @ w["D"])
+    Hu[:, 1:] = -(E @ w["D"][:, None])
+    Hp = Hp.reshape(n, 12, 6)
+    Hu = Hu.reshape(n, 12, 2)
+    Q = Hp @ w["cov_T"] @ Hp.transpose(0, 2, 1) + Hu @ w["cov_uv"] @ Hu.transpose(0, 2, 1)
+    return np.einsum("nij,nj->ni", P, w0), Q
 
 
 @dataclass
@@ -219,15 +296,25 @@ class ApexTracker:
         assigned = self._associate(centre, directions)
         beside, rows = self._views(T, uv)
         rows["dirs"] = directions
+        n = len(uv)
+        rows["cov_T"] = np.broadcast_to(
+            np.zeros((6, 6)) if cov_T_w_c is None else cov_T_w_c, (n, 6, 6)
+        )
+        rows["cov_uv"] = np.broadcast_to(np.zeros((2, 2)) if cov_uv is None else cov_uv, (n, 2, 2))
+        # Each ray's terms about its track's origin (a new track's: this camera's centre).
+        origins = np.array(
+            [assigned[k].window.origin if k in assigned else centre for k in range(n)]
+        )
+        rows.update(zip(_REBUILT_BY_RAY, _ray_terms(rows, origins.reshape(n, 3)), strict=True))
         out = []
         for k, d in enumerate(directions):
             track = assigned.get(k)
             if track is None:
-                track = _Track(self._next_id, _Window(2 * self.max_views))
+                track = _Track(self._next_id, _Window(2 * self.max_views, centre))
                 self._next_id += 1
                 self._tracks.append(track)
             track.rays.append((float(t_s), centre.copy(), d, T, uv[k], cov_T_w_c, cov_uv))
-            track.window.append(rows, k, bool(beside[k]), cov_T_w_c, cov_uv)
+            track.window.append(rows, k, bool(beside[k]))
             while len(track.rays) > self.max_views:
                 track.rays.popleft()
                 track.window.popleft()
@@ -302,26 +389,30 @@ class ApexTracker:
         return out
 
     def _estimate(self, track: _Track) -> TrackedApex:
-        """The track's apex, base and covariance from its window's stacked rays: the numbers
-        of ``_estimate_reference`` (the triangulation and ``midpoint_covariance`` of every
-        view again, at each image), each view's own part computed once (``_views``)."""
+        """The track's apex, base and covariance from its window's sums (``_Window``): the
+        numbers of ``_estimate_reference`` (the triangulation and ``midpoint_covariance`` of
+        every view again, at each image) but for rounding, each view's terms computed once
+        (``_views``, ``_ray_terms``) and summed as views join and leave."""
         w = track.window
         n = w.hi - w.lo
-        angle = parallax_deg(w["dirs"]) if n >= 2 else 0.0
+        angle = w.parallax_deg("dirs") if n >= 2 else 0.0
         if angle < self.min_parallax_deg:
             return TrackedApex(track.id, None, track.apex_w, angle, n)
         # triangulate_checked: the same checks, in its order.
-        d, P, T = w["d"], w["P"], w["T"]
-        c = T[:, :3, 3]
-        if w.beside[w.lo : w.hi].any() or not parallax_deg(d) >= self.min_parallax_deg:
+        T = w["T"]
+        if w.beside[w.lo : w.hi].any() or not w.parallax_deg("d") >= self.min_parallax_deg:
             return TrackedApex(track.id, None, None, angle, n)
-        A = P.sum(axis=0)
-        apex = np.linalg.solve(A, np.einsum("nij,nj->i", P, c))
-        if not np.all(np.einsum("ni,ni->n", apex - c, T[:, :3, 2]) > 0.0):
+        A_inv = np.linalg.inv(w.A)
+        p_o = A_inv @ w.b  # the apex less the window's origin
+        apex = w.origin + p_o
+        if not np.all(np.einsum("ni,ni->n", apex - T[:, :3, 3], T[:, :3, 2]) > 0.0):
             return TrackedApex(track.id, None, None, angle, n)
         track.apex_w = apex
         base = apex - np.array([0.0, 0.0, self.cone.height_m])
-        cov = _window_covariance(w, np.linalg.inv(A), apex)
+        q = np.concatenate(([1.0], -p_o))
+        S = np.einsum("a,aibj,b->ij", q, w.Q.reshape(4, 3, 4, 3), q)
+        cov = A_inv @ S @ A_inv.T
+        cov = 0.5 * (cov + cov.T)
         range_m = float(np.linalg.norm(apex - track.rays[-1][1]))
         if (
             math.sqrt(max(float(np.linalg.eigvalsh(cov)[-1]), 0.0))
@@ -361,33 +452,6 @@ class ApexTracker:
         ):
             return TrackedApex(track.id, None, apex, angle, len(track.rays), None)
         return TrackedApex(track.id, base, apex, angle, len(track.rays), cov)
-
-
-def _window_covariance(w: _Window, A_inv: np.ndarray, p_w: np.ndarray) -> np.ndarray:
-    """``midpoint_covariance`` of the window's views at ``p_w``, ``A_inv = (sum P_i)^-1``,
-    from the parts ``ApexTracker._view`` computed once per view: the same operations on the
-    same numbers."""
-    d, P = w["d"], w["P"]
-    wv = w["T"][:, :3, 3] - p_w
-    M = np.einsum("ni,ni->n", d, wv)[:, None, None] * np.eye(3) + d[:, :, None] * wv[:, None, :]
-    cov = np.zeros((3, 3))
-    lo, hi = w.lo, w.hi
-    posed, pixels = w.posed[lo:hi], w.pixels[lo:hi]
-    # Every view (the usual case): the window's rows themselves, not a copy of them all.
-    every = slice(None)
-    if posed.any():
-        k = every if posed.all() else np.flatnonzero(posed)
-        Pk = P[k]
-        J = np.empty((len(Pk), 3, 6))
-        J[:, :, :3] = Pk
-        J[:, :, 3:] = w["PcS"][k] + M[k] @ w["Sd"][k]
-        J = A_inv @ J
-        cov += np.einsum("nij,njk,nlk->il", J, w["cov_T"][k], J)
-    if pixels.any():
-        k = every if pixels.all() else np.flatnonzero(pixels)
-        J = -(A_inv @ M[k] @ w["D"][k])
-        cov += np.einsum("nij,njk,nlk->il", J, w["cov_uv"][k], J)
-    return 0.5 * (cov + cov.T)
 
 
 def _angle_to_track(d: np.ndarray, track: _Track, v: np.ndarray | None, n: float | None) -> float:

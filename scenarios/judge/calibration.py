@@ -216,10 +216,18 @@ def estimate_with_mount(
     (``vnav.plugin``) is called again, with the recovered mount as its ``T_b_c``, by a second
     estimator of its own (``PluginEstimator.second_pass``): the run's calls, failures and
     diagnosis stay those of the declared mount; a function stopped for its time limit in the
-    run is not called again."""
+    run is not called again.
+
+    Only the estimates' errors are read from this pass (the report's ``recovered_mount``
+    statistics, the recording's errors and error-against-range crosses): the single-image
+    methods' covariances and every NEES are not computed (``Localizer(with_covariance=
+    False)``), so its records have no NEES and covariances only for the several-image
+    methods (the apex tracker refuses an estimate by its own)."""
     spec = result.spec
     methods = second_pass_methods(active_methods())
-    localizer = Localizer(camera, far_m=spec.scene.zfar_m, noise=spec.noise, methods=methods)
+    localizer = Localizer(
+        camera, far_m=spec.scene.zfar_m, noise=spec.noise, methods=methods, with_covariance=False
+    )
     return reevaluate(
         result.ticks, result.cones_w, localizer, T_b_c, cov_T_b_c=mount_covariance(spec.noise)
     )

@@ -523,11 +523,15 @@ def _nees_by_detection(
 ) -> list[list[tuple[float, int]] | None]:
     """Each matched detection's ``nees_many`` of its estimates (in ``estimates_w``'s order)
     against its true cone, None for an unmatched one: every detection's as one stack (the
-    same numbers as a call per detection: ``nees_many`` scores a stack matrix by matrix)."""
+    same numbers as a call per detection: ``nees_many`` scores a stack matrix by matrix).
+    None too for a detection estimated without its covariances (a ``Localizer`` made
+    ``with_covariance=False``, the calibrated run's second pass: its errors alone are
+    read), whose records then have no NEES."""
     errors, covs, counts = [], [], []
     for i, (e, est_w) in enumerate(zip(estimates, estimates_w, strict=True)):
         cone_index = cone_of.get(i)
-        if cone_index is None:
+        covariances = e.cov_w_by_method
+        if cone_index is None or not all(m in covariances for m in est_w):
             counts.append(None)
             continue
         p_true_w = cones_w[cone_index]
@@ -555,7 +559,7 @@ def _compare(
 ) -> DetectionRecord:
     """One detection's record: its estimates (``estimates_w``, those ``estimates`` gives)
     and, if matched, their errors, NEES (``scores``, in ``estimates_w``'s order,
-    ``_nees_by_detection``) and the range."""
+    ``_nees_by_detection``; None: not scored) and the range."""
     no_estimate = dict(estimates.no_estimate)
     covariances_w = dict(estimates.cov_w_by_method)
     if cone_index is None:
@@ -566,8 +570,7 @@ def _compare(
     p_c_true = se3.apply(T_c_w, p_true_w)
     range_m = float(np.linalg.norm(p_c_true))
     errors_m = _errors_m(p_true_w, estimates_w)
-    assert scores is not None  # matched: scored by _nees_by_detection
-    scored = dict(zip(estimates_w, scores, strict=True))
+    scored = {} if scores is None else dict(zip(estimates_w, scores, strict=True))
     nees_by_method = {m: v for m, v in scored.items() if _has_nees(v)}
     in_contract = cone_index in in_view and CONTRACT_DOMAIN.contains_range(range_m)
     return DetectionRecord(
