@@ -282,8 +282,9 @@ class CalibrationRecord:
     ticks_recovered : list of TickRecord or None
         Every camera tick estimated again with the recovered mount in place of the declared
         one, on the same images and poses (``scenarios.run.evaluate.reevaluate``): what
-        calibrating gives the estimates, with their errors but no NEES and covariances only
-        for the several-image methods (``estimate_with_mount``). None when refused.
+        calibrating gives the estimates, with their errors, covariances only for the
+        several-image methods (``estimate_with_mount``) and so no NEES but the tracker's where
+        it is a detection's only estimate. None when refused.
     """
 
     T_b_c: np.ndarray | None
