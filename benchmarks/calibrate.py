@@ -22,6 +22,12 @@ Three figures:
   sensors equal to 1e-15: same flight, same images), each error and its standard error;
   timed, target under 10 s on 2 cores. ``imu_held_out`` gives the held-out mounts the tests
   use.
+- ``imu coverage``: over ``--imu-coverage-seeds`` of those held-out flights (noise-free IMU),
+  how many camera-IMU answers lie within 3 standard errors of the truth on every one of the 7
+  parameters (the rotation about each axis of the camera, the translation along each axis of
+  the IMU, the offset; ``ImuCamCalibration.covariance``; the target: 19 of 20), and the
+  largest ratio of error to standard error. Each flight is simulated once (15-25 s on 2 busy
+  cores) and calibrated once (3-15 s).
 """
 
 from __future__ import annotations
@@ -49,6 +55,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--only-imu", action="store_true", help="the camera-IMU figures alone (they are quick)"
+    )
+    parser.add_argument(
+        "--imu-coverage-seeds",
+        type=int,
+        default=20,
+        help="held-out flights of the imu built-in for its standard errors' coverage (0: none)",
     )
 
 
@@ -243,8 +255,12 @@ def run(args: argparse.Namespace) -> dict:
     repeat = getattr(args, "repeat", 3)
     quiet = getattr(args, "json", False)
     imu_seeds = getattr(args, "imu_seeds", 3)
+    imu_coverage_seeds = getattr(args, "imu_coverage_seeds", 20)
     if getattr(args, "only_imu", False):
-        return imu_noise(imu_seeds, repeat, quiet)
+        figures = imu_noise(imu_seeds, repeat, quiet)
+        if imu_coverage_seeds > 0:
+            figures.update(_imu_coverage_figures(imu_coverage_seeds, quiet))
+        return figures
     figures = _synthetic_figures(repeat, quiet)
     figures.update(_recording_figures(repeat, quiet))
     seeds = getattr(args, "seeds", 20)
@@ -252,6 +268,8 @@ def run(args: argparse.Namespace) -> dict:
     if seeds > 0:
         figures.update(_coverage_figures(seeds, rate, quiet))
     figures.update(imu_noise(imu_seeds, repeat, quiet))
+    if imu_coverage_seeds > 0:
+        figures.update(_imu_coverage_figures(imu_coverage_seeds, quiet))
     return figures
 
 
@@ -402,3 +420,70 @@ def imu_noise(seeds: int, repeat: int = 3, quiet: bool = False) -> dict:
                 f"{1e3 * figures[f'{key}_std_time_offset_s_median']:.3f} ms"
             )
     return figures
+
+
+def imu_tangent_error(solved, T_i_c_true: np.ndarray, time_offset_true_s: float) -> np.ndarray:
+    """The truth against a camera-IMU answer in ``ImuCamCalibration.covariance``'s
+    coordinates, (7,): the rotation's error in the answer's camera frame (``R_i_c_true =
+    R_i_c exp(phi^)``, rad), the translation's in the IMU frame (m), the offset's (s)."""
+    from vnav import so3
+
+    phi = so3.log(solved.T_i_c[:3, :3].T @ T_i_c_true[:3, :3])
+    return np.r_[
+        phi, T_i_c_true[:3, 3] - solved.T_i_c[:3, 3], time_offset_true_s - solved.time_offset_s
+    ]
+
+
+def imu_coverage_ratio(result) -> np.ndarray | str:
+    """A finished run's camera-IMU error over its standard error on the 7 parameters, (7,)
+    (``imu_tangent_error`` over the square roots of ``ImuCamCalibration.covariance``'s
+    diagonal), or the reason it was refused."""
+    from scenarios.judge.imu_calibration import imu_inputs_from_run
+    from vnav.calibration import CalibrationError
+
+    inputs = imu_inputs_from_run(result)
+    try:
+        solved = inputs.solve()
+    except CalibrationError as exc:
+        return str(exc)
+    assert inputs.T_i_c_true is not None and inputs.time_offset_true_s is not None
+    error = imu_tangent_error(solved, inputs.T_i_c_true, inputs.time_offset_true_s)
+    return error / np.sqrt(np.diag(solved.covariance))
+
+
+def imu_coverage(seeds: range) -> list[np.ndarray | str]:
+    """``imu_coverage_ratio`` of the held-out flight ``imu_held_out(seed)`` run at ``seed``,
+    for each of ``seeds``."""
+    from scenarios import pipeline  # noqa: F401  (imports the run's modules in their order)
+    from scenarios.run.runner import run_scenario
+    from scenarios.scenario.spec import from_dict
+
+    return [imu_coverage_ratio(run_scenario(from_dict(imu_held_out(s)), seed=s)) for s in seeds]
+
+
+def _imu_coverage_figures(seeds: int, quiet: bool) -> dict[str, object]:
+    """``imu coverage``: over ``seeds`` held-out flights, how many camera-IMU answers hold the
+    truth within ``COVERAGE_SIGMAS`` standard errors; printed unless ``quiet``."""
+    t0 = time.perf_counter()
+    ratios = imu_coverage(range(seeds))
+    elapsed_s = time.perf_counter() - t0
+    answered = [r for r in ratios if not isinstance(r, str)]
+    within = sum(bool(np.all(np.abs(r) <= COVERAGE_SIGMAS)) for r in answered)
+    worst = max((float(np.max(np.abs(r))) for r in answered), default=math.nan)
+    rms = np.sqrt(np.mean(np.square(answered), axis=0)) if answered else np.full(7, math.nan)
+    if not quiet:
+        print(
+            f"camera-IMU standard errors over {seeds} held-out flights of the imu built-in "
+            f"(noise-free IMU, {elapsed_s / max(seeds, 1):.0f} s each): the truth within "
+            f"{COVERAGE_SIGMAS:g} standard errors on all 7 parameters in {within} of "
+            f"{len(answered)} answered ({len(ratios) - len(answered)} refused); largest "
+            f"error / standard error {worst:.2f}; RMS per parameter (rotation x y z, "
+            f"translation x y z, offset) {np.array2string(rms, precision=2)}"
+        )
+    return {
+        "imu_coverage_seeds": seeds,
+        "imu_coverage_refused": len(ratios) - len(answered),
+        "imu_coverage_within": within,
+        "imu_coverage_worst_ratio": worst,
+        "imu_coverage_rms_ratio": [float(v) for v in rms],
+    }
