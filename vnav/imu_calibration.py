@@ -44,16 +44,16 @@ about two axes); the offset from the rates' changes (angular acceleration); the 
 the lever arm's tangential and centripetal terms (``vnav.imu.point_acceleration_w``), so it
 needs angular acceleration and rate, and its precision is the weakest of the three. The
 standard errors come from a covariance of three terms, as ``vnav.calibration``'s, each for an
-error the others miss. (Measured on 13 held-out flights of the ``imu`` built-in, noise-free
+error the others miss. (Measured on 20 held-out flights of the ``imu`` built-in, noise-free
 IMU, ``benchmarks.calibrate.imu_held_out``: ``(J^T J)^-1`` scaled by the residual variance put
-the truth beyond 3 standard errors in 11 of them, the translation along the IMU's z axis 1.5-3.8
-mm off, always the same way, at 0.7-0.9 mm of standard error. The apexes' errors, linearised
-through the fit, reproduce each flight's error to 0.2 mm; they are independent from image to
-image, but a smooth field over the image, the same on every flight, carries the error: a cubic
-in the pixel's position fitted to them alone gives most of it, 2.7 and 3.0 of 3.2 and 3.8 mm on
-two of the flights. With the three terms: 13
-of 13 within 3 standard errors, ``python -m benchmarks calibrate --only-imu
---imu-coverage-seeds 20`` for the full figure.)
+the truth beyond 3 standard errors in 16 of them, up to 5.2; on seeds 0-12 the translation
+along the IMU's z axis was 1.5-3.8 mm off, always the same way, at 0.7-0.9 mm of standard
+error. The apexes' errors,
+linearised through the fit, reproduce each flight's error to 0.2 mm; they are independent from
+image to image, but a smooth field over the image, which the same flight meets again whatever
+the mounts, carries the error: a cubic in the pixel's position fitted to them alone gives most
+of it, 2.7 and 3.0 of 3.2 and 3.8 mm on two of the flights. With the three terms: 20 of 20
+within 3 standard errors, at most 2.2; ``python -m benchmarks calibrate --only-imu``.)
 
 - the apexes' own errors, by the cluster-robust ("sandwich") covariance with each image a
   cluster (Cameron & Miller, "A Practitioner's Guide to Cluster-Robust Inference", J. Human
