@@ -96,6 +96,7 @@ __all__ = [
     "CalibrationError",
     "ImuCamCalibration",
     "ImuIntegral",
+    "apex_bias_fields",
     "calibrate_camera_imu",
     "rotation_from_rates",
     "time_offset_from_rates",
