@@ -22,6 +22,13 @@ Three figures:
   sensors equal to 1e-15: same flight, same images), each error and its standard error;
   timed, target under 10 s on 2 cores. ``imu_held_out`` gives the held-out mounts the tests
   use.
+- ``imu coverage``: over ``--imu-coverage-seeds`` of those held-out flights, noise-free and
+  with the built-in's IMU noise (one run each, calibrated from both readings), how many
+  camera-IMU answers lie within 3 standard errors of the truth on every one of the 7
+  parameters (the rotation about each axis of the camera, the translation along each axis of
+  the IMU, the offset; ``ImuCamCalibration.covariance``; the target: 19 of 20), and the
+  largest ratio of error to standard error. Each flight is simulated once (12-27 s on 2 busy
+  cores) and calibrated twice (2-5 s each).
 """
 
 from __future__ import annotations
@@ -49,6 +56,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--only-imu", action="store_true", help="the camera-IMU figures alone (they are quick)"
+    )
+    parser.add_argument(
+        "--imu-coverage-seeds",
+        type=int,
+        default=20,
+        help="held-out flights of the imu built-in for its standard errors' coverage (0: none)",
     )
 
 
@@ -181,17 +194,18 @@ def _synthetic_flight():
     return camera, stamps, T_w_b, t_true - 0.03, apex_uv, apex_w, declared
 
 
-def imu_held_out(seed: int) -> dict:
-    """The ``imu`` built-in with mounts and a clock offset it was not tuned on, noise-free, its
-    calibration checks alone: the IMU's mount error uniform in +-2 deg about each axis and
-    +-1 cm along each, the camera's in +-2 deg and +-3 cm, the camera-IMU clock offset
-    (``time_offset_s``) in +-40 ms, all drawn from ``seed``."""
+def imu_held_out(seed: int, noise: bool = False) -> dict:
+    """The ``imu`` built-in with mounts and a clock offset it was not tuned on, noise-free (with
+    ``noise``, the built-in's IMU noise), its calibration checks alone: the IMU's mount error
+    uniform in +-2 deg about each axis and +-1 cm along each, the camera's in +-2 deg and
+    +-3 cm, the camera-IMU clock offset (``time_offset_s``) in +-40 ms, all drawn from
+    ``seed``."""
     from scenarios.scenario import builtin
 
     rng = np.random.default_rng(2000 + seed)
     data = builtin.imu()
     data["name"] = f"imu-held-out-{seed}"
-    imu = {k: v for k, v in data["imu"].items() if k not in builtin.IMU_NOISE}
+    imu = {k: v for k, v in data["imu"].items() if noise or k not in builtin.IMU_NOISE}
     imu["mount_error"] = {
         "position_m": [float(v) for v in rng.uniform(-0.01, 0.01, 3)],
         "rpy_deg": [float(v) for v in rng.uniform(-2.0, 2.0, 3)],
@@ -243,8 +257,12 @@ def run(args: argparse.Namespace) -> dict:
     repeat = getattr(args, "repeat", 3)
     quiet = getattr(args, "json", False)
     imu_seeds = getattr(args, "imu_seeds", 3)
+    imu_coverage_seeds = getattr(args, "imu_coverage_seeds", 20)
     if getattr(args, "only_imu", False):
-        return imu_noise(imu_seeds, repeat, quiet)
+        figures = imu_noise(imu_seeds, repeat, quiet)
+        if imu_coverage_seeds > 0:
+            figures.update(_imu_coverage_figures(imu_coverage_seeds, quiet))
+        return figures
     figures = _synthetic_figures(repeat, quiet)
     figures.update(_recording_figures(repeat, quiet))
     seeds = getattr(args, "seeds", 20)
@@ -252,6 +270,8 @@ def run(args: argparse.Namespace) -> dict:
     if seeds > 0:
         figures.update(_coverage_figures(seeds, rate, quiet))
     figures.update(imu_noise(imu_seeds, repeat, quiet))
+    if imu_coverage_seeds > 0:
+        figures.update(_imu_coverage_figures(imu_coverage_seeds, quiet))
     return figures
 
 
@@ -400,5 +420,96 @@ def imu_noise(seeds: int, repeat: int = 3, quiet: bool = False) -> dict:
                 f"{figures[f'{key}_std_rotation_deg_median']:.4f} deg, "
                 f"{1e3 * figures[f'{key}_std_translation_m_median']:.2f} mm, "
                 f"{1e3 * figures[f'{key}_std_time_offset_s_median']:.3f} ms"
+            )
+    return figures
+
+
+def imu_tangent_error(solved, T_i_c_true: np.ndarray, time_offset_true_s: float) -> np.ndarray:
+    """The truth against a camera-IMU answer in ``ImuCamCalibration.covariance``'s
+    coordinates, (7,): the rotation's error in the answer's camera frame (``R_i_c_true =
+    R_i_c exp(phi^)``, rad), the translation's in the IMU frame (m), the offset's (s)."""
+    from vnav import so3
+
+    phi = so3.log(solved.T_i_c[:3, :3].T @ T_i_c_true[:3, :3])
+    return np.r_[
+        phi, T_i_c_true[:3, 3] - solved.T_i_c[:3, 3], time_offset_true_s - solved.time_offset_s
+    ]
+
+
+def imu_coverage_ratio(result) -> np.ndarray | str:
+    """A finished run's camera-IMU error over its standard error on the 7 parameters, (7,)
+    (``imu_tangent_error`` over the square roots of ``ImuCamCalibration.covariance``'s
+    diagonal), or the reason it was refused."""
+    from scenarios.judge.imu_calibration import imu_inputs_from_run
+    from vnav.calibration import CalibrationError
+
+    inputs = imu_inputs_from_run(result)
+    try:
+        solved = inputs.solve()
+    except CalibrationError as exc:
+        return str(exc)
+    assert inputs.T_i_c_true is not None and inputs.time_offset_true_s is not None
+    error = imu_tangent_error(solved, inputs.T_i_c_true, inputs.time_offset_true_s)
+    return error / np.sqrt(np.diag(solved.covariance))
+
+
+def imu_coverage(seeds: range, noise: bool = False) -> list[np.ndarray | str]:
+    """``imu_coverage_ratio`` of the held-out flight ``imu_held_out(seed)`` run at ``seed``,
+    for each of ``seeds``; with ``noise``, that of the flight with the built-in's IMU noise
+    too, as ``(noise-free, noisy)`` pairs (one run each: the noise-free readings are the
+    same run's, ``noise_free``)."""
+    from scenarios import pipeline  # noqa: F401  (imports the run's modules in their order)
+    from scenarios.run.runner import run_scenario
+    from scenarios.scenario.spec import from_dict
+
+    ratios: list = []
+    for seed in seeds:
+        result = run_scenario(from_dict(imu_held_out(seed, noise=noise)), seed=seed)
+        clean = imu_coverage_ratio(noise_free(result) if noise else result)
+        ratios.append((clean, imu_coverage_ratio(result)) if noise else clean)
+    return ratios
+
+
+def _coverage_line(ratios: list) -> tuple[int, int, float, np.ndarray]:
+    """Answers within ``COVERAGE_SIGMAS`` on every parameter, refusals, the largest ratio and
+    the RMS ratio per parameter."""
+    answered = [r for r in ratios if not isinstance(r, str)]
+    within = sum(bool(np.all(np.abs(r) <= COVERAGE_SIGMAS)) for r in answered)
+    worst = max((float(np.max(np.abs(r))) for r in answered), default=math.nan)
+    rms = np.sqrt(np.mean(np.square(answered), axis=0)) if answered else np.full(7, math.nan)
+    return within, len(ratios) - len(answered), worst, rms
+
+
+def _imu_coverage_figures(seeds: int, quiet: bool) -> dict[str, object]:
+    """``imu coverage``: over ``seeds`` held-out flights, noise-free and with the built-in's
+    IMU noise, how many camera-IMU answers hold the truth within ``COVERAGE_SIGMAS`` standard
+    errors; printed unless ``quiet``."""
+    t0 = time.perf_counter()
+    pairs = imu_coverage(range(seeds), noise=True)
+    elapsed_s = time.perf_counter() - t0
+    figures: dict[str, object] = {"imu_coverage_seeds": seeds}
+    if not quiet:
+        print(
+            f"camera-IMU standard errors over {seeds} held-out flights of the imu built-in "
+            f"({elapsed_s / max(seeds, 1):.0f} s each: one run, two calibrations)"
+        )
+    for k, (key, label) in enumerate(
+        (("imu_coverage", "noise-free IMU"), ("imu_coverage_noisy", "the built-in's IMU noise"))
+    ):
+        within, refused, worst, rms = _coverage_line([p[k] for p in pairs])
+        figures.update(
+            {
+                f"{key}_refused": refused,
+                f"{key}_within": within,
+                f"{key}_worst_ratio": worst,
+                f"{key}_rms_ratio": [float(v) for v in rms],
+            }
+        )
+        if not quiet:
+            print(
+                f"  {label}: the truth within {COVERAGE_SIGMAS:g} standard errors on all 7 "
+                f"parameters in {within} of {seeds - refused} answered ({refused} refused); "
+                f"largest error / standard error {worst:.2f}; RMS per parameter (rotation "
+                f"x y z, translation x y z, offset) {np.array2string(rms, precision=2)}"
             )
     return figures
