@@ -21,7 +21,8 @@ Three figures:
   noise-free readings, ``ImuRecord.accel_chain_i`` and ``gyro_chain_i``, which MuJoCo's
   sensors equal to 1e-15: same flight, same images), each error and its standard error;
   timed, target under 10 s on 2 cores. ``imu_held_out`` gives the held-out mounts the tests
-  use.
+  use; ``imu_long_flight`` is one of them flown for 30 s (the rocking twice over), whose
+  calibration is timed too (target under 10 s).
 - ``imu coverage``: over ``--imu-coverage-seeds`` of those held-out flights, noise-free and
   with the built-in's IMU noise (one run each, calibrated from both readings), how many
   camera-IMU answers lie within 3 standard errors of the truth on every one of the 7
@@ -260,6 +261,7 @@ def run(args: argparse.Namespace) -> dict:
     imu_coverage_seeds = getattr(args, "imu_coverage_seeds", 20)
     if getattr(args, "only_imu", False):
         figures = imu_noise(imu_seeds, repeat, quiet)
+        figures.update(_imu_long_figures(repeat, quiet))
         if imu_coverage_seeds > 0:
             figures.update(_imu_coverage_figures(imu_coverage_seeds, quiet))
         return figures
@@ -270,9 +272,43 @@ def run(args: argparse.Namespace) -> dict:
     if seeds > 0:
         figures.update(_coverage_figures(seeds, rate, quiet))
     figures.update(imu_noise(imu_seeds, repeat, quiet))
+    figures.update(_imu_long_figures(repeat, quiet))
     if imu_coverage_seeds > 0:
         figures.update(_imu_coverage_figures(imu_coverage_seeds, quiet))
     return figures
+
+
+def imu_long_flight(seed: int = 1) -> dict:
+    """``imu_held_out(seed)`` flown for 30 s: the ``imu`` built-in's rocking (its waypoints
+    after the first second) flown twice over, no checks."""
+    import copy
+
+    data = imu_held_out(seed)
+    waypoints = data["flight"]["waypoints"]
+    again = [dict(copy.deepcopy(w), t=w["t"] + 15.0) for w in waypoints[2:]]
+    data["flight"]["waypoints"] = waypoints + again
+    data.update(name="imu-30s", duration_s=30.0, checks=[])
+    return data
+
+
+def _imu_long_figures(repeat: int, quiet: bool) -> dict[str, object]:
+    """The camera-IMU calibration (``calibrate_imu_run``, two passes) of ``imu_long_flight``,
+    best and median of ``repeat`` calls, wall time (numpy's BLAS may take both cores), target
+    under 10 s; printed unless ``quiet``."""
+    from scenarios.judge.imu_calibration import calibrate_imu_run
+    from scenarios.run.runner import run_scenario
+    from scenarios.scenario.spec import from_dict
+
+    result = run_scenario(from_dict(imu_long_flight()), seed=1)
+    med, best, record = _time_s(lambda: calibrate_imu_run(result), repeat)
+    if not quiet:
+        print(
+            f"camera-IMU calibration of a 30 s flight ({len(result.ticks)} images, held-out "
+            f"mounts, noise-free IMU): best {best:.2f} s, median {med:.2f} s "
+            f"(target < {TARGET_S:g} s)"
+        )
+        print(_imu_line("  against the truth", record))
+    return {"imu_30s_images": len(result.ticks), "imu_30s_median_s": med, "imu_30s_best_s": best}
 
 
 def _synthetic_figures(repeat: int, quiet: bool) -> dict[str, object]:
