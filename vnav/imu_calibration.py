@@ -519,6 +519,25 @@ def rotation_from_rates(omega_c: np.ndarray, omega_i: np.ndarray) -> np.ndarray:
 # ------------------------------------------------------------------------------ the solver
 
 
+def _checked_apexes(apex_uv: list[np.ndarray]) -> list[np.ndarray]:
+    """Each image's apexes as a float (K, 2) array.
+
+    Raises
+    ------
+    ValueError
+        If one is not (K, 2) or holds NaN or inf (named by its index).
+    """
+    uvs = []
+    for i, uv in enumerate(apex_uv):
+        uv = np.asarray(uv, dtype=np.float64)
+        if uv.size and (uv.ndim != 2 or uv.shape[1] != 2):
+            raise ValueError(f"apex_uv[{i}] must have shape (K, 2), got {uv.shape}")
+        if not np.isfinite(uv).all():
+            raise ValueError(f"apex_uv[{i}] must be finite; it holds NaN or inf")
+        uvs.append(uv.reshape(-1, 2))
+    return uvs
+
+
 def calibrate_camera_imu(
     camera: PinholeCamera,
     image_stamps_cam_s: np.ndarray,
@@ -582,14 +601,7 @@ def calibrate_camera_imu(
     for name, value in (("max_offset_s", max_offset_s), ("window_s", window_s)):
         if isinstance(value, bool) or not (isinstance(value, int | float) and 0 < value < 1e3):
             raise ValueError(f"{name} must be a positive number of seconds, got {value!r}")
-    uvs = []
-    for i, uv in enumerate(apex_uv):
-        uv = np.asarray(uv, dtype=np.float64)
-        if uv.size and (uv.ndim != 2 or uv.shape[1] != 2):
-            raise ValueError(f"apex_uv[{i}] must have shape (K, 2), got {uv.shape}")
-        if not np.isfinite(uv).all():
-            raise ValueError(f"apex_uv[{i}] must be finite; it holds NaN or inf")
-        uvs.append(uv.reshape(-1, 2))
+    uvs = _checked_apexes(apex_uv)
     g_w = _v.vector(gravity_w, "gravity_w", batched=False)
     integral = ImuIntegral(imu_stamps_s, gyro_i, accel_i)
     t_imu = integral.t_s

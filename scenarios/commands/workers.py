@@ -128,6 +128,23 @@ class _Bar:
             self.shown = False
 
 
+def _worker_options(args: argparse.Namespace) -> dict[str, Any]:
+    """What each worker's ``session`` is given: the command's options, its directory and its
+    environment (picklable)."""
+    return {
+        "seed": args.seed,
+        "quiet": args.quiet,
+        "exports": tuple(getattr(args, "exports", ())),
+        "estimator": list(getattr(args, "estimator", None) or []),
+        "estimator_timeout_s": getattr(args, "estimator_timeout_s", None),
+        "progress": not args.quiet and sys.stderr.isatty(),
+        # A fork server outlives its first command in a process that runs several (tests):
+        # its workers take this command's directory and environment, not the server's.
+        "cwd": os.getcwd(),
+        "environ": dict(os.environ),
+    }
+
+
 def run_parallel(
     specs: list[ScenarioSpec],
     args: argparse.Namespace,
@@ -156,18 +173,7 @@ def run_parallel(
         When the command or a worker is stopped by a signal; every worker has ended then.
     """
     ctx = _context()
-    options = {
-        "seed": args.seed,
-        "quiet": args.quiet,
-        "exports": tuple(getattr(args, "exports", ())),
-        "estimator": list(getattr(args, "estimator", None) or []),
-        "estimator_timeout_s": getattr(args, "estimator_timeout_s", None),
-        "progress": not args.quiet and sys.stderr.isatty(),
-        # A fork server outlives its first command in a process that runs several (tests):
-        # its workers take this command's directory and environment, not the server's.
-        "cwd": os.getcwd(),
-        "environ": dict(os.environ),
-    }
+    options = _worker_options(args)
     bar = _Bar(specs, progress_bar if options["progress"] else None)
     pending = start_order(specs)
     done: dict[int, tuple[int, Path | None, Messages]] = {}
