@@ -163,6 +163,13 @@ def _add_run_parser(sub) -> None:
         "there are two cores and two scenarios, else 1; 1 runs them one after the other in "
         "this process)",
     )
+    _add_estimator_and_export_options(p)
+    p.set_defaults(func=_verb("run"))
+
+
+def _add_estimator_and_export_options(p) -> None:
+    """``run``'s options for the user's own code and for other tools: ``--estimator``,
+    ``--estimator-timeout-s`` and ``--export``."""
     p.add_argument(
         "--estimator",
         action="append",
@@ -192,7 +199,6 @@ def _add_run_parser(sub) -> None:
         + "; ".join(f"{n}: {export.FORMATS[n].help}" for n in export.available())
         + " (README: Use the data elsewhere)",
     )
-    p.set_defaults(func=_verb("run"))
 
 
 def _add_sweep_parser(sub) -> None:
