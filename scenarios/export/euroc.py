@@ -68,7 +68,6 @@ from scenarios.export.base import (
     ExportResult,
     Flusher,
     TickDepthMm,
-    depth_mm,
     stamp_ns,
     tick_depth_mm,
     write_flushed,
@@ -88,7 +87,6 @@ __all__ = [
     "GROUNDTRUTH_HEADER",
     "IMU_HEADER",
     "EurocExporter",
-    "depth_png_mm",
 ]
 
 logger = logging.getLogger(__name__)
@@ -123,23 +121,6 @@ IMU_HEADER = (
     "a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]"
 )
 """The EuRoC IMU table's header: the angular rate first, then the specific force."""
-
-
-def depth_png_mm(depth_m: np.ndarray, far_m: float) -> np.ndarray:
-    """The depth PNG's pixels: ``scenarios.export.base.depth_mm`` (uint16 millimetres, 0
-    where there is no return or beyond 65.535 m).
-
-    Parameters
-    ----------
-    depth_m : ndarray, shape (H, W)
-    far_m : float
-        The renderer's far plane (the sky reads it).
-
-    Returns
-    -------
-    ndarray, shape (H, W), uint16
-    """
-    return depth_mm(depth_m, far_m)
 
 
 def _write_file(path: Path, data: bytes) -> None:
