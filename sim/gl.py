@@ -12,6 +12,11 @@ here raises at import (with no platform library at all ``MUJOCO_GL=disable`` is 
 ``create_gl_context`` raises one clear ``GLBackendError`` when a rendering context cannot
 be made.
 
+Every OpenGL call of the process runs on one thread of its own (``on_gl_thread``,
+``submit_gl``): a context is current on one thread at a time, and a render drawn there
+overlaps the physics and the estimation of the caller's thread (``sim.render.Renderer.
+render_async``): the software rasteriser's threads and the caller's then keep both cores busy.
+
 MuJoCo's own warnings (e.g. "Nan, Inf or huge value in QVEL") are routed to the ``mujoco``
 logger instead of stderr and a ``MUJOCO_LOG.TXT`` file in the working directory.
 """
@@ -23,7 +28,10 @@ import ctypes.util
 import logging
 import os
 import sys
-from typing import Any
+import threading
+from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
+from typing import Any, TypeVar
 
 logger = logging.getLogger(__name__)
 
@@ -114,6 +122,49 @@ if mujoco.get_mju_user_warning() is None:
     mujoco.set_mju_user_warning(_log_mujoco_warning)
 
 
+_T = TypeVar("_T")
+
+_gl_lock = threading.Lock()
+_gl_executor: ThreadPoolExecutor | None = None
+_gl_pid: int | None = None  # the process that made _gl_executor (a forked child makes its own)
+_gl_thread: threading.Thread | None = None
+
+
+def _note_gl_thread() -> None:
+    global _gl_thread
+    _gl_thread = threading.current_thread()
+
+
+def submit_gl(fn: Callable[..., _T], /, *args: Any, **kwargs: Any) -> Future[_T]:
+    """Queue ``fn(*args, **kwargs)`` for the process's OpenGL thread.
+
+    One thread makes every OpenGL context current and draws in it, in the order the calls
+    are queued (an EGL or OSMesa context is current on one thread at a time). The thread is
+    made on the first call of each process (a forked child's first call makes its own).
+
+    Returns
+    -------
+    concurrent.futures.Future
+        Its ``result()`` is ``fn``'s, or raises what ``fn`` raised.
+    """
+    global _gl_executor, _gl_pid
+    with _gl_lock:
+        if _gl_executor is None or _gl_pid != os.getpid():
+            _gl_executor = ThreadPoolExecutor(
+                max_workers=1, thread_name_prefix="vnav-gl", initializer=_note_gl_thread
+            )
+            _gl_pid = os.getpid()
+        return _gl_executor.submit(fn, *args, **kwargs)
+
+
+def on_gl_thread(fn: Callable[..., _T], /, *args: Any, **kwargs: Any) -> _T:
+    """``fn(*args, **kwargs)`` called on the process's OpenGL thread (at once when already on
+    it); its result, or what it raised."""
+    if threading.current_thread() is _gl_thread and _gl_pid == os.getpid():
+        return fn(*args, **kwargs)
+    return submit_gl(fn, *args, **kwargs).result()
+
+
 def create_gl_context(width: int, height: int) -> Any:
     """Create and make current an off-screen OpenGL context for MuJoCo.
 
@@ -121,6 +172,9 @@ def create_gl_context(width: int, height: int) -> Any:
     ----------
     width, height : int
         Largest image size the context will render, in pixels.
+
+    The context is made on the process's OpenGL thread (``on_gl_thread``), current there;
+    call its ``make_current`` and ``free`` there too.
 
     Returns
     -------
@@ -143,11 +197,16 @@ def create_gl_context(width: int, height: int) -> Any:
             f"libraries (libEGL, libOSMesa) could be loaded. {_INSTALL_HINT}"
         )
     try:
-        context = mujoco.GLContext(width, height)
-        context.make_current()
+        context = on_gl_thread(_new_context, width, height)
     except Exception as exc:  # the backends raise ImportError, RuntimeError, GLError...
         raise GLBackendError(
             f"Could not create an OpenGL context with MUJOCO_GL={backend!r} "
             f"(tried: {tried}): {type(exc).__name__}: {exc}. {_INSTALL_HINT}"
         ) from exc
+    return context
+
+
+def _new_context(width: int, height: int) -> Any:
+    context = mujoco.GLContext(width, height)
+    context.make_current()
     return context

@@ -8,12 +8,19 @@ One ``mujoco.mjr_render`` fills the colour and the depth buffer; one
 The onboard view leaves out the drone's geom group (``sim.names.DRONE_GEOM_GROUP``): a real
 camera does not image its own housing. External views (``camera="chase"`` or a
 ``mujoco.MjvCamera``) show it.
+
+The state is drawn into a scene on the caller's thread (``mjv_updateScene``: it reads the
+simulation's data); the scene is rendered and read back on the process's OpenGL thread
+(``sim.gl.submit_gl``), which reads nothing but the scene. ``render_async`` returns at once,
+so the caller steps the physics and estimates while the image is drawn; two scenes take
+turns, so that the next state can be drawn while the last is rendered.
 """
 
 from __future__ import annotations
 
 import logging
 import math
+from concurrent.futures import Future
 from dataclasses import dataclass
 from typing import Any
 
@@ -21,7 +28,7 @@ import numpy as np
 
 from sim import names
 from sim.config import RENDER_QUALITY, RenderQuality
-from sim.gl import create_gl_context, mujoco
+from sim.gl import create_gl_context, mujoco, on_gl_thread, submit_gl
 from sim.world import World
 from vnav.camera import PinholeCamera
 
@@ -31,6 +38,9 @@ SKY_DOME_MIN_FRACTION = 0.696
 """Nearest ray distance of MuJoCo's skybox, as a fraction of zfar (measured, mujoco 4.0)."""
 SKY_THRESHOLD_FRACTION = 0.65
 """Depth pixels whose ray is longer than this fraction of zfar are sky: set to zfar."""
+SCENE_BUFFERS = 2
+"""Scenes a renderer draws into in turn: one rendered on the OpenGL thread while the caller
+draws the next state into the other."""
 DECORATION_GEOMS = 100
 """Room in the scene's geom buffer beyond the model's own geoms, sites, cameras and lights,
 for what MuJoCo adds to draw (none with the options used here; a margin, not a limit)."""
@@ -174,9 +184,15 @@ class Renderer:
             raise ValueError(f"quality must be one of {list(RENDER_QUALITY)}, got {quality!r}")
         self.quality = quality
         settings = RENDER_QUALITY[quality]
-        self._open_contexts(gl_context, settings)
+        on_gl_thread(self._open_contexts, gl_context, settings)
 
-        self._scene = mujoco.MjvScene(model, maxgeom=scene_geoms(model))
+        self._scenes = [
+            mujoco.MjvScene(model, maxgeom=scene_geoms(model)) for _ in range(SCENE_BUFFERS)
+        ]
+        # The render last queued from each scene: a scene is drawn into again only once it
+        # is done. The next scene to draw into.
+        self._in_flight: list[Future | None] = [None] * SCENE_BUFFERS
+        self._next_scene = 0
         self._rect = mujoco.MjrRect(0, 0, self.width, self.height)
         self._rgb = np.empty((self.height, self.width, 3), dtype=np.uint8)
         self._depth = np.empty((self.height, self.width), dtype=np.float32)
@@ -217,7 +233,12 @@ class Renderer:
     # ---------------------------------------------------------------- lifecycle
     def close(self) -> None:
         """Free the rendering context, and the OpenGL context if it is the renderer's own
-        (idempotent)."""
+        (idempotent; on the OpenGL thread, after the renders queued)."""
+        if self._con is None and self._gl is None:
+            return
+        on_gl_thread(self._free)
+
+    def _free(self) -> None:
         if self._con is not None and self._gl is not None:
             self._gl.make_current()
             self._con.free()
@@ -280,7 +301,7 @@ class Renderer:
         camera: str | int | mujoco.MjvCamera | None = None,
         show_drone: bool | None = None,
     ) -> RenderedImage:
-        """Render the current state.
+        """Render the current state (``render_async``, waited for).
 
         Parameters
         ----------
@@ -298,17 +319,62 @@ class Renderer:
         -------
         RenderedImage
         """
+        return self.render_async(
+            depth=depth, segmentation=segmentation, camera=camera, show_drone=show_drone
+        ).result()
+
+    def render_async(
+        self,
+        *,
+        depth: bool = True,
+        segmentation: bool = False,
+        camera: str | int | mujoco.MjvCamera | None = None,
+        show_drone: bool | None = None,
+    ) -> Future[RenderedImage]:
+        """Draw the current state now and render it on the OpenGL thread.
+
+        The simulation's data is read before this returns: the caller may step on at once.
+        The image is the same as ``render``'s, pixel for pixel. Parameters as ``render``'s.
+
+        Returns
+        -------
+        concurrent.futures.Future
+            Of the ``RenderedImage``.
+
+        Raises
+        ------
+        RuntimeError
+            If the renderer is closed.
+        ValueError
+            On an unknown camera.
+        """
         if self._con is None:
             raise RuntimeError("render() called after close()")
         cam, onboard = self._camera(camera)
         if show_drone is None:
             show_drone = not onboard
         option = self._external_option if show_drone else self._onboard_option
-        data = self.world.data
+        i = self._next_scene
+        self._next_scene = (i + 1) % SCENE_BUFFERS
+        if self._in_flight[i] is not None:
+            # Its last render must have read the scene before it is drawn into again (its
+            # errors are that render's caller's: not raised here).
+            self._in_flight[i].exception()
+        scene = self._update_scene(i, option, cam)
+        time_s = float(self.world.data.time)
+        future = submit_gl(self._draw, scene, depth, segmentation, time_s)
+        self._in_flight[i] = future
+        return future
+
+    def _draw(
+        self, scene: mujoco.MjvScene, depth: bool, segmentation: bool, time_s: float
+    ) -> RenderedImage:
+        """Render ``scene`` and read it back (on the OpenGL thread)."""
+        if self._con is None or self._gl is None:
+            raise RuntimeError("render() called after close()")
         self._gl.make_current()
         if not self._owns_gl:  # another renderer in this context may have bound its buffer
             mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN.value, self._con)
-        scene = self._update_scene(option, cam)
         scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = self._shadows
         scene.flags[mujoco.mjtRndFlag.mjRND_SEGMENT] = False
         scene.flags[mujoco.mjtRndFlag.mjRND_IDCOLOR] = False
@@ -323,13 +389,17 @@ class Renderer:
         seg = None
         if segmentation:
             seg = self._segmentation(scene)
-        return RenderedImage(rgb=rgb, depth=depth_m, segmentation=seg, time_s=float(data.time))
+        return RenderedImage(rgb=rgb, depth=depth_m, segmentation=seg, time_s=time_s)
 
-    def _update_scene(self, option: mujoco.MjvOption, cam: mujoco.MjvCamera) -> mujoco.MjvScene:
-        """Draw the current state into the scene, doubling its geom buffer while it is full.
+    def _update_scene(
+        self, i: int, option: mujoco.MjvOption, cam: mujoco.MjvCamera
+    ) -> mujoco.MjvScene:
+        """Draw the current state into scene ``i``, doubling its geom buffer while it is full.
 
         Parameters
         ----------
+        i : int
+            Which of the renderer's scenes.
         option : mujoco.MjvOption
             Which geom and site groups are drawn (onboard or external).
         cam : mujoco.MjvCamera
@@ -338,16 +408,16 @@ class Renderer:
         Returns
         -------
         mujoco.MjvScene
-            The renderer's scene (a larger one, kept, if the old one was full).
+            The renderer's scene ``i`` (a larger one, kept, if the old one was full).
         """
         model, data = self.world.model, self.world.data
-        scene = self._scene
+        scene = self._scenes[i]
         mujoco.mjv_updateScene(
             model, data, option, None, cam, mujoco.mjtCatBit.mjCAT_ALL.value, scene
         )
         while scene.ngeom >= scene.maxgeom:  # full: something may be left out; grow, redraw
             logger.warning("scene geom buffer of %d full: doubled", scene.maxgeom)
-            self._scene = scene = mujoco.MjvScene(model, maxgeom=2 * scene.maxgeom)
+            self._scenes[i] = scene = mujoco.MjvScene(model, maxgeom=2 * scene.maxgeom)
             mujoco.mjv_updateScene(
                 model, data, option, None, cam, mujoco.mjtCatBit.mjCAT_ALL.value, scene
             )

@@ -21,7 +21,7 @@ from collections import OrderedDict
 from typing import Any
 
 from sim.config import SceneConfig
-from sim.gl import create_gl_context
+from sim.gl import create_gl_context, on_gl_thread
 from sim.render import Renderer
 from sim.world import World
 
@@ -82,7 +82,7 @@ class SceneCache:
             _, (_, renderer) = self._scenes.popitem()
             renderer.close()
         if self._gl is not None:
-            self._gl.free()
+            on_gl_thread(self._gl.free)  # where every OpenGL call of the process runs
             self._gl = None
 
     def __len__(self) -> int:

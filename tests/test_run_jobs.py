@@ -64,7 +64,9 @@ def test_two_workers_write_and_print_what_one_process_does(tmp_path, monkeypatch
     """The same files, the same reports (but for timing_s and the recording's id), the same
     output in the scenarios' order, though the second scenario finishes first."""
     (tmp_path / "tiny.toml").write_text(TINY_TOML)
-    args = ("frame-problem", str(tmp_path / "tiny.toml"), "--duration", "2")
+    # frame-problem's whole flight (51 images) against tiny's 3: with a shorter flight the
+    # two finish within the workers' start-up and set-up of each other.
+    args = ("frame-problem", str(tmp_path / "tiny.toml"))
     serial = _run(tmp_path / "serial", monkeypatch, capsys, *args, "--jobs", "1")
     parallel = _run(tmp_path / "parallel", monkeypatch, capsys, *args, "--jobs", "2")
     a, b = tmp_path / "serial" / "out", tmp_path / "parallel" / "out"

@@ -26,7 +26,9 @@ import bisect
 import contextlib
 import logging
 import time
+from collections import deque
 from collections.abc import Callable
+from concurrent.futures import Future
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -61,7 +63,7 @@ from sim.imu import (
 )
 from sim.mesh import Scenery, scenery
 from sim.noise import mount_error, noisy_depth, noisy_pose, noisy_rgb
-from sim.render import Renderer
+from sim.render import RenderedImage, Renderer
 from sim.scene_cache import SceneCache
 from sim.world import World
 from vnav import quat, se3, so3
@@ -227,14 +229,25 @@ def _run_ticks(
         if flow.navigator is not None and flow.navigator.ended:
             break  # at the goal or a cone: no more images
         image = _capture(k, flow, world, renderer, camera_track, cones_w, result.timing_s)
+        evaluate.settle()  # the images before this one, while it renders
         evaluate(flow.expose(image))
     evaluate(flow.drain())
+    evaluate.settle()
     _finish(flow, world, result)
 
 
 class _Evaluator:
     """Evaluates the images the camera's link delivers, in order: each one's record appended
-    to the run's, the navigator steered by it and the observer told, each stage timed."""
+    to the run's, the navigator steered by it and the observer told, each stage timed.
+
+    In a flight that does not steer by what it sees, the images delivered wait (``settle``
+    evaluates them): the run steps the physics to the next image and queues its render
+    first, so that rendering overlaps the estimation and the physics. Every result is the
+    same: the images are evaluated in the same order, each with what was delivered with it
+    (the pose stream's lookups are made on delivery), and the noise of each image is drawn
+    in the order the images were taken (``_Flow.finish_through``). A closed loop evaluates
+    each image as it is delivered: what it sees steers the next physics step.
+    """
 
     def __init__(
         self,
@@ -251,13 +264,23 @@ class _Evaluator:
         self.n_ticks = n_ticks
         self.done = 0
         """Images evaluated so far."""
+        self.deferred = flow.navigator is None
+        self.waiting: list[Delivered] = []
 
     def __call__(self, delivered: list[Delivered]) -> None:
-        """Evaluate ``delivered``, in order."""
+        """Evaluate ``delivered``, in order (after those waiting), or keep them waiting."""
+        self.waiting += delivered
+        if not self.deferred:
+            self.settle()
+
+    def settle(self) -> None:
+        """Evaluate every image waiting, in order."""
+        delivered, self.waiting = self.waiting, []
         flow, observer, timing = self.flow, self.observer, self.result.timing_s
         for d in delivered:
-            t0 = time.perf_counter()
             image: _Image = d.payload
+            flow.finish_through(image, timing)
+            t0 = time.perf_counter()
             record = flow.evaluate(d)
             self.result.ticks.append(record)
             t1 = time.perf_counter()
@@ -284,22 +307,18 @@ def _capture(
     cones_w: np.ndarray,
     timing: dict[str, float],
 ) -> _Image:
-    """Camera tick ``k``'s image now: the camera moved along its track, the image rendered
-    (with the scenario's noise) and its cones detected, with the truth at this instant (its
-    ``cones_w`` the run's)."""
+    """Camera tick ``k``'s image taken now: the camera moved along its track, the render
+    queued (``_Flow.finish_through`` adds the scenario's noise and detects the cones), with
+    the truth at this instant (its ``cones_w`` the run's)."""
     t0 = time.perf_counter()
     if camera_track:
         world.set_camera_position_b(_interpolate(camera_track, world.time_s))
     t1 = time.perf_counter()
-    rgb, depth = flow.render(renderer)
-    t2 = time.perf_counter()
-    detections = detect_cones(rgb)
-    t3 = time.perf_counter()
+    image = flow.take(renderer)
     timing["physics"] += t1 - t0
-    timing["render"] += t2 - t1
-    timing["detect"] += t3 - t2
-    truth = _truth(k, world, flow.driver, cones_w)
-    return _Image(truth, detections, rgb, depth)
+    timing["render"] += time.perf_counter() - t1
+    image.truth = _truth(k, world, flow.driver, cones_w)
+    return image
 
 
 def _finish(flow: _Flow, world: World, result: RunResult) -> None:
@@ -400,14 +419,16 @@ class _Imu:
         )
 
 
-@dataclass(frozen=True)
+@dataclass
 class _Image:
-    """What travels with an image to the estimator (and the truth the evaluation needs)."""
+    """What travels with an image to the estimator (and the truth the evaluation needs):
+    its render until ``_Flow.finish_through`` has made the rest."""
 
-    truth: TickTruth
-    detections: list
-    rgb: np.ndarray
-    depth: np.ndarray | None
+    rendering: Future[RenderedImage] | None
+    truth: TickTruth | None = None
+    detections: list | None = None
+    rgb: np.ndarray | None = None
+    depth: np.ndarray | None = None
 
 
 class _Flow:
@@ -469,6 +490,7 @@ class _Flow:
         self._stamps: list[float] = []
         self._sent: list[np.ndarray] = []
         self._arrivals: list[float] = []
+        self._unfinished: deque[_Image] = deque()  # taken, not yet finished, in order
         self._sample()  # the first pose, at t = 0
         self.imu = None if spec.scene.imu is None else _Imu(spec, world, imu_seq)
 
@@ -577,15 +599,32 @@ class _Flow:
             out += self.advance_to(self._next_sample_step())
         return out
 
-    def render(self, renderer: Renderer) -> tuple[np.ndarray, np.ndarray | None]:
-        """The camera's image and depth now, with the scenario's image and depth noise."""
+    def take(self, renderer: Renderer) -> _Image:
+        """The camera's image of the state now, its render queued (``Renderer.render_async``)."""
+        image = _Image(renderer.render_async(depth=True))
+        self._unfinished.append(image)
+        return image
+
+    def finish_through(self, image: _Image, timing: dict[str, float]) -> None:
+        """Finish every image taken up to ``image``, in the order taken: the render waited
+        for, the scenario's image and depth noise added (drawn in that order, as if each were
+        finished when taken), the cones detected."""
         noise = self.spec.noise
-        image = renderer.render(depth=True)
-        rgb = noisy_rgb(image.rgb, noise, self.image_rng)
-        depth = image.depth
-        if depth is not None:
-            depth = noisy_depth(depth, noise, self.spec.scene.zfar_m, self.depth_rng)
-        return rgb, depth
+        while image.rendering is not None:
+            first = self._unfinished.popleft()
+            t0 = time.perf_counter()
+            rendered = first.rendering.result()
+            first.rendering = None
+            first.rgb = noisy_rgb(rendered.rgb, noise, self.image_rng)
+            first.depth = rendered.depth
+            if first.depth is not None:
+                first.depth = noisy_depth(
+                    first.depth, noise, self.spec.scene.zfar_m, self.depth_rng
+                )
+            t1 = time.perf_counter()
+            first.detections = detect_cones(first.rgb)
+            timing["render"] += t1 - t0
+            timing["detect"] += time.perf_counter() - t1
 
     def evaluate(self, d: Delivered) -> TickRecord:
         """Evaluate a delivered image with what the estimator was told: the pose at its
