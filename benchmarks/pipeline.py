@@ -2,8 +2,10 @@
 
 Runs built-in scenarios exactly as ``vnav-demo run`` does (640x480, recording to a temporary
 directory) and prints, per scenario and in total: ticks, ticks per second, milliseconds per
-tick of each stage (physics, render, detect, localize, log), the overhead ratio
-(detect + localize + log) / render (target <= 0.5), the share of the tick spent on time
+tick of each stage (physics, render, detect, localize, log) on the run's thread (``render``
+there: drawing the scene and waiting for the image) and of the OpenGL thread's rendering
+(``render_gl``, which overlaps the stages), the overhead ratio
+(detect + localize + log) / render_gl (target <= 0.5), the share of the tick spent on time
 (``streams``: the pose and image streams, the estimator's ``FrameBuffer`` and its lookups;
 target <= 10%: keeping the chain honest about time must not slow the pipeline by more), the
 share of a navigating built-in's tick spent on its map and planner (``navigate``: the
@@ -73,6 +75,9 @@ from scenarios.scenario import builtin
 from scenarios.scenario.spec import ScenarioSpec, from_dict
 from sim.scene_cache import SceneCache
 
+COLUMNS = (*STAGES, "render_gl")
+"""The stages on the run's thread, then the OpenGL thread's rendering."""
+
 TARGETS = {
     "overhead_ratio": 0.5,
     "rrd_bytes_per_tick": 60_000,
@@ -127,14 +132,14 @@ def _run_one(name: str, out: Path, scenes: SceneCache | None = None) -> dict:
     wall_s = time.perf_counter() - start
     result, rrd = outcome.result, outcome.rrd_path
     ticks = len(result.ticks)
-    ms = {k: 1e3 * result.timing_s[k] / ticks for k in STAGES}
+    ms = {k: 1e3 * result.timing_s[k] / ticks for k in COLUMNS}
     return {
         "navigates": result.navigation is not None,
         "ticks": ticks,
         "wall_s": wall_s,
         "ticks_per_s": ticks / wall_s,
         "ms_per_tick": ms,
-        "overhead_ratio": (ms["detect"] + ms["localize"] + ms["log"]) / ms["render"],
+        "overhead_ratio": (ms["detect"] + ms["localize"] + ms["log"]) / ms["render_gl"],
         "setup_s": result.timing_s["setup"],
         "rrd_bytes": rrd.stat().st_size,
         "rrd_bytes_per_tick": rrd.stat().st_size / ticks,
@@ -171,7 +176,7 @@ def run(args: argparse.Namespace) -> dict:
         all_wall_s = time.perf_counter() - start
     ticks = sum(p["ticks"] for p in per.values())
     total_ms = {
-        k: sum(p["ms_per_tick"][k] * p["ticks"] for p in per.values()) / ticks for k in STAGES
+        k: sum(p["ms_per_tick"][k] * p["ticks"] for p in per.values()) / ticks for k in COLUMNS
     }
     figures = {
         "scenarios": per,
@@ -181,8 +186,9 @@ def run(args: argparse.Namespace) -> dict:
             "ticks_per_s": ticks / all_wall_s,
             "ms_per_tick": total_ms,
             "overhead_ratio": (total_ms["detect"] + total_ms["localize"] + total_ms["log"])
-            / total_ms["render"],
-            "streams_share": total_ms["streams"] / sum(total_ms.values()),
+            / total_ms["render_gl"],
+            # Of the run's thread's time (render_gl overlaps it).
+            "streams_share": total_ms["streams"] / sum(total_ms[k] for k in STAGES),
             "rrd_bytes_per_tick": sum(p["rrd_bytes"] for p in per.values()) / ticks,
             "setup_s": sum(p["setup_s"] for p in per.values()),
             "navigate": _navigate_shares(per),
@@ -192,13 +198,15 @@ def run(args: argparse.Namespace) -> dict:
     if not args.json:
         header = (
             f"{'scenario':<19}{'ticks':>7}{'ticks/s':>8}"
-            + "".join(f"{s:>10}" for s in STAGES)
+            + "".join(f"{s:>10}" for s in COLUMNS)
             + f"{'overhead':>10}{'KB/tick':>10}{'setup s':>9}"
         )
         print(
             "pipeline at 640x480, ms per tick by stage; overhead = (detect + localize + log)"
-            " / render;\nsetup = world, GL context, file header and close, once per run; JPEG/PNG"
-            " encoding overlaps rendering on a worker thread"
+            " / render_gl;\nrender = the run's thread drawing the scene and waiting for the"
+            " image; render_gl = the OpenGL thread's rendering (wall time), overlapping the"
+            " other stages;\nsetup = world, GL context, file header and close, once per run;"
+            " JPEG/PNG encoding overlaps rendering on a worker thread"
         )
         print(header)
         print("-" * len(header))
@@ -206,7 +214,7 @@ def run(args: argparse.Namespace) -> dict:
         for name, p in rows:
             print(
                 f"{name:<19}{p['ticks']:>7}{p['ticks_per_s']:>8.1f}"
-                + "".join(f"{p['ms_per_tick'][s]:>10.2f}" for s in STAGES)
+                + "".join(f"{p['ms_per_tick'][s]:>10.2f}" for s in COLUMNS)
                 + f"{p['overhead_ratio']:>10.2f}{p['rrd_bytes_per_tick'] / 1e3:>10.1f}"
                 + f"{p['setup_s']:>9.2f}"
             )

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import logging
 import math
+import time
 from concurrent.futures import Future
 from dataclasses import dataclass
 from typing import Any
@@ -71,12 +72,16 @@ class RenderedImage:
         MuJoCo geom id seen at each pixel, -1 for background (sky).
     time_s : float
         Simulated time of the state rendered.
+    draw_s : float
+        Wall seconds the OpenGL thread spent rendering and reading this image back (while
+        the caller of ``render_async`` went on).
     """
 
     rgb: np.ndarray
     depth: np.ndarray | None
     segmentation: np.ndarray | None
     time_s: float
+    draw_s: float = 0.0
 
 
 def _tan_half_fovy(scene: mujoco.MjvScene) -> float:
@@ -372,6 +377,7 @@ class Renderer:
         """Render ``scene`` and read it back (on the OpenGL thread)."""
         if self._con is None or self._gl is None:
             raise RuntimeError("render() called after close()")
+        t0 = time.perf_counter()
         self._gl.make_current()
         if not self._owns_gl:  # another renderer in this context may have bound its buffer
             mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN.value, self._con)
@@ -389,7 +395,13 @@ class Renderer:
         seg = None
         if segmentation:
             seg = self._segmentation(scene)
-        return RenderedImage(rgb=rgb, depth=depth_m, segmentation=seg, time_s=time_s)
+        return RenderedImage(
+            rgb=rgb,
+            depth=depth_m,
+            segmentation=seg,
+            time_s=time_s,
+            draw_s=time.perf_counter() - t0,
+        )
 
     def _update_scene(
         self, i: int, option: mujoco.MjvOption, cam: mujoco.MjvCamera

@@ -388,6 +388,7 @@ def test_recording_is_finished_after_judging_with_the_verdicts(tmp_path, monkeyp
     assert given["judged"] == outcome.judged
     assert list(outcome.result.timing_s) == [
         *STAGES,
+        "render_gl",
         "setup",
         "calibrate",
         "judge",

@@ -470,8 +470,10 @@ class RunResult:
     seed : int
     ticks : list of TickRecord
     timing_s : dict of str to float
-        Seconds spent per stage (``physics``, ``streams``, ``render``, ``detect``,
-        ``localize``, ``navigate``, ``clearance``, ``log``) and once per run (``setup``: the
+        Seconds spent per stage on the run's thread (``physics``, ``streams``, ``render``:
+        drawing the scene and waiting for what the OpenGL thread had not rendered yet,
+        ``detect``, ``localize``, ``navigate``, ``clearance``, ``log``), ``render_gl``: the
+        OpenGL thread's rendering, overlapping the stages, and once per run (``setup``: the
         world, the GL context and the recording's start and finish,
         ``scenarios.run.runner.STAGES``); ``scenarios.pipeline``
         adds ``calibrate`` (the calibration and the second estimate with its mount, 0 when

@@ -169,7 +169,7 @@ def run_scenario(
         told to ``abort`` first.
     """
     setup_start = time.perf_counter()
-    result = RunResult(spec=spec, seed=seed, timing_s=dict.fromkeys(STAGES, 0.0))
+    result = RunResult(spec=spec, seed=seed, timing_s=dict.fromkeys((*STAGES, "render_gl"), 0.0))
     with contextlib.ExitStack() as owned:
         if scenes is None:
             world = World.from_config(spec.scene)
@@ -624,6 +624,7 @@ class _Flow:
             t1 = time.perf_counter()
             first.detections = detect_cones(first.rgb)
             timing["render"] += t1 - t0
+            timing["render_gl"] += rendered.draw_s
             timing["detect"] += time.perf_counter() - t1
 
     def evaluate(self, d: Delivered) -> TickRecord:
