@@ -135,6 +135,17 @@ def _note_gl_thread() -> None:
     _gl_thread = threading.current_thread()
 
 
+def _forget_gl_thread() -> None:
+    """In a forked child: the parent's OpenGL thread is not there (nor its contexts); the
+    child's first call makes its own. A new lock, in case a parent's thread held it."""
+    global _gl_lock, _gl_executor, _gl_pid, _gl_thread
+    _gl_lock = threading.Lock()
+    _gl_executor, _gl_pid, _gl_thread = None, None, None
+
+
+os.register_at_fork(after_in_child=_forget_gl_thread)
+
+
 def submit_gl(fn: Callable[..., _T], /, *args: Any, **kwargs: Any) -> Future[_T]:
     """Queue ``fn(*args, **kwargs)`` for the process's OpenGL thread.
 

@@ -5,6 +5,9 @@ image's render with the physics and the estimation giving the reports of runs th
 from __future__ import annotations
 
 import dataclasses
+import os
+import select
+import signal
 import threading
 
 import numpy as np
@@ -75,3 +78,24 @@ def test_a_run_rendering_ahead_reports_what_one_evaluating_each_image_at_once_do
 
     monkeypatch.setattr(runner._Evaluator, "__init__", at_once)
     assert [_report(spec) for spec in specs] == ahead
+
+
+def test_a_forked_child_calls_on_a_gl_thread_of_its_own():
+    # The parent's OpenGL thread does not exist in a forked child: a call queued for it
+    # would wait for ever. (No context is made in the child: an EGL display initialised
+    # before a fork is not usable after it, which is why worker processes start from a
+    # fresh interpreter, ``scenarios.commands.workers``.)
+    parent_tid = on_gl_thread(threading.get_native_id)
+    read, write = os.pipe()
+    pid = os.fork()
+    if pid == 0:
+        try:
+            child_tid = on_gl_thread(threading.get_native_id)
+            os.write(write, b"ok" if child_tid not in (parent_tid, os.getpid()) else b"no")
+        finally:
+            os._exit(0)
+    os.close(write)
+    ready, _, _ = select.select([read], [], [], 30.0)
+    os.waitpid(pid, 0) if ready else os.kill(pid, signal.SIGKILL)
+    assert ready and os.read(read, 2) == b"ok"
+    assert on_gl_thread(threading.get_native_id) == parent_tid
