@@ -127,6 +127,7 @@ def run_episode(
     property of the grid point and seed as an error figure.
     """
     start = time.perf_counter()
+    timing_s: dict[str, float] = {}
     try:
         outcome = pipeline.run(spec, seed=seed, scenes=scenes)
     except SimulationError as exc:
@@ -134,8 +135,9 @@ def run_episode(
     else:
         row = _row(outcome.result, outcome.report, outcome.judged)
         estimates = _estimates(outcome.result)
+        timing_s = dict(outcome.result.timing_s)
     row["wall_s"] = time.perf_counter() - start
-    return Episode(point, seed, row, estimates)
+    return Episode(point, seed, row, estimates, timing_s)
 
 
 class EpisodeRunner:

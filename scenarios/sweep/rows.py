@@ -158,9 +158,13 @@ class Episode:
         row has ``NAV_COLUMNS`` too.
     estimates : dict of str to list
         ``ESTIMATE_COLUMNS``, one entry per matched detection and method with an estimate.
+    timing_s : dict of str to float
+        The run's seconds per stage (``RunResult.timing_s``; empty for a diverged flight or
+        an episode read back from a journal): not a column, a figure for the benchmarks.
     """
 
     point: int
     seed: int
     row: dict[str, Any]
     estimates: dict[str, list] = field(default_factory=dict)
+    timing_s: dict[str, float] = field(default_factory=dict)
