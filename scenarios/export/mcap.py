@@ -66,8 +66,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, BinaryIO
 
 import numpy as np
+import zstandard
+from isal import isal_zlib
+from mcap.records import Chunk, ChunkIndex
 from mcap.well_known import MessageEncoding, SchemaEncoding
-from mcap.writer import CompressionType
+from mcap.writer import CompressionType, IndexType
 from mcap.writer import Writer as McapWriter
 
 # The CDR encoder of mcap-ros2-support's own Writer (a module function; that Writer registers
@@ -130,6 +133,10 @@ _MARKER_TRIANGLE_LIST = 11
 _NS_PER_S = 1_000_000_000
 MAX_QUEUED = 8
 """Ticks waiting for the writer thread at most; beyond, a tick waits (bounded memory)."""
+ZSTD_LEVEL = 1
+"""The zstd level of the file's chunks: the C++ MCAP writer's default (what ``ros2 bag record``
+writes with), not the Python writer's 3: a tick's 1.5 MB chunk compressed in 3.2 ms instead
+of 4.6 ms, 6% larger."""
 
 
 def estimates_topic(method: str) -> str:
@@ -137,6 +144,70 @@ def estimates_topic(method: str) -> str:
     ``user:name`` as ``/estimates/user/name``, any character a ROS name cannot hold as ``_``."""
     tokens = [re.sub(r"\W|^(?=\d)", "_", t, flags=re.ASCII) for t in method.split(":")]
     return "/estimates/" + "/".join(t or "_" for t in tokens)
+
+
+class _LevelledWriter(McapWriter):
+    """mcap's ``Writer`` whose zstd chunks are compressed at ``ZSTD_LEVEL`` by one compressor
+    kept for the file, and checksummed by ISA-L's CRC-32 (the same value as zlib's, in a
+    quarter of the time).
+
+    mcap's Python writer has no compression level: it calls ``zstandard.compress`` (level 3, a
+    new context for each chunk). Its private ``__finalize_chunk`` (``_Writer__finalize_chunk``
+    to a subclass) is replaced here, for this writer only, by the same steps as mcap 1.6's
+    with that compressor: the same records, indexes and statistics, the chunk's bytes those
+    of another zstd level. Another compression type goes to mcap's own. The writer is used
+    from one thread at a time (the compressor is not thread-safe).
+    """
+
+    def __init__(self, output: BinaryIO, compression: CompressionType) -> None:
+        super().__init__(output, compression=compression)
+        self._zstd = zstandard.ZstdCompressor(level=ZSTD_LEVEL)
+
+    def _Writer__finalize_chunk(self) -> None:
+        if self._Writer__compression != CompressionType.ZSTD:
+            super()._Writer__finalize_chunk()
+            return
+        builder = self._Writer__chunk_builder
+        if not builder or builder.num_messages == 0:
+            return
+        self._Writer__statistics.chunk_count += 1
+        chunk_data = builder.end()
+        compressed = self._zstd.compress(chunk_data)
+        chunk = Chunk(
+            compression="zstd",
+            data=compressed,
+            message_start_time=builder.message_start_time,
+            message_end_time=builder.message_end_time,
+            uncompressed_crc=isal_zlib.crc32(chunk_data) if self._Writer__enable_crcs else 0,
+            uncompressed_size=len(chunk_data),
+        )
+        records, stream = self._Writer__record_builder, self._Writer__stream
+        self._Writer__flush()
+        chunk_start_offset = stream.tell()
+        chunk.write(records)
+        chunk_index = ChunkIndex(
+            message_start_time=chunk.message_start_time,
+            message_end_time=chunk.message_end_time,
+            chunk_start_offset=chunk_start_offset,
+            chunk_length=records.count,
+            message_index_offsets={},
+            message_index_length=0,
+            compression=chunk.compression,
+            compressed_size=len(compressed),
+            uncompressed_size=chunk.uncompressed_size,
+        )
+        self._Writer__flush()
+        message_index_start_offset = stream.tell()
+        if self._Writer__index_types & IndexType.MESSAGE:
+            for channel_id, index in builder.message_indices.items():
+                chunk_index.message_index_offsets[channel_id] = (
+                    message_index_start_offset + records.count
+                )
+                index.write(records)
+        chunk_index.message_index_length = records.count
+        self._Writer__flush()
+        self._Writer__chunk_indices.append(chunk_index)
+        builder.reset()
 
 
 class McapExporter:
@@ -166,7 +237,7 @@ class McapExporter:
         self.path: Path | None = None
         self._compression = compression
         self._file: BinaryIO | None = None
-        self._writer: McapWriter | None = None
+        self._writer: _LevelledWriter | None = None
         self._schemas: dict[str, tuple[int, Any]] = {}
         self._channels: dict[str, tuple[int, Any]] = {}
         self._sequence: dict[str, int] = {}
@@ -200,7 +271,7 @@ class McapExporter:
         self._camera = camera
         self._spec = spec
         self._file = open(self.path, "xb")  # closed by finish or abort
-        self._writer = McapWriter(self._file, compression=self._compression)
+        self._writer = _LevelledWriter(self._file, self._compression)
         self._writer.start(profile="ros2", library="vnav-sim (mcap, mcap-ros2-support)")
         metadata = {
             "scenario": spec.name,
