@@ -69,6 +69,8 @@ from scenarios.export.base import (
     ExportResult,
     Flusher,
     TickDepthMm,
+    exporter_threads,
+    queue_bound,
     stamp_ns,
     tick_depth_mm,
     write_flushed,
@@ -99,8 +101,6 @@ DEPTH_FILTER = png.FILTER_SUB
 """The 16-bit depth PNG's row filter: ``SUB`` (each byte less the one two bytes left, the same
 byte of the pixel before): a smooth depth's high bytes become zeros, and the image is less
 than half the size of unfiltered (72 KB against 189 KB for the orbit built-in at 640x480)."""
-MAX_QUEUED = 8
-"""Images waiting for the writer thread at most; beyond, a tick waits (bounded memory)."""
 
 GROUNDTRUTH_HEADER = (
     "#timestamp, p_RS_R_x [m], p_RS_R_y [m], p_RS_R_z [m], q_RS_w [], q_RS_x [], q_RS_y [], "
@@ -200,11 +200,12 @@ class EurocExporter:
         mav0 = self._root / "mav0"
         for sub in ("cam0/data", "depth0/data", "state_groundtruth_estimate0"):
             (mav0 / sub).mkdir(parents=True)
-        self._writer = ThreadPoolExecutor(max_workers=1, thread_name_prefix="vnav-euroc")
+        self._writer = exporter_threads(1, "vnav-euroc")
         self._flusher = Flusher()
 
     def on_tick(self, record: TickRecord, rgb: np.ndarray, depth_m: np.ndarray | None) -> None:
-        """Queue the tick's images for the writer thread; keep its ground-truth row."""
+        """Queue the tick's images for the writer thread (a tick waits for it beyond
+        ``queue_bound``); keep its ground-truth row."""
         assert self._writer is not None and self._root is not None, "start() first"
         self._raise_done()
         t_ns = stamp_ns(record)
@@ -231,7 +232,7 @@ class EurocExporter:
             self._T_b_c_first = record.T_b_c
         elif not np.array_equal(record.T_b_c, self._T_b_c_first):
             self._mount_moved = True
-        while len(self._pending) > MAX_QUEUED:
+        while len(self._pending) > queue_bound(rgb, depth_m):
             self._pending.popleft().result()
 
     def _raise_done(self) -> None:

@@ -78,7 +78,13 @@ from mcap.writer import Writer as McapWriter
 # registered here through mcap's Writer).
 from mcap_ros2._dynamic import serialize_dynamic
 
-from scenarios.export.base import ExportResult, TickDepthMm, tick_depth_mm
+from scenarios.export.base import (
+    ExportResult,
+    TickDepthMm,
+    exporter_threads,
+    queue_bound,
+    tick_depth_mm,
+)
 from scenarios.export.ros2_msgs import QOS_LATCHED, QOS_VOLATILE, msgdef
 from scenarios.scenario.spec import KinematicFlight
 from vnav import quat, se3
@@ -131,8 +137,6 @@ _LATCHED = {"/tf_static", "/cones"}
 _ESTIMATE_TYPE = "geometry_msgs/msg/PointStamped"
 _MARKER_TRIANGLE_LIST = 11
 _NS_PER_S = 1_000_000_000
-MAX_QUEUED = 8
-"""Ticks waiting for the writer thread at most; beyond, a tick waits (bounded memory)."""
 ZSTD_LEVEL = 1
 """The zstd level of the file's chunks: the C++ MCAP writer's default (what ``ros2 bag record``
 writes with), not the Python writer's 3: a tick's 1.5 MB chunk compressed in 3.2 ms instead
@@ -303,7 +307,7 @@ class McapExporter:
             # One message: a latched topic keeps only its last one for a late subscriber.
             self._write("/tf_static", {"transforms": static}, stamp_ns)
         self._write("/cones", _cone_markers(spec, scenery, stamp_ns), stamp_ns)
-        self._thread = ThreadPoolExecutor(max_workers=1, thread_name_prefix="vnav-mcap")
+        self._thread = exporter_threads(1, "vnav-mcap")
 
     def on_tick(self, record: TickRecord, rgb: np.ndarray, depth_m: np.ndarray | None) -> None:
         """Check the image's messages and queue them for the writer thread, all stamped at its
@@ -352,7 +356,7 @@ class McapExporter:
         self._pending.append(
             self._thread.submit(self._write_tick, record, stamp_ns, transforms, rgb, depth)
         )
-        while len(self._pending) > MAX_QUEUED:
+        while len(self._pending) > queue_bound(rgb, depth_m):
             self._pending.popleft().result()
         self._ticks += 1
 
