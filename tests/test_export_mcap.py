@@ -32,13 +32,16 @@ from scenarios.export.mcap import (
     TOPICS,
     ZSTD_LEVEL,
     McapExporter,
+    _camera_info,
     _image_cdr,
     _LevelledWriter,
+    _restamped,
     estimates_topic,
 )
 from scenarios.export.ros2_msgs import msgdef
 from scenarios.run.runner import run_scenario
 from scenarios.scenario import builtin
+from vnav.camera import PinholeCamera
 from vnav.cone import TRAFFIC_CONE
 from vnav.obstacle_map import footprint_radius_m
 
@@ -401,6 +404,21 @@ def test_an_image_message_is_the_generic_encoders_bytes(encoding, dtype, channel
     assert (image.height, image.width, image.encoding) == (shape[0], shape[1], encoding)
     got = np.frombuffer(image.data.tobytes(), dtype=np.dtype(dtype).newbyteorder("<"))
     np.testing.assert_array_equal(got.reshape(shape), pixels)
+
+
+@pytest.mark.parametrize("stamp_ns", [0, 33_333_333, 1_020_000_000, 1_700_000_000_123_456_789])
+def test_the_camera_info_encoded_once_and_restamped_is_the_generic_encoders(stamp_ns):
+    """The camera info encoded once at stamp 0 and restamped (``_restamped``) is byte for byte
+    what mcap-ros2-support's encoder makes of the message at ``stamp_ns``; rosbags reads the
+    stamp and the intrinsics back."""
+    camera = PinholeCamera.from_fovy(50.0, 640, 480)
+    type_name = "sensor_msgs/msg/CameraInfo"
+    encode = serialize_dynamic(type_name, msgdef(type_name))[type_name]
+    data = _restamped(encode(_camera_info(camera, 0)), stamp_ns)
+    assert data == encode(_camera_info(camera, stamp_ns))
+    info = HUMBLE.deserialize_cdr(bytes(data), type_name)
+    assert _ns(info.header.stamp) == stamp_ns
+    np.testing.assert_array_equal(info.k.reshape(3, 3), camera.K)
 
 
 def _bag(writer_class, compression: CompressionType) -> bytes:

@@ -47,10 +47,11 @@ that stamp in nanoseconds (the readings are written after the run, the file's in
 them). The file's metadata record ``vnav_sim`` names the scenario, the seed, the clock
 offsets and ``stamp_origin_s``.
 
-The messages are encoded and written, and the file's chunks compressed (zstd), on a thread of
-the exporter's own, overlapping the next tick's rendering; ``on_tick`` checks the images and
-queues them. An image message is encoded straight from its pixels (``_image_cdr``: one copy,
-not the generic encoder's three).
+The messages are encoded and written, and the file's chunks compressed (zstd at level 1, as
+the C++ MCAP writer's default: ``ZSTD_LEVEL``), on a thread of the exporter's own, overlapping
+the next tick's rendering; ``on_tick`` checks the images and queues them. An image message is
+encoded straight from its pixels (``_image_cdr``: one copy, not the generic encoder's three),
+the camera info once (``_restamped``: only its stamp changes).
 """
 
 from __future__ import annotations
@@ -246,6 +247,7 @@ class McapExporter:
         self._channels: dict[str, tuple[int, Any]] = {}
         self._sequence: dict[str, int] = {}
         self._camera: PinholeCamera | None = None
+        self._camera_info_cdr = b""
         self._T_b_c_static: np.ndarray | None = None
         self._origin_ns = 0
         self._depth_ticks = 0
@@ -294,6 +296,8 @@ class McapExporter:
             self._channel(topic, type_name)
         if imu is not None:
             self._channel(*IMU_TOPIC)
+        # The camera info is the same message at every image but for its stamp: encoded once.
+        self._camera_info_cdr = self._channels["/camera/camera_info"][1](_camera_info(camera, 0))
         # The flight starts at t_pose = 0, which the camera clock reads as -offset.
         stamp_ns = self._stamp_ns(-offset_s)
         moves_camera = isinstance(spec.flight, KinematicFlight) and spec.flight.moves_camera
@@ -369,7 +373,6 @@ class McapExporter:
         depth_mm: TickDepthMm | None,
     ) -> None:
         """Write one tick's messages (on the writer thread)."""
-        cam = self._camera
         self._write("/tf", {"transforms": transforms}, stamp_ns)
         q_xyzw = quat.from_matrix(record.T_w_b[:3, :3])
         self._write(
@@ -380,7 +383,8 @@ class McapExporter:
             },
             stamp_ns,
         )
-        self._write("/camera/camera_info", _camera_info(cam, stamp_ns), stamp_ns)
+        camera_info = _restamped(self._camera_info_cdr, stamp_ns)
+        self._write_raw("/camera/camera_info", camera_info, stamp_ns)
         self._write_raw("/camera/image_raw", _image_cdr(rgb, "rgb8", stamp_ns), stamp_ns)
         if depth_mm is not None:
             self._write_raw(
@@ -585,11 +589,23 @@ def _cdr_string(text: str, offset: int) -> bytes:
     return b"\x00" * (-offset % 4) + struct.pack("<I", len(raw)) + raw
 
 
-def _image_cdr(pixels: np.ndarray, encoding: str, stamp_ns: int) -> bytes:
+def _restamped(message: bytes, stamp_ns: int) -> bytearray:
+    """A copy of a little-endian CDR message that starts with its ``std_msgs/Header`` (as every
+    stamped message does) with the header's stamp set to ``stamp_ns``: the stamp's ``int32
+    sec`` and ``uint32 nanosec`` are the first 8 bytes after the encapsulation header, whatever
+    follows them."""
+    if message[: len(_CDR_LE)] != _CDR_LE:
+        raise ValueError("message: expected little-endian plain CDR")
+    out = bytearray(message)
+    struct.pack_into("<iI", out, len(_CDR_LE), *divmod(stamp_ns, _NS_PER_S))
+    return out
+
+
+def _image_cdr(pixels: np.ndarray, encoding: str, stamp_ns: int) -> bytearray:
     """A ``sensor_msgs/Image`` in ``FRAME_CAMERA`` of an (H, W) or (H, W, C) array, rows
     packed (no padding), CDR-encoded: the bytes mcap-ros2-support's encoder makes of the same
-    message, with the pixels copied once; little-endian (``is_bigendian`` 0) whatever the
-    machine.
+    message, with the pixels copied once, by numpy (which lets other threads run meanwhile);
+    little-endian (``is_bigendian`` 0) whatever the machine.
 
     Parameters
     ----------
@@ -598,16 +614,23 @@ def _image_cdr(pixels: np.ndarray, encoding: str, stamp_ns: int) -> bytes:
         ``sensor_msgs/Image``'s ``encoding`` (``rgb8``, ``16UC1``).
     stamp_ns : int
     """
-    data = np.ascontiguousarray(pixels, dtype=pixels.dtype.newbyteorder("<"))
-    height, width = data.shape[:2]
+    pixels = np.asarray(pixels)
+    little = pixels.dtype.newbyteorder("<")
+    height, width = pixels.shape[:2]
+    step = width * math.prod(pixels.shape[2:]) * pixels.dtype.itemsize
     sec, nanosec = divmod(stamp_ns, _NS_PER_S)
     out = struct.pack("<iI", sec, nanosec)
     out += _cdr_string(FRAME_CAMERA, len(out))
     out += b"\x00" * (-len(out) % 4) + struct.pack("<II", height, width)
     out += _cdr_string(encoding, len(out))
     out += b"\x00"  # is_bigendian
-    out += b"\x00" * (-len(out) % 4) + struct.pack("<II", data.strides[0], data.nbytes)
-    return b"".join((_CDR_LE, out, data))
+    out += b"\x00" * (-len(out) % 4) + struct.pack("<II", step, step * height)
+    header = _CDR_LE + out
+    message = bytearray(len(header) + step * height)
+    message[: len(header)] = header
+    data = np.frombuffer(message, dtype=little, offset=len(header)).reshape(pixels.shape)
+    np.copyto(data, pixels, casting="equiv")
+    return message
 
 
 def _cone_markers(spec: ScenarioSpec, scenery: Scenery, stamp_ns: int) -> dict:
