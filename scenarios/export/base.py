@@ -70,11 +70,16 @@ DEPTH_MM_MAX = int(np.iinfo(np.uint16).max)
 EXPORTER_NICE = 10
 """How much nicer than the run's thread an exporter's thread is (Linux ``nice``, per thread):
 the kernel's weight of such a thread is about a tenth of the run's, so that the run's thread
-and the renderer's get a core first when they want one."""
+and the renderer's get a core first when they want one. The cost: an exporter's thread
+descheduled while it holds the GIL keeps the run's thread waiting; they hold it little (their
+work is deflate, zstd and numpy, which release it)."""
 QUEUED_BYTES_MAX = 64 * 2**20
 """The images an exporter keeps waiting for its thread at most, bytes (``queue_bound``)."""
 QUEUED_TICKS_MIN = 2
 """Ticks an exporter keeps waiting at least, whatever their size."""
+QUEUED_TICKS_MAX = 64
+"""Ticks an exporter keeps waiting at most, however small (each costs some time to write
+whatever its size, which ``finish`` waits for)."""
 
 
 def _lower_priority() -> None:
@@ -103,10 +108,11 @@ def exporter_threads(workers: int, name: str) -> ThreadPoolExecutor:
 def queue_bound(*images: np.ndarray | None) -> int:
     """Ticks an exporter may keep waiting for its thread, each holding ``images`` (the
     arrays queued with a tick): as many as ``QUEUED_BYTES_MAX`` holds (31 ticks of a 640x480
-    colour image and its float32 depth, which the two exporters share), ``QUEUED_TICKS_MIN``
-    at least. Beyond, the run's thread waits."""
+    colour image and its float32 depth, which the two exporters share), between
+    ``QUEUED_TICKS_MIN`` and ``QUEUED_TICKS_MAX``. Beyond, the run's thread waits."""
     tick_bytes = sum(a.nbytes for a in images if a is not None)
-    return max(QUEUED_TICKS_MIN, QUEUED_BYTES_MAX // max(tick_bytes, 1))
+    fits = QUEUED_BYTES_MAX // max(tick_bytes, 1)
+    return min(QUEUED_TICKS_MAX, max(QUEUED_TICKS_MIN, fits))
 
 
 @dataclass(frozen=True)
