@@ -82,26 +82,41 @@ QUEUED_TICKS_MAX = 64
 whatever its size, which ``finish`` waits for)."""
 
 
-def _lower_priority() -> None:
-    """Make the calling thread ``EXPORTER_NICE`` nicer (a ``ThreadPoolExecutor`` initializer).
-
-    Linux only: there ``setpriority`` with a thread's id sets that thread's priority alone
-    (POSIX would set the process's, and elsewhere a thread id is not a process id). A
-    failure leaves the priority as it is: it is the speed, not the output, that depends on it.
-    """
+def _priority(tid: int) -> int | None:
+    """A thread's nice value (Linux, where ``getpriority`` of a thread id is that thread's;
+    elsewhere a thread id is not a process id): None where it cannot be read."""
     if not sys.platform.startswith("linux"):
-        return
+        return None
+    try:
+        return os.getpriority(os.PRIO_PROCESS, tid)
+    except OSError:
+        return None
+
+
+def _set_priority(nice: int) -> None:
+    """Set the calling thread's nice value to ``nice`` (a ``ThreadPoolExecutor``
+    initializer; Linux only). A failure leaves it as it is: the speed depends on it, not the
+    output."""
     tid = threading.get_native_id()
     try:
-        os.setpriority(os.PRIO_PROCESS, tid, os.getpriority(os.PRIO_PROCESS, tid) + EXPORTER_NICE)
+        os.setpriority(os.PRIO_PROCESS, tid, nice)
     except OSError as exc:
         logger.debug("exporter thread %d keeps its priority: %s", tid, exc)
 
 
 def exporter_threads(workers: int, name: str) -> ThreadPoolExecutor:
-    """A pool of ``workers`` threads named ``name`` at the exporters' lower priority."""
+    """A pool of ``workers`` threads named ``name``, each ``EXPORTER_NICE`` nicer than the
+    thread that makes the pool (the run's), whichever thread starts them (a pool starts its
+    threads on its first calls, from the thread that calls; a thread inherits its parent's
+    priority)."""
+    base = _priority(threading.get_native_id())
+    if base is None:
+        return ThreadPoolExecutor(max_workers=workers, thread_name_prefix=name)
     return ThreadPoolExecutor(
-        max_workers=workers, thread_name_prefix=name, initializer=_lower_priority
+        max_workers=workers,
+        thread_name_prefix=name,
+        initializer=_set_priority,
+        initargs=(min(19, base + EXPORTER_NICE),),  # 19: Linux's nicest
     )
 
 
