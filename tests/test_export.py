@@ -9,6 +9,8 @@ import errno
 import json
 import math
 import os
+import sys
+import threading
 from fractions import Fraction
 from pathlib import Path
 
@@ -232,6 +234,42 @@ def test_a_flush_that_fails_is_an_error(tmp_path):
                 flusher.submit(tmp_path / "0.png")
     finally:
         flusher.shutdown()
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="per-thread nice is Linux's")
+def test_the_exporters_threads_are_nicer_than_the_run(tmp_path):
+    """Each thread of an exporter's pool runs ``EXPORTER_NICE`` nicer than the thread that
+    made the pool (the kernel's own figure, read back per thread), up to Linux's 19, also when
+    another exporter thread starts it (as the EuRoC writer starts its ``Flusher``'s)."""
+
+    def nice() -> int:
+        return os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
+
+    mine = nice()
+    expected = min(19, mine + base.EXPORTER_NICE)
+    with base.exporter_threads(1, "test-writer") as writer:
+        inner = base.exporter_threads(2, "test-inner")
+        try:
+            # The inner pool's threads start from the writer's thread, already nicer.
+            started = writer.submit(lambda: [inner.submit(nice) for _ in range(4)]).result()
+            assert writer.submit(nice).result() == expected
+            assert {f.result() for f in started} == {expected}
+        finally:
+            inner.shutdown()
+    assert nice() == mine
+
+
+def test_the_queue_holds_what_its_bytes_allow():
+    """A 640x480 colour image and its float32 depth: 31 ticks in 64 MiB; the bound is the
+    bytes, within the fewest and most ticks."""
+    rgb = np.zeros((480, 640, 3), np.uint8)
+    depth_m = np.zeros((480, 640), np.float32)
+    assert base.queue_bound(rgb, depth_m) == base.QUEUED_BYTES_MAX // (rgb.nbytes + depth_m.nbytes)
+    assert base.queue_bound(rgb, depth_m) == 31
+    large_rgb = np.zeros((960, 1280, 3), np.uint8)  # 3.7 MB; no depth
+    assert base.queue_bound(large_rgb, None) == base.QUEUED_BYTES_MAX // large_rgb.nbytes == 18
+    assert base.queue_bound(np.zeros((4000, 4000, 3), np.uint8)) == base.QUEUED_TICKS_MIN
+    assert base.queue_bound(np.zeros((48, 64, 3), np.uint8)) == base.QUEUED_TICKS_MAX
 
 
 def test_euroc_sensor_files_describe_the_camera(calibration):

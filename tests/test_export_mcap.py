@@ -5,24 +5,43 @@ Rerun's MCAP importer, against what the run held and the simulator's truth."""
 from __future__ import annotations
 
 import dataclasses
+import io
 import math
 import subprocess
 import sys
+import zlib
 from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
 import pytest
+import zstandard
+from mcap.reader import make_reader
+from mcap.records import Chunk, ChunkIndex, Footer, MetadataIndex, SummaryOffset
+from mcap.stream_reader import StreamReader
+from mcap.writer import CompressionType
+from mcap.writer import Writer as McapWriter
 from mcap_ros2._dynamic import serialize_dynamic
 from rosbags.highlevel import AnyReader
 from rosbags.interfaces import QosDurability
 from rosbags.typesys import Stores, get_typestore
 from scipy.spatial.transform import Rotation
 
-from scenarios.export.mcap import IMU_TOPIC, TOPICS, McapExporter, _image_cdr, estimates_topic
+from scenarios.export.mcap import (
+    IMU_TOPIC,
+    TOPICS,
+    ZSTD_LEVEL,
+    McapExporter,
+    _camera_info,
+    _image_cdr,
+    _LevelledWriter,
+    _restamped,
+    estimates_topic,
+)
 from scenarios.export.ros2_msgs import msgdef
 from scenarios.run.runner import run_scenario
 from scenarios.scenario import builtin
+from vnav.camera import PinholeCamera
 from vnav.cone import TRAFFIC_CONE
 from vnav.obstacle_map import footprint_radius_m
 
@@ -385,3 +404,100 @@ def test_an_image_message_is_the_generic_encoders_bytes(encoding, dtype, channel
     assert (image.height, image.width, image.encoding) == (shape[0], shape[1], encoding)
     got = np.frombuffer(image.data.tobytes(), dtype=np.dtype(dtype).newbyteorder("<"))
     np.testing.assert_array_equal(got.reshape(shape), pixels)
+
+
+@pytest.mark.parametrize("stamp_ns", [0, 33_333_333, 1_020_000_000, 1_700_000_000_123_456_789])
+def test_the_camera_info_encoded_once_and_restamped_is_the_generic_encoders(stamp_ns):
+    """The camera info encoded once at stamp 0 and restamped (``_restamped``) is byte for byte
+    what mcap-ros2-support's encoder makes of the message at ``stamp_ns``; rosbags reads the
+    stamp and the intrinsics back."""
+    camera = PinholeCamera.from_fovy(50.0, 640, 480)
+    type_name = "sensor_msgs/msg/CameraInfo"
+    encode = serialize_dynamic(type_name, msgdef(type_name))[type_name]
+    data = _restamped(encode(_camera_info(camera, 0)), stamp_ns)
+    assert data == encode(_camera_info(camera, stamp_ns))
+    info = HUMBLE.deserialize_cdr(bytes(data), type_name)
+    assert _ns(info.header.stamp) == stamp_ns
+    np.testing.assert_array_equal(info.k.reshape(3, 3), camera.K)
+
+
+def _bag(writer_class, compression: CompressionType) -> bytes:
+    """A file of three channels' messages over several chunks, a metadata record between."""
+    out = io.BytesIO()
+    writer = (
+        writer_class(out, compression)
+        if writer_class is _LevelledWriter
+        else writer_class(out, compression=compression)
+    )
+    writer.start(profile="ros2", library="test")
+    schema = writer.register_schema("s", "ros2msg", b"int32 a")
+    channels = [writer.register_channel(f"/t{i}", "cdr", schema) for i in range(3)]
+    rng = np.random.default_rng(3)
+    for i in range(40):
+        if i == 17:
+            writer.add_metadata("m", {"k": "v"})
+        # Compressible bytes (a few values), 120 KB a message: several 1 MB chunks.
+        data = rng.integers(0, 4, 120_000, dtype=np.uint8).tobytes()
+        t_ns = 1_000_000 * (i * 7 % 40)  # out of order: each chunk's time range is a min/max
+        writer.add_message(channels[i % 3], log_time=t_ns, data=data, publish_time=t_ns + 1)
+    writer.finish()
+    return out.getvalue()
+
+
+def test_the_writer_compresses_the_chunks_at_its_level_and_writes_what_mcaps_does():
+    """``_LevelledWriter`` (mcap's Writer, its chunk step replaced) writes what mcap's own
+    Writer writes of the same messages but for the chunks' zstd bytes (and the offsets and
+    sizes those move): each chunk is ``zstandard`` at ``ZSTD_LEVEL`` of the same records, its
+    CRC zlib's; mcap's reader, checking every CRC, reads the same messages through the index."""
+    ours = _bag(_LevelledWriter, CompressionType.ZSTD)
+    theirs = _bag(McapWriter, CompressionType.ZSTD)
+    assert ours != theirs
+    ours_records = list(StreamReader(io.BytesIO(ours), emit_chunks=True).records)
+    theirs_records = list(StreamReader(io.BytesIO(theirs), emit_chunks=True).records)
+    assert [type(r) for r in ours_records] == [type(r) for r in theirs_records]
+    # What holds a position in the file, or its size: those the chunks' sizes move.
+    moved = {
+        ChunkIndex: {"chunk_start_offset", "chunk_length", "compressed_size"},
+        MetadataIndex: {"offset"},
+        SummaryOffset: {"group_start"},
+        Footer: {"summary_start", "summary_offset_start", "summary_crc"},
+    }
+    for mine, ref in zip(ours_records, theirs_records, strict=True):
+        if isinstance(mine, Chunk):
+            raw = zstandard.decompress(ref.data, max_output_size=ref.uncompressed_size)
+            assert mine.data == zstandard.ZstdCompressor(level=ZSTD_LEVEL).compress(raw)
+            assert mine.uncompressed_crc == zlib.crc32(raw) == ref.uncompressed_crc
+            assert dataclasses.replace(mine, data=ref.data) == ref
+            continue
+        if isinstance(mine, ChunkIndex):
+            # Each channel's message index at the same place after its chunk's record.
+            def after_chunk(index: ChunkIndex) -> dict[int, int]:
+                end = index.chunk_start_offset + index.chunk_length
+                return {k: v - end for k, v in index.message_index_offsets.items()}
+
+            assert after_chunk(mine) == after_chunk(ref)
+            mine = dataclasses.replace(mine, message_index_offsets=ref.message_index_offsets)
+        fixed = {k: v for k, v in vars(mine).items() if k not in moved.get(type(mine), ())}
+        assert fixed == {k: v for k, v in vars(ref).items() if k not in moved.get(type(ref), ())}
+    chunks = [r for r in ours_records if isinstance(r, Chunk)]
+    indexes = [r for r in ours_records if isinstance(r, ChunkIndex)]
+    assert len(chunks) == len(indexes) >= 3
+    assert [i.compressed_size for i in indexes] == [len(c.data) for c in chunks]
+    with io.BytesIO(ours) as f_ours, io.BytesIO(theirs) as f_theirs:
+        read_ours = [
+            (c.topic, m.log_time, m.publish_time, m.data)
+            for _, c, m in make_reader(f_ours, validate_crcs=True).iter_messages(
+                log_time_order=True
+            )
+        ]
+        read_theirs = [
+            (c.topic, m.log_time, m.publish_time, m.data)
+            for _, c, m in make_reader(f_theirs).iter_messages(log_time_order=True)
+        ]
+    assert read_ours == read_theirs and len(read_ours) == 40
+
+
+def test_another_compression_is_mcaps_own():
+    """LZ4 (and no compression) go through mcap's own chunk step: the same bytes."""
+    for compression in (CompressionType.LZ4, CompressionType.NONE):
+        assert _bag(_LevelledWriter, compression) == _bag(McapWriter, compression)

@@ -15,11 +15,19 @@ will be in the output directory) and those it did not write this time (with the 
 What several exporters write of the same image is made once: the depth in millimetres
 (``tick_depth_mm``), which the EuRoC PNGs and the bag's depth images both hold, made on the
 exporters' threads, not the run's.
+
+The exporters' threads (``exporter_threads``) run at a lower scheduling priority than the run's
+own: on a machine whose cores the run already keeps busy (its thread, the renderer's), they
+take the time the run leaves idle instead of delaying its next tick, and catch up while it
+waits; their queue (``queue_bound``) is deep enough to hold what they fall behind by, and
+bounded in bytes.
 """
 
 from __future__ import annotations
 
+import logging
 import os
+import sys
 import threading
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -38,21 +46,88 @@ if TYPE_CHECKING:  # annotations only: importing sim.mesh loads MuJoCo before si
 __all__ = [
     "DEPTH_MM_MAX",
     "DEPTH_SCALE",
+    "EXPORTER_NICE",
+    "QUEUED_BYTES_MAX",
     "ExportResult",
     "Exporter",
     "Flusher",
     "TickDepthMm",
     "depth_mm",
+    "exporter_threads",
     "listed_files",
+    "queue_bound",
     "stamp_ns",
     "tick_depth_mm",
     "write_flushed",
 ]
 
+logger = logging.getLogger(__name__)
+
 DEPTH_SCALE = 1000.0
 """The exported 16-bit depth's value per metre (millimetres)."""
 DEPTH_MM_MAX = int(np.iinfo(np.uint16).max)
 """The farthest depth 16 bits hold, millimetres (65.535 m)."""
+EXPORTER_NICE = 10
+"""How much nicer than the run's thread an exporter's thread is (Linux ``nice``, per thread):
+the kernel's weight of such a thread is about a tenth of the run's, so that the run's thread
+and the renderer's get a core first when they want one. The cost: an exporter's thread
+descheduled while it holds the GIL keeps the run's thread waiting; they hold it little (their
+work is deflate, zstd and numpy, which release it)."""
+QUEUED_BYTES_MAX = 64 * 2**20
+"""The images an exporter keeps waiting for its thread at most, bytes (``queue_bound``)."""
+QUEUED_TICKS_MIN = 2
+"""Ticks an exporter keeps waiting at least, whatever their size."""
+QUEUED_TICKS_MAX = 64
+"""Ticks an exporter keeps waiting at most, however small (each costs some time to write
+whatever its size, which ``finish`` waits for)."""
+
+
+def _priority(tid: int) -> int | None:
+    """A thread's nice value (Linux, where ``getpriority`` of a thread id is that thread's;
+    elsewhere a thread id is not a process id): None where it cannot be read."""
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        return os.getpriority(os.PRIO_PROCESS, tid)
+    except OSError:
+        return None
+
+
+def _set_priority(nice: int) -> None:
+    """Set the calling thread's nice value to ``nice`` (a ``ThreadPoolExecutor``
+    initializer; Linux only). A failure leaves it as it is: the speed depends on it, not the
+    output."""
+    tid = threading.get_native_id()
+    try:
+        os.setpriority(os.PRIO_PROCESS, tid, nice)
+    except OSError as exc:
+        logger.debug("exporter thread %d keeps its priority: %s", tid, exc)
+
+
+def exporter_threads(workers: int, name: str) -> ThreadPoolExecutor:
+    """A pool of ``workers`` threads named ``name``, each ``EXPORTER_NICE`` nicer than the
+    thread that makes the pool (the run's), whichever thread starts them (a pool starts its
+    threads on its first calls, from the thread that calls; a thread inherits its parent's
+    priority)."""
+    base = _priority(threading.get_native_id())
+    if base is None:
+        return ThreadPoolExecutor(max_workers=workers, thread_name_prefix=name)
+    return ThreadPoolExecutor(
+        max_workers=workers,
+        thread_name_prefix=name,
+        initializer=_set_priority,
+        initargs=(min(19, base + EXPORTER_NICE),),  # 19: Linux's nicest
+    )
+
+
+def queue_bound(*images: np.ndarray | None) -> int:
+    """Ticks an exporter may keep waiting for its thread, each holding ``images`` (the
+    arrays queued with a tick): as many as ``QUEUED_BYTES_MAX`` holds (31 ticks of a 640x480
+    colour image and its float32 depth, which the two exporters share), between
+    ``QUEUED_TICKS_MIN`` and ``QUEUED_TICKS_MAX``. Beyond, the run's thread waits."""
+    tick_bytes = sum(a.nbytes for a in images if a is not None)
+    fits = QUEUED_BYTES_MAX // max(tick_bytes, 1)
+    return min(QUEUED_TICKS_MAX, max(QUEUED_TICKS_MIN, fits))
 
 
 @dataclass(frozen=True)
@@ -132,7 +207,7 @@ class Flusher:
     """
 
     def __init__(self, threads: int = 4) -> None:
-        self._pool = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="vnav-fsync")
+        self._pool = exporter_threads(threads, "vnav-fsync")
         self._pending: list[Future] = []
 
     def submit(self, path: Path) -> None:

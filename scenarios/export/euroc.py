@@ -46,10 +46,11 @@ The depth is millimetres (1000 per metre; TUM RGB-D's PNGs use 5000).
 The velocity is the simulator's (``scenarios.run.records.TickRecord.v_w_b_mps``): MuJoCo's
 free-joint velocity, or a keyframe flight's segment slope, not a difference of poses.
 
-Images are encoded and written on a worker thread (OpenCV and file writes release the GIL),
-overlapping the next tick's rendering, as the recording's JPEGs are, and flushed to the disk
-by a ``scenarios.export.base.Flusher`` (several files at a time, off the writer's thread). The
-depth in millimetres is made once for this export and the bag's (``tick_depth_mm``).
+Images are encoded (``scenarios.export.png``) and written on a worker thread (deflate and file
+writes release the GIL), overlapping the next tick's rendering, as the recording's JPEGs are,
+and flushed to the disk by a ``scenarios.export.base.Flusher`` (several files at a time, off
+the writer's thread). The depth in millimetres is made once for this export and the bag's
+(``tick_depth_mm``).
 """
 
 from __future__ import annotations
@@ -60,14 +61,16 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import cv2
 import numpy as np
 
+from scenarios.export import png
 from scenarios.export.base import (
     DEPTH_SCALE,
     ExportResult,
     Flusher,
     TickDepthMm,
+    exporter_threads,
+    queue_bound,
     stamp_ns,
     tick_depth_mm,
     write_flushed,
@@ -91,22 +94,13 @@ __all__ = [
 
 logger = logging.getLogger(__name__)
 
-PNG_PARAMS = [cv2.IMWRITE_PNG_COMPRESSION, 1, cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_NONE]
-"""The colour image's: zlib level 1 and no PNG row filter: a rendered 640x480 image is encoded
-in about 6 ms instead of OpenCV's default's 13 ms (level 1) to 25 ms (level 3), and comes out
-smaller than with the default filters or the ``SUB`` filter (lossless either way)."""
-DEPTH_PNG_PARAMS = [
-    cv2.IMWRITE_PNG_COMPRESSION,
-    1,
-    cv2.IMWRITE_PNG_FILTER,
-    cv2.IMWRITE_PNG_FILTER_SUB,
-]
-"""The 16-bit depth's: zlib level 1 and the ``SUB`` row filter (each byte less the one two
-bytes left, the same byte of the pixel before): a smooth depth's high bytes become zeros, and
-the image is a third the size of unfiltered (72 KB against 194 KB for the orbit built-in at
-640x480) and encoded in 40% less time (6 ms against 10 ms)."""
-MAX_QUEUED = 8
-"""Images waiting for the writer thread at most; beyond, a tick waits (bounded memory)."""
+RGB_FILTER = png.FILTER_NONE
+"""The colour PNG's row filter: none. A rendered image comes out smaller than with the ``SUB``
+filter (90 KB against 94 KB at 640x480), and is encoded faster (lossless either way)."""
+DEPTH_FILTER = png.FILTER_SUB
+"""The 16-bit depth PNG's row filter: ``SUB`` (each byte less the one two bytes left, the same
+byte of the pixel before): a smooth depth's high bytes become zeros, and the image is less
+than half the size of unfiltered (72 KB against 189 KB for the orbit built-in at 640x480)."""
 
 GROUNDTRUTH_HEADER = (
     "#timestamp, p_RS_R_x [m], p_RS_R_y [m], p_RS_R_z [m], q_RS_w [], q_RS_x [], q_RS_y [], "
@@ -129,14 +123,6 @@ def _write_file(path: Path, data: bytes) -> None:
         f.write(data)
 
 
-def _png(image: np.ndarray, params: list[int]) -> np.ndarray:
-    """The PNG file's bytes, as OpenCV's (N,) uint8 buffer (written as it is, not copied)."""
-    ok, png = cv2.imencode(".png", image, params)
-    if not ok:
-        raise RuntimeError("OpenCV could not PNG-encode an image")
-    return png
-
-
 def _write_images(
     rgb_path: Path,
     rgb: np.ndarray,
@@ -145,10 +131,10 @@ def _write_images(
     flusher: Flusher,
 ) -> None:
     """Encode and write one tick's images (on the writer thread); flush them."""
-    _write_file(rgb_path, _png(cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), PNG_PARAMS))
+    _write_file(rgb_path, png.encode_png(rgb, RGB_FILTER))
     flusher.submit(rgb_path)
     if depth_path is not None and depth_mm is not None:
-        _write_file(depth_path, _png(depth_mm.get(), DEPTH_PNG_PARAMS))
+        _write_file(depth_path, png.encode_png(depth_mm.get(), DEPTH_FILTER))
         flusher.submit(depth_path)
 
 
@@ -214,11 +200,12 @@ class EurocExporter:
         mav0 = self._root / "mav0"
         for sub in ("cam0/data", "depth0/data", "state_groundtruth_estimate0"):
             (mav0 / sub).mkdir(parents=True)
-        self._writer = ThreadPoolExecutor(max_workers=1, thread_name_prefix="vnav-euroc")
+        self._writer = exporter_threads(1, "vnav-euroc")
         self._flusher = Flusher()
 
     def on_tick(self, record: TickRecord, rgb: np.ndarray, depth_m: np.ndarray | None) -> None:
-        """Queue the tick's images for the writer thread; keep its ground-truth row."""
+        """Queue the tick's images for the writer thread (a tick waits for it beyond
+        ``queue_bound``); keep its ground-truth row."""
         assert self._writer is not None and self._root is not None, "start() first"
         self._raise_done()
         t_ns = stamp_ns(record)
@@ -245,7 +232,7 @@ class EurocExporter:
             self._T_b_c_first = record.T_b_c
         elif not np.array_equal(record.T_b_c, self._T_b_c_first):
             self._mount_moved = True
-        while len(self._pending) > MAX_QUEUED:
+        while len(self._pending) > queue_bound(rgb, depth_m):
             self._pending.popleft().result()
 
     def _raise_done(self) -> None:
