@@ -93,6 +93,7 @@ def run(
     progress: Callable[[int, int], None] | None = None,
     scenes: SceneCache | None = None,
     exports: Sequence[str] = (),
+    render_ahead: bool = True,
 ) -> Outcome:
     """Run ``spec``, judge it with its checks (or ``check_kinds.default_checks()``), report it.
 
@@ -112,6 +113,9 @@ def run(
     exports : sequence of str
         Export formats (``scenarios.export.FORMATS``) written with the recording and the
         report, committed with them; only with ``out_dir``.
+    render_ahead : bool
+        See ``scenarios.run.runner.run_scenario`` (False for a process with one core of
+        several; the results are the same).
 
     Raises
     ------
@@ -130,7 +134,9 @@ def run(
     if out_dir is None:
         if exports:
             raise ValueError("exports are written beside the recording: give out_dir")
-        result = run_scenario(spec, seed=seed, progress=progress, scenes=scenes)
+        result = run_scenario(
+            spec, seed=seed, progress=progress, scenes=scenes, render_ahead=render_ahead
+        )
         judged = _calibrate_and_judge(spec, result)
         started.stop(result)
         return Outcome(result, judged, report.build(result, judged))
@@ -153,7 +159,12 @@ def run(
             observer = FanOut(recording, *exporters) if exporters else recording
             try:
                 result = run_scenario(
-                    spec, seed=seed, observer=observer, progress=progress, scenes=scenes
+                    spec,
+                    seed=seed,
+                    observer=observer,
+                    progress=progress,
+                    scenes=scenes,
+                    render_ahead=render_ahead,
                 )
                 judged = _calibrate_and_judge(spec, result)
                 finish_start = time.perf_counter()

@@ -145,6 +145,7 @@ def run_scenario(
     observer: TickObserver | None = None,
     progress: Callable[[int, int], None] | None = None,
     scenes: SceneCache | None = None,
+    render_ahead: bool = True,
 ) -> RunResult:
     """Run ``spec`` headless and return what it saw, tick by tick.
 
@@ -161,6 +162,12 @@ def run_scenario(
     scenes : sim.scene_cache.SceneCache, optional
         Where to take the world and its renderer from (and leave them): a process running
         many episodes builds each scene once. Without it the run builds and frees its own.
+    render_ahead : bool
+        Render each image on the OpenGL thread while the run estimates the one before and
+        steps the physics to the next (a flight that does not steer by what it sees): about
+        two cores' work at once. False: each image is evaluated as soon as it is delivered,
+        the run waiting for its render, for a process that has one core of several (a
+        sweep's worker). The results are the same either way.
 
     Raises
     ------
@@ -176,7 +183,9 @@ def run_scenario(
             renderer = owned.enter_context(Renderer(world))
         else:
             world, renderer = scenes.acquire(spec.scene)
-        _observe_and_run(spec, seed, world, renderer, result, observer, progress, setup_start)
+        _observe_and_run(
+            spec, seed, world, renderer, result, observer, progress, setup_start, render_ahead
+        )
     return result
 
 
@@ -189,6 +198,7 @@ def _observe_and_run(
     observer: TickObserver | None,
     progress: Callable[[int, int], None] | None,
     setup_start: float,
+    render_ahead: bool,
 ) -> None:
     """The ticks, after the observer's ``start`` (its ``abort`` if they fail)."""
     try:
@@ -198,7 +208,7 @@ def _observe_and_run(
             )
         # Building the world, the GL context and the observer's start.
         result.timing_s["setup"] = time.perf_counter() - setup_start
-        _run_ticks(spec, world, renderer, result, observer, progress)
+        _run_ticks(spec, world, renderer, result, observer, progress, render_ahead)
     except BaseException:
         if observer:
             observer.abort()
@@ -212,6 +222,7 @@ def _run_ticks(
     result: RunResult,
     observer: TickObserver | None,
     progress: Callable[[int, int], None] | None,
+    render_ahead: bool = True,
 ) -> None:
     """Every camera tick of the run, appended to ``result.ticks`` in order, each stage timed.
 
@@ -223,7 +234,7 @@ def _run_ticks(
     flow = _Flow(spec, world, result.seed)
     camera_track = _camera_track(spec)
     cones_w = world.cones_w
-    evaluate = _Evaluator(flow, result, observer, progress, spec.n_ticks)
+    evaluate = _Evaluator(flow, result, observer, progress, spec.n_ticks, render_ahead)
     for k in range(spec.n_ticks):
         evaluate(flow.advance_to(flow.step_of(k / spec.camera_rate_hz)))
         if flow.navigator is not None and flow.navigator.ended:
@@ -256,6 +267,7 @@ class _Evaluator:
         observer: TickObserver | None,
         progress: Callable[[int, int], None] | None,
         n_ticks: int,
+        render_ahead: bool = True,
     ) -> None:
         self.flow = flow
         self.result = result
@@ -264,7 +276,7 @@ class _Evaluator:
         self.n_ticks = n_ticks
         self.done = 0
         """Images evaluated so far."""
-        self.deferred = flow.navigator is None
+        self.deferred = render_ahead and flow.navigator is None
         self.waiting: list[Delivered] = []
 
     def __call__(self, delivered: list[Delivered]) -> None:

@@ -150,7 +150,10 @@ class SerialEngine:
 
 class _Worker(EpisodeRunner):
     """An ``EpisodeRunner`` with OpenCV's threads as the environment says, and a ``ready``
-    probe."""
+    probe. It waits for each render (``render_ahead=False``): Ray gives it one CPU, and a
+    worker rendering ahead keeps about two busy; with a worker per core that oversubscribes
+    them (measured: 2 workers 0.60 episodes/s rendering ahead, 0.71 not,
+    ``python -m benchmarks sweep``)."""
 
     def __init__(self, estimators: Sequence[EstimatorSource] = ()) -> None:
         threads = os.environ.get("OPENCV_FOR_THREADS_NUM")
@@ -158,7 +161,7 @@ class _Worker(EpisodeRunner):
             import cv2
 
             cv2.setNumThreads(int(threads))
-        super().__init__(estimators)
+        super().__init__(estimators, render_ahead=False)
 
     def ready(self) -> int:
         return os.getpid()

@@ -119,9 +119,14 @@ def _diverged(spec: ScenarioSpec, exc: SimulationError) -> dict[str, Any]:
 
 
 def run_episode(
-    spec: ScenarioSpec, point: int, seed: int, scenes: SceneCache | None = None
+    spec: ScenarioSpec,
+    point: int,
+    seed: int,
+    scenes: SceneCache | None = None,
+    render_ahead: bool = True,
 ) -> Episode:
-    """Run, judge and measure ``spec`` with ``seed`` (no files written).
+    """Run, judge and measure ``spec`` with ``seed`` (no files written; ``render_ahead`` as
+    ``scenarios.pipeline.run``'s).
 
     A diverging flight is a result (status ``diverged``), not an error: it is as much a
     property of the grid point and seed as an error figure.
@@ -129,7 +134,7 @@ def run_episode(
     start = time.perf_counter()
     timing_s: dict[str, float] = {}
     try:
-        outcome = pipeline.run(spec, seed=seed, scenes=scenes)
+        outcome = pipeline.run(spec, seed=seed, scenes=scenes, render_ahead=render_ahead)
     except SimulationError as exc:
         row, estimates = _diverged(spec, exc), {c: [] for c in ESTIMATE_COLUMNS}
     else:
@@ -151,6 +156,8 @@ class EpisodeRunner:
     ----------
     estimators : sequence of EstimatorSource, optional
         The sweep's user estimators, run in every episode beside the built-ins.
+    render_ahead : bool
+        As ``scenarios.pipeline.run``'s: False in a worker given one core of several.
 
     Raises
     ------
@@ -159,8 +166,11 @@ class EpisodeRunner:
         (``EstimatorSource.load``): that episode's error; the next one tries again.
     """
 
-    def __init__(self, estimators: Sequence[EstimatorSource] = ()) -> None:
+    def __init__(
+        self, estimators: Sequence[EstimatorSource] = (), render_ahead: bool = True
+    ) -> None:
         self._scenes = SceneCache(capacity=2)
+        self._render_ahead = render_ahead
         self._specs: dict[str, ScenarioSpec] = {}
         self._sources = tuple(estimators)
         self._methods: tuple[Method, ...] | None = None
@@ -174,7 +184,7 @@ class EpisodeRunner:
         if self._methods is None:
             self._methods = tuple(source.load() for source in self._sources)
         with extended(self._methods):
-            return run_episode(spec, point, seed, self._scenes)
+            return run_episode(spec, point, seed, self._scenes, self._render_ahead)
 
     def scenes_built(self) -> int:
         """Scenes this runner has built (fewer than the episodes when they are reused)."""
