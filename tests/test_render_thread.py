@@ -13,7 +13,6 @@ import threading
 import numpy as np
 
 from scenarios import pipeline
-from scenarios.run import runner
 from scenarios.scenario import builtin
 from scenarios.scenario.spec import from_dict
 from sim.config import SceneConfig
@@ -51,33 +50,26 @@ def test_render_async_draws_the_state_of_its_call_not_of_its_result():
     assert not np.array_equal(at_a.rgb, at_b.rgb)  # the two states do look different
 
 
-def _report(spec) -> dict:
-    outcome = pipeline.run(spec, seed=3)
+def _report(spec, render_ahead: bool) -> dict:
+    outcome = pipeline.run(spec, seed=3, render_ahead=render_ahead)
     report = dict(outcome.report)
     del report["timing_s"]
     return report
 
 
-def test_a_run_rendering_ahead_reports_what_one_evaluating_each_image_at_once_does(monkeypatch):
-    # The reference: each image evaluated as it is delivered, as a closed loop must (the run
-    # before images rendered ahead). Image and depth noise (their draws in the images'
-    # order) and a link with latency and jitter (images delivered late, in bursts).
+def test_a_run_rendering_ahead_reports_what_one_waiting_for_each_render_does():
+    # The reference: each image evaluated as it is delivered, the run waiting for its render
+    # (as a sweep's worker runs, and as every run did before rendering ahead). Image and
+    # depth noise (their draws in the images' order) and a link with latency and jitter
+    # (images delivered late, several at a time).
     late = builtin.latency()  # three images in flight at a time, with uncertainty's noise
     late["timing"] = {**late["timing"], "image_latency_s": 0.25, "jitter_s": 0.02}
     late["noise"] = builtin.uncertainty()["noise"]
-    specs = [
+    for spec in (
         dataclasses.replace(builtin.load("uncertainty"), duration_s=3.0),
         dataclasses.replace(from_dict(late), duration_s=3.0),
-    ]
-    ahead = [_report(spec) for spec in specs]
-    init = runner._Evaluator.__init__
-
-    def at_once(self, *args, **kwargs):
-        init(self, *args, **kwargs)
-        self.deferred = False
-
-    monkeypatch.setattr(runner._Evaluator, "__init__", at_once)
-    assert [_report(spec) for spec in specs] == ahead
+    ):
+        assert _report(spec, render_ahead=True) == _report(spec, render_ahead=False)
 
 
 def test_a_forked_child_calls_on_a_gl_thread_of_its_own():
