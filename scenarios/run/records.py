@@ -470,7 +470,8 @@ class RunResult:
     seed : int
     ticks : list of TickRecord
     timing_s : dict of str to float
-        Seconds spent per stage on the run's thread (``physics``, ``streams``, ``render``:
+        Seconds spent per stage on the run's thread (``physics``, with reading each image's
+        ground truth, ``streams``, ``render``:
         drawing the scene and waiting for what the OpenGL thread had not rendered yet,
         ``detect``, ``localize``, ``navigate``, ``clearance``, ``log``), ``render_gl``: the
         OpenGL thread's rendering, overlapping the stages, and once per run (``setup``: the

@@ -325,11 +325,14 @@ def _capture(
     t0 = time.perf_counter()
     if camera_track:
         world.set_camera_position_b(_interpolate(camera_track, world.time_s))
+    # The simulator's truth is read (counted with the physics) before the render is queued,
+    # so that its time is not shared with the render's.
+    truth = _truth(k, world, flow.driver, cones_w)
     t1 = time.perf_counter()
     image = flow.take(renderer)
+    image.truth = truth
     timing["physics"] += t1 - t0
     timing["render"] += time.perf_counter() - t1
-    image.truth = _truth(k, world, flow.driver, cones_w)
     return image
 
 
