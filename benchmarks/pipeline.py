@@ -196,55 +196,61 @@ def run(args: argparse.Namespace) -> dict:
         "targets": TARGETS,
     }
     if not args.json:
-        header = (
-            f"{'scenario':<19}{'ticks':>7}{'ticks/s':>8}"
-            + "".join(f"{s:>10}" for s in COLUMNS)
-            + f"{'overhead':>10}{'KB/tick':>10}{'setup s':>9}"
-        )
-        print(
-            "pipeline at 640x480, ms per tick by stage; overhead = (detect + localize + log)"
-            " / render_gl;\nrender = the run's thread drawing the scene and waiting for the"
-            " image; render_gl = the OpenGL thread's rendering (wall time), overlapping the"
-            " other stages;\nsetup = world, GL context, file header and close, once per run;"
-            " JPEG/PNG encoding overlaps rendering on a worker thread"
-        )
-        print(header)
-        print("-" * len(header))
-        rows = [*per.items(), ("ALL", figures["total"])]
-        for name, p in rows:
-            print(
-                f"{name:<19}{p['ticks']:>7}{p['ticks_per_s']:>8.1f}"
-                + "".join(f"{p['ms_per_tick'][s]:>10.2f}" for s in COLUMNS)
-                + f"{p['overhead_ratio']:>10.2f}{p['rrd_bytes_per_tick'] / 1e3:>10.1f}"
-                + f"{p['setup_s']:>9.2f}"
-            )
-        t = figures["total"]
-        print(
-            f"\nwall time, {len(per)} scenarios: {all_wall_s:.1f} s (target <= "
-            f"{TARGETS['all_wall_s']:.0f} s)"
-        )
-        print(f"overhead ratio: {t['overhead_ratio']:.2f} (target <= {TARGETS['overhead_ratio']})")
-        print(
-            f"time (streams, FrameBuffer, lookups): {t['streams_share']:.1%} of the tick "
-            f"(target <= {TARGETS['streams_share']:.0%})"
-        )
-        nav = t["navigate"]
-        for name, share in nav["scenarios"].items():
-            print(
-                f"{name}: map and planner {share['navigate']:.1%} of the tick, MuJoCo's truth "
-                f"(contacts, clearances) {share['clearance']:.1%}"
-            )
-        if nav["scenarios"]:
-            print(
-                f"map and planner, navigating built-ins: {nav['navigate_share']:.1%} of the tick "
-                f"(target <= {TARGETS['navigate_share']:.0%}); MuJoCo's truth "
-                f"{nav['clearance_share']:.1%}"
-            )
-        print(
-            f".rrd bytes per tick: {t['rrd_bytes_per_tick'] / 1e3:.1f} KB (target <= "
-            f"{TARGETS['rrd_bytes_per_tick'] / 1e3:.0f} KB)"
-        )
+        _print_table(per, figures)
     return figures
+
+
+def _print_table(per: dict[str, dict], figures: dict) -> None:
+    """The per-scenario table and the totals against their targets."""
+    all_wall_s = figures["total"]["all_wall_s"]
+    header = (
+        f"{'scenario':<19}{'ticks':>7}{'ticks/s':>8}"
+        + "".join(f"{s:>10}" for s in COLUMNS)
+        + f"{'overhead':>10}{'KB/tick':>10}{'setup s':>9}"
+    )
+    print(
+        "pipeline at 640x480, ms per tick by stage; overhead = (detect + localize + log)"
+        " / render_gl;\nrender = the run's thread drawing the scene and waiting for the"
+        " image; render_gl = the OpenGL thread's rendering (wall time), overlapping the"
+        " other stages;\nsetup = world, GL context, file header and close, once per run;"
+        " JPEG/PNG encoding overlaps rendering on a worker thread"
+    )
+    print(header)
+    print("-" * len(header))
+    rows = [*per.items(), ("ALL", figures["total"])]
+    for name, p in rows:
+        print(
+            f"{name:<19}{p['ticks']:>7}{p['ticks_per_s']:>8.1f}"
+            + "".join(f"{p['ms_per_tick'][s]:>10.2f}" for s in COLUMNS)
+            + f"{p['overhead_ratio']:>10.2f}{p['rrd_bytes_per_tick'] / 1e3:>10.1f}"
+            + f"{p['setup_s']:>9.2f}"
+        )
+    t = figures["total"]
+    print(
+        f"\nwall time, {len(per)} scenarios: {all_wall_s:.1f} s (target <= "
+        f"{TARGETS['all_wall_s']:.0f} s)"
+    )
+    print(f"overhead ratio: {t['overhead_ratio']:.2f} (target <= {TARGETS['overhead_ratio']})")
+    print(
+        f"time (streams, FrameBuffer, lookups): {t['streams_share']:.1%} of the tick "
+        f"(target <= {TARGETS['streams_share']:.0%})"
+    )
+    nav = t["navigate"]
+    for name, share in nav["scenarios"].items():
+        print(
+            f"{name}: map and planner {share['navigate']:.1%} of the tick, MuJoCo's truth "
+            f"(contacts, clearances) {share['clearance']:.1%}"
+        )
+    if nav["scenarios"]:
+        print(
+            f"map and planner, navigating built-ins: {nav['navigate_share']:.1%} of the tick "
+            f"(target <= {TARGETS['navigate_share']:.0%}); MuJoCo's truth "
+            f"{nav['clearance_share']:.1%}"
+        )
+    print(
+        f".rrd bytes per tick: {t['rrd_bytes_per_tick'] / 1e3:.1f} KB (target <= "
+        f"{TARGETS['rrd_bytes_per_tick'] / 1e3:.0f} KB)"
+    )
 
 
 def _navigate_shares(per: dict[str, dict]) -> dict:

@@ -130,7 +130,6 @@ def run(
     for m in active_methods():
         if m.images == "user":  # a user's function: this run's failures only
             m.estimator.reset()
-    recording_id = f"{spec.name}-seed{seed}-{uuid.uuid4().hex[:12]}"
     if out_dir is None:
         if exports:
             raise ValueError("exports are written beside the recording: give out_dir")
@@ -140,12 +139,25 @@ def run(
         judged = _calibrate_and_judge(spec, result)
         started.stop(result)
         return Outcome(result, judged, report.build(result, judged))
-    out_dir = Path(out_dir)
-    for name in exports:
-        if name not in export.FORMATS:
-            raise ValueError(
-                f"unknown export format {name!r}; the formats are {', '.join(export.FORMATS)}"
-            )
+    run_args = {"seed": seed, "progress": progress, "scenes": scenes, "render_ahead": render_ahead}
+    return _run_and_write(spec, Path(out_dir), exports, run_args, started)
+
+
+def _run_and_write(
+    spec: ScenarioSpec,
+    out_dir: Path,
+    exports: Sequence[str],
+    run_args: dict[str, Any],
+    started: _Clock,
+) -> Outcome:
+    """``run`` with ``out_dir``: the recording, the exports and the report staged, then
+    committed together (``OutputPair``), or none of them; an unknown format refused first."""
+    unknown = [name for name in exports if name not in export.FORMATS]
+    if unknown:
+        raise ValueError(
+            f"unknown export format {unknown[0]!r}; the formats are {', '.join(export.FORMATS)}"
+        )
+    recording_id = f"{spec.name}-seed{run_args['seed']}-{uuid.uuid4().hex[:12]}"
     rrd_path, json_path = output_paths(spec, out_dir)
     pair = OutputPair(rrd_path, json_path)
     try:
@@ -156,30 +168,7 @@ def run(
             ]
             recording = Recording(pair.rrd_tmp, recording_id)
             exporters = [export.create(n, d) for n, d in zip(exports, stagings, strict=True)]
-            observer = FanOut(recording, *exporters) if exporters else recording
-            try:
-                result = run_scenario(
-                    spec,
-                    seed=seed,
-                    observer=observer,
-                    progress=progress,
-                    scenes=scenes,
-                    render_ahead=render_ahead,
-                )
-                judged = _calibrate_and_judge(spec, result)
-                finish_start = time.perf_counter()
-                recording.finish(result, judged)
-                export_start = time.perf_counter()
-                exported = tuple(e.finish(result) for e in exporters)
-            except BaseException:
-                # A failed run has aborted its observers already (a second abort does
-                # nothing); a failure while judging or finishing must not leave a file open.
-                observer.abort()
-                raise
-            # The recording's end (plots, layout, footer) is set-up work, as its start is.
-            result.timing_s["setup"] += export_start - finish_start
-            if exporters:
-                result.timing_s["export"] = time.perf_counter() - export_start
+            result, judged, exported = _observed_run(spec, recording, exporters, run_args)
             started.stop(result)
             rep = report.build(
                 result, judged, recording={"file": rrd_path.name, "id": recording_id}
@@ -201,6 +190,32 @@ def run(
         pair.discard()
         raise
     return Outcome(result, judged, rep, rrd_path, json_path, exported)
+
+
+def _observed_run(
+    spec: ScenarioSpec, recording: Recording, exporters: list, run_args: dict[str, Any]
+) -> tuple[RunResult, list[checks.CheckResult], tuple[ExportResult, ...]]:
+    """The run with the recording and the exporters observing it, judged, the recording and
+    the exports finished (their time counted: the recording's end as set-up, the exports'
+    as ``export``); every observer aborted if any of it fails."""
+    observer = FanOut(recording, *exporters) if exporters else recording
+    try:
+        result = run_scenario(spec, observer=observer, **run_args)
+        judged = _calibrate_and_judge(spec, result)
+        finish_start = time.perf_counter()
+        recording.finish(result, judged)
+        export_start = time.perf_counter()
+        exported = tuple(e.finish(result) for e in exporters)
+    except BaseException:
+        # A failed run has aborted its observers already (a second abort does nothing); a
+        # failure while judging or finishing must not leave a file open.
+        observer.abort()
+        raise
+    # The recording's end (plots, layout, footer) is set-up work, as its start is.
+    result.timing_s["setup"] += export_start - finish_start
+    if exporters:
+        result.timing_s["export"] = time.perf_counter() - export_start
+    return result, judged, exported
 
 
 def _export_entry(done: ExportResult, staging: Path) -> dict[str, Any]:
