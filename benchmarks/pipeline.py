@@ -391,28 +391,35 @@ def _export(args: argparse.Namespace) -> dict:
         "target_ratio": EXPORT_TARGET,
     }
     if not args.json:
-        print(
-            f"{name}, 30 s at 30 Hz ({ticks} ticks), best of {args.rounds} alternating rounds, "
-            "recording as vnav-demo run does"
-        )
-        for side, label in (("plain", "without export"), ("export", f"--export {args.export}")):
-            print(f"  {label:<26}{best[side][0]:>8.2f} s wall {best[side][1]:>8.2f} s CPU")
-        print(
-            f"  ratio: wall {ratio['wall']:.3f}, CPU {ratio['cpu']:.3f} (target <= "
-            f"{EXPORT_TARGET:.2f}); exported {exported_bytes / max(ticks, 1) / 1e3:.0f} KB per tick"
-        )
-        print(
-            f"  on the run's thread (the observers' 'log' stage): {log_ms['plain']:.2f} ms per "
-            f"tick without, {log_ms['export']:.2f} ms with; the images are encoded and written "
-            "on threads of their own, so on a machine with a core to spare the wall time "
-            "grows by little more than that"
-        )
-        for side, label in (("plain", "without export"), ("export", "with")):
-            run_s, other_s = threads_s[side]
-            print(
-                f"  CPU {label}: the run's thread {run_s:.2f} s, the other threads {other_s:.2f} s"
-            )
+        _print_export(figures, args.export)
     return figures
+
+
+def _print_export(figures: dict, formats: str) -> None:
+    """``_export``'s figures: both sides, their ratio against the target, the bytes, the run's
+    thread's observers and the CPU of the threads."""
+    ticks, ratio, log_ms = figures["ticks"], figures["ratio"], figures["log_ms_per_tick"]
+    print(
+        f"{figures['scenario']}, 30 s at 30 Hz ({ticks} ticks), best of {figures['rounds']} "
+        "alternating rounds, recording as vnav-demo run does"
+    )
+    for side, label in (("plain", "without export"), ("export", f"--export {formats}")):
+        wall_cpu = figures[f"{side}_s"]
+        print(f"  {label:<26}{wall_cpu['wall']:>8.2f} s wall {wall_cpu['cpu']:>8.2f} s CPU")
+    print(
+        f"  ratio: wall {ratio['wall']:.3f}, CPU {ratio['cpu']:.3f} (target <= "
+        f"{EXPORT_TARGET:.2f}); exported {figures['exported_bytes_per_tick'] / 1e3:.0f} KB per "
+        "tick"
+    )
+    print(
+        f"  on the run's thread (the observers' 'log' stage): {log_ms['plain']:.2f} ms per "
+        f"tick without, {log_ms['export']:.2f} ms with; the images are encoded and written "
+        "on threads of their own, so on a machine with a core to spare the wall time "
+        "grows by little more than that"
+    )
+    for side, label in (("plain", "without export"), ("export", "with")):
+        run_s, other_s = figures["run_thread_cpu_s"][side], figures["other_threads_cpu_s"][side]
+        print(f"  CPU {label}: the run's thread {run_s:.2f} s, the other threads {other_s:.2f} s")
 
 
 IMU_TARGET = 1.05
@@ -470,6 +477,55 @@ def _imu_run(spec: ScenarioSpec, out: Path) -> dict:
     }
 
 
+def _keep_best(best: dict[str, dict], side: str, got: dict) -> None:
+    """``best[side]`` made the least of itself and ``got`` (an ``_imu_run``), figure by figure."""
+    if side not in best:
+        best[side] = got
+        return
+    b = best[side]
+    b["stage_ms"] = {k: min(v, got["stage_ms"][k]) for k, v in b["stage_ms"].items()}
+    for k in ("tick_cpu_ms", "tick_wall_ms", "after_ticks_cpu_s", "judge_s", "total_cpu_s"):
+        b[k] = min(b[k], got[k])
+
+
+def _print_imu(figures: dict) -> None:
+    """``_imu``'s figures: each stage with and without, the ratio, what grew, what is not tick
+    time."""
+    name, plain, imu, grew = (
+        figures["scenario"],
+        figures["plain"],
+        figures["imu"],
+        figures["stages_grew_ms"],
+    )
+    ratio, rounds = figures["tick_cpu_ratio"], figures["rounds"]
+    print(
+        f"{name}, {imu['ticks']} camera ticks, with the imu built-in's [imu] and without, "
+        f"best of {rounds} alternating rounds, recording as vnav-demo run does "
+        f"(load average {figures['load_average'][0]:.1f})"
+    )
+    print("ms per camera tick by stage (the stage timers read wall time):")
+    print(f"  {'stage':<12}{'without':>10}{'with':>10}{'change':>10}")
+    for k in STAGES:
+        a, b = plain["stage_ms"][k], imu["stage_ms"][k]
+        print(f"  {k:<12}{a:>10.2f}{b:>10.2f}{b - a:>+10.2f}")
+    for key, label in (("tick_cpu_ms", "CPU"), ("tick_wall_ms", "wall")):
+        print(f"  {'tick, ' + label:<12}{plain[key]:>10.2f}{imu[key]:>10.2f}")
+    print(
+        f"ratio with / without, a tick's CPU: {ratio:.3f} (target <= {IMU_TARGET:.2f}); "
+        f"wall {figures['tick_wall_ratio']:.3f}"
+    )
+    where = ", ".join(f"{k} {v:+.2f} ms" for k, v in sorted(grew.items(), key=lambda x: -x[1]))
+    print(f"where the IMU's time goes (stages that grew): {where or 'none'}")
+    print(
+        "not tick time: after the last tick (the IMU's readings made, judging, the "
+        f"recording finished) {plain['after_ticks_cpu_s']:.2f} -> "
+        f"{imu['after_ticks_cpu_s']:.2f} s CPU, of which judging (checks such as "
+        f"imu_consistent, calibrations) {plain['judge_s']:.3f} -> {imu['judge_s']:.3f} s "
+        "wall; the whole run "
+        f"{plain['total_cpu_s']:.2f} -> {imu['total_cpu_s']:.2f} s CPU"
+    )
+
+
 def _imu(args: argparse.Namespace) -> dict:
     """A scenario with the ``imu`` built-in's ``[imu]`` against without, alternating (ABBA),
     best of the rounds for each figure."""
@@ -484,20 +540,7 @@ def _imu(args: argparse.Namespace) -> dict:
         _imu_run(specs["plain"], Path(tmp))  # warm: imports, the first OpenGL context
         for i in range(max(1, args.rounds)):
             for side in ("plain", "imu")[:: 1 if i % 2 == 0 else -1]:
-                got = _imu_run(specs[side], Path(tmp))
-                if side not in best:
-                    best[side] = got
-                    continue
-                b = best[side]
-                b["stage_ms"] = {k: min(v, got["stage_ms"][k]) for k, v in b["stage_ms"].items()}
-                for k in (
-                    "tick_cpu_ms",
-                    "tick_wall_ms",
-                    "after_ticks_cpu_s",
-                    "judge_s",
-                    "total_cpu_s",
-                ):
-                    b[k] = min(b[k], got[k])
+                _keep_best(best, side, _imu_run(specs[side], Path(tmp)))
     plain, imu = best["plain"], best["imu"]
     ratio = imu["tick_cpu_ms"] / plain["tick_cpu_ms"]
     # A stage grew by at least what its figure prints (0.01 ms): not a rounding's difference.
@@ -519,32 +562,7 @@ def _imu(args: argparse.Namespace) -> dict:
         "target_ratio": IMU_TARGET,
     }
     if not args.json:
-        print(
-            f"{name}, {imu['ticks']} camera ticks, with the imu built-in's [imu] and without, "
-            f"best of {args.rounds} alternating rounds, recording as vnav-demo run does "
-            f"(load average {os.getloadavg()[0]:.1f})"
-        )
-        print("ms per camera tick by stage (the stage timers read wall time):")
-        print(f"  {'stage':<12}{'without':>10}{'with':>10}{'change':>10}")
-        for k in STAGES:
-            a, b = plain["stage_ms"][k], imu["stage_ms"][k]
-            print(f"  {k:<12}{a:>10.2f}{b:>10.2f}{b - a:>+10.2f}")
-        for key, label in (("tick_cpu_ms", "CPU"), ("tick_wall_ms", "wall")):
-            print(f"  {'tick, ' + label:<12}{plain[key]:>10.2f}{imu[key]:>10.2f}")
-        print(
-            f"ratio with / without, a tick's CPU: {ratio:.3f} (target <= {IMU_TARGET:.2f}); "
-            f"wall {figures['tick_wall_ratio']:.3f}"
-        )
-        where = ", ".join(f"{k} {v:+.2f} ms" for k, v in sorted(grew.items(), key=lambda x: -x[1]))
-        print(f"where the IMU's time goes (stages that grew): {where or 'none'}")
-        print(
-            "not tick time: after the last tick (the IMU's readings made, judging, the "
-            f"recording finished) {plain['after_ticks_cpu_s']:.2f} -> "
-            f"{imu['after_ticks_cpu_s']:.2f} s CPU, of which judging (checks such as "
-            f"imu_consistent, calibrations) {plain['judge_s']:.3f} -> {imu['judge_s']:.3f} s "
-            "wall; the whole run "
-            f"{plain['total_cpu_s']:.2f} -> {imu['total_cpu_s']:.2f} s CPU"
-        )
+        _print_imu(figures)
     return figures
 
 
