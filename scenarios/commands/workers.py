@@ -180,23 +180,16 @@ def run_parallel(
     printed = 0
     workers: list[_Worker] = []
     cpu_s = [0.0]
-    cannot_start = "could not run it"
     try:
-        for _ in range(min(jobs, len(specs))):
-            try:
-                workers.append(_start(ctx, session, options, out_dir))
-            except OSError as exc:  # no process left to make, no fork server...
-                cannot_start = f"could not start: {exc}"
-                break
+        cannot_start = _start_workers(
+            workers, min(jobs, len(specs)), ctx, session, options, out_dir
+        )
         for worker in workers:
             _assign(worker, pending, specs)
         while printed < len(specs):
             live = [w for w in workers if not w.gone]
             if not live:  # every worker died: nothing left to run the rest
-                for index in pending:
-                    line = f"{specs[index].name}: could not complete: its worker {cannot_start}"
-                    done[index] = (EXIT_INCOMPLETE, None, [("err", line)])
-                pending.clear()
+                _left_incomplete(specs, pending, done, cannot_start)
             else:
                 ready = wait([w.results for w in live] + [w.process.sentinel for w in live])
                 for worker in live:
@@ -223,6 +216,32 @@ def run_parallel(
             for end in (worker.tasks, worker.results, worker.lifeline):
                 end.close()
     return [(done[i][0], done[i][1]) for i in range(len(specs))], cpu_s[0]
+
+
+def _start_workers(
+    workers: list[_Worker], n: int, ctx, session, options: dict[str, Any], out_dir: Path
+) -> str:
+    """Start up to ``n`` workers into ``workers``; what to say of a scenario none could run
+    (why the last one could not start, if one could not)."""
+    for _ in range(n):
+        try:
+            workers.append(_start(ctx, session, options, out_dir))
+        except OSError as exc:  # no process left to make, no fork server...
+            return f"could not start: {exc}"
+    return "could not run it"
+
+
+def _left_incomplete(
+    specs: list[ScenarioSpec],
+    pending: list[int],
+    done: dict[int, tuple[int, Path | None, Messages]],
+    cannot_start: str,
+) -> None:
+    """Every scenario still ``pending`` ended incomplete: no worker is left to run it."""
+    for index in pending:
+        line = f"{specs[index].name}: could not complete: its worker {cannot_start}"
+        done[index] = (EXIT_INCOMPLETE, None, [("err", line)])
+    pending.clear()
 
 
 def cost(spec: ScenarioSpec) -> int:

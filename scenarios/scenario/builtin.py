@@ -404,12 +404,8 @@ def mount_error_text(error: MountError) -> str:
     return f"{error.angle_deg:.2f} deg and {1e3 * error.offset_m:.0f} mm"
 
 
-def calibration() -> Scenario:
-    # Calibration: the camera sits off where it is declared (CALIBRATION_MOUNT_ERROR) and its
-    # clock runs 30 ms off the pose clock. Eight cones in view and a flight that rolls,
-    # pitches and yaws (all three rotation axes, so that every axis of the mount and the offset
-    # shows in the images) let vnav.calibration recover both from the apexes' reprojection
-    # error.
+def _calibration_keyframes() -> list[dict[str, Any]]:
+    """The calibration built-in's flight: a swing about all three axes each second, 18 s."""
     swings = [(8.0, -5.0, 12.0), (-8.0, 6.0, -10.0), (6.0, 5.0, 8.0), (-6.0, -6.0, -12.0)]
     keyframes = [{"t": 0.0, "position_w": [0.0, 0.0, 3.0], "rpy_deg": [0.0, 0.0, 0.0]}]
     for k in range(16):
@@ -422,6 +418,21 @@ def calibration() -> Scenario:
             }
         )
     keyframes.append({"t": 18.0, "position_w": [1.6, 0.0, 3.0], "rpy_deg": [0.0, 0.0, 0.0]})
+    return keyframes
+
+
+def _mount_error_table(error: MountError) -> dict[str, list[float]]:
+    """A ``[*.mount_error]`` table of ``error``."""
+    return {"position_m": list(error.position_m), "rpy_deg": list(error.rpy_deg)}
+
+
+def calibration() -> Scenario:
+    # Calibration: the camera sits off where it is declared (CALIBRATION_MOUNT_ERROR) and its
+    # clock runs 30 ms off the pose clock. Eight cones in view and a flight that rolls,
+    # pitches and yaws (all three rotation axes, so that every axis of the mount and the offset
+    # shows in the images) let vnav.calibration recover both from the apexes' reprojection
+    # error.
+    keyframes = _calibration_keyframes()
     cones = [
         [8.0, 0.0],
         [9.0, 2.5],
@@ -451,10 +462,7 @@ def calibration() -> Scenario:
         "camera_rate_hz": 20.0,
         "camera": {
             "pitch_down_deg": 20.0,
-            "mount_error": {
-                "position_m": list(CALIBRATION_MOUNT_ERROR.position_m),
-                "rpy_deg": list(CALIBRATION_MOUNT_ERROR.rpy_deg),
-            },
+            "mount_error": _mount_error_table(CALIBRATION_MOUNT_ERROR),
         },
         "cones": [{"position_w": [x, y, 0.0]} for x, y in cones],
         "flight": {"mode": "kinematic", "keyframes": keyframes},
@@ -508,6 +516,24 @@ def imu_waypoints(duration_s: float = IMU_FLIGHT_S) -> list[dict[str, Any]]:
     return waypoints
 
 
+def _imu_checks() -> list[dict]:
+    """The ``imu`` built-in's checks: MuJoCo's IMU against vnav's chain, the camera-IMU
+    calibration's three figures, the detections."""
+    return [
+        _check(
+            "imu_consistent",
+            1e-9,
+            name="MuJoCo's IMU = vnav.imu's chain at every physics step",
+        ),
+        _check("calibration_imu_rotation", 0.1, name="T_i_c rotation within 0.1 deg"),
+        _check("calibration_imu_translation", 0.005, name="T_i_c translation within 5 mm"),
+        _check("calibration_imu_time_offset", 0.001, name="clock offset within 1 ms"),
+        # No tracking check: the rocking asks for more than the controller follows (it
+        # lags by decimetres), and the calibration needs the motion, not the reference.
+        _check("detection_rate", 0.9, name="cones detected whenever fully in view"),
+    ]
+
+
 def imu() -> Scenario:
     # An IMU 4 cm forward, 2.5 cm right and 1.5 cm up of the body origin, yawed 90 deg and
     # pitched 30 deg on the body (a board mounted sideways on a wedge), a few millimetres and
@@ -542,10 +568,7 @@ def imu() -> Scenario:
             "pitch_down_deg": 25.0,
             "width": 1280,
             "height": 960,
-            "mount_error": {
-                "position_m": list(CALIBRATION_MOUNT_ERROR.position_m),
-                "rpy_deg": list(CALIBRATION_MOUNT_ERROR.rpy_deg),
-            },
+            "mount_error": _mount_error_table(CALIBRATION_MOUNT_ERROR),
         },
         "cones": [{"position_w": [x, y, 0.0]} for x, y in cones],
         "flight": {"mode": "controlled", "waypoints": imu_waypoints()},
@@ -554,26 +577,11 @@ def imu() -> Scenario:
             "rate_hz": 200.0,
             "position_b": [0.04, -0.025, 0.015],
             "rpy_deg": [0.0, 30.0, 90.0],
-            "mount_error": {
-                "position_m": list(IMU_MOUNT_ERROR.position_m),
-                "rpy_deg": list(IMU_MOUNT_ERROR.rpy_deg),
-            },
+            "mount_error": _mount_error_table(IMU_MOUNT_ERROR),
             "time_offset_s": 0.015,
             **IMU_NOISE,
         },
-        "checks": [
-            _check(
-                "imu_consistent",
-                1e-9,
-                name="MuJoCo's IMU = vnav.imu's chain at every physics step",
-            ),
-            _check("calibration_imu_rotation", 0.1, name="T_i_c rotation within 0.1 deg"),
-            _check("calibration_imu_translation", 0.005, name="T_i_c translation within 5 mm"),
-            _check("calibration_imu_time_offset", 0.001, name="clock offset within 1 ms"),
-            # No tracking check: the rocking asks for more than the controller follows (it
-            # lags by decimetres), and the calibration needs the motion, not the reference.
-            _check("detection_rate", 0.9, name="cones detected whenever fully in view"),
-        ],
+        "checks": _imu_checks(),
     }
 
 
