@@ -27,6 +27,7 @@ output directory, and are committed with the recording and the report: the repor
 from __future__ import annotations
 
 import contextlib
+import resource
 import time
 import uuid
 from collections.abc import Callable, Sequence
@@ -46,7 +47,7 @@ from scenarios.scenario.spec import ScenarioSpec
 from sim.scene_cache import SceneCache
 from vnav.methods import active_methods
 
-__all__ = ["Outcome", "judge", "output_paths", "run"]
+__all__ = ["Outcome", "cpu_time_s", "judge", "output_paths", "run"]
 
 
 @dataclass(frozen=True)
@@ -167,7 +168,7 @@ def _run_and_write(
                 for name in exports
             ]
             recording = Recording(pair.rrd_tmp, recording_id)
-            exporters = [export.create(n, d) for n, d in zip(exports, stagings, strict=True)]
+            exporters = export.ExportSet(exports, stagings) if exports else None
             result, judged, exported = _observed_run(spec, recording, exporters, run_args)
             started.stop(result)
             rep = report.build(
@@ -193,19 +194,22 @@ def _run_and_write(
 
 
 def _observed_run(
-    spec: ScenarioSpec, recording: Recording, exporters: list, run_args: dict[str, Any]
+    spec: ScenarioSpec,
+    recording: Recording,
+    exporters: export.ExportSet | None,
+    run_args: dict[str, Any],
 ) -> tuple[RunResult, list[checks.CheckResult], tuple[ExportResult, ...]]:
     """The run with the recording and the exporters observing it, judged, the recording and
     the exports finished (their time counted: the recording's end as set-up, the exports'
     as ``export``); every observer aborted if any of it fails."""
-    observer = FanOut(recording, *exporters) if exporters else recording
+    observer = FanOut(recording, exporters) if exporters else recording
     try:
         result = run_scenario(spec, observer=observer, **run_args)
         judged = _calibrate_and_judge(spec, result)
         finish_start = time.perf_counter()
         recording.finish(result, judged)
         export_start = time.perf_counter()
-        exported = tuple(e.finish(result) for e in exporters)
+        exported = exporters.finish(result) if exporters else ()
     except BaseException:
         # A failed run has aborted its observers already (a second abort does nothing); a
         # failure while judging or finishing must not leave a file open.
@@ -257,14 +261,22 @@ def judge(spec: ScenarioSpec, result: RunResult) -> list[checks.CheckResult]:
     return [checks.judge(c, result) for c in (*own, *check_kinds.user_checks(spec.checks))]
 
 
+def cpu_time_s() -> float:
+    """CPU seconds, user and system, of this process (every thread's) and of its children
+    that have ended and been waited for (the export process, ``scenarios.export.process``,
+    which ``run`` waits for)."""
+    children = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return time.process_time() + children.ru_utime + children.ru_stime
+
+
 class _Clock:
     """The wall and CPU time of a whole run, from ``run``'s start to its report."""
 
     def __init__(self) -> None:
-        self.wall_s, self.cpu_s = time.perf_counter(), time.process_time()
+        self.wall_s, self.cpu_s = time.perf_counter(), cpu_time_s()
 
     def stop(self, result: RunResult) -> None:
-        """Put the run's ``total`` (wall) and ``total_cpu`` (this process's user and system
-        time, every thread's) seconds in ``result.timing_s``."""
+        """Put the run's ``total`` (wall) and ``total_cpu`` (``cpu_time_s``: this process's
+        and its export process's) seconds in ``result.timing_s``."""
         result.timing_s["total"] = time.perf_counter() - self.wall_s
-        result.timing_s["total_cpu"] = time.process_time() - self.cpu_s
+        result.timing_s["total_cpu"] = cpu_time_s() - self.cpu_s

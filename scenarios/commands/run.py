@@ -566,7 +566,7 @@ def command(args: argparse.Namespace) -> int:
 
 def _body(args: argparse.Namespace):
     def run_all(specs: list[ScenarioSpec], out_dir: Path) -> int:
-        wall_s, cpu_s = time.perf_counter(), time.process_time()
+        wall_s, cpu_s = time.perf_counter(), pipeline.cpu_time_s()
         workers_cpu_s = 0.0
         jobs = min(args.jobs, len(specs)) if args.jobs is not None else default_jobs(len(specs))
         if jobs > 1:  # each worker process has its own OpenGL context and scenes
@@ -584,7 +584,7 @@ def _body(args: argparse.Namespace):
             # One OpenGL context for every run: a new one costs 0.2 s of set-up per scenario.
             with extended(getattr(args, "user_methods", ())), SceneCache(capacity=2) as scenes:
                 results = [(spec, *run_one(spec, args, out_dir, scenes)) for spec in specs]
-        cpu_s = time.process_time() - cpu_s + workers_cpu_s
+        cpu_s = pipeline.cpu_time_s() - cpu_s + workers_cpu_s
         duration = (time.perf_counter() - wall_s, cpu_s)
         if not args.quiet:
             say(final_summary(results, out_dir, duration))

@@ -468,5 +468,6 @@ def _run_tasks(
                 _Ticks(results, index, bool(options["progress"])),
             )
             results.send(("done", index, status, rrd, messages))
-    usage = resource.getrusage(resource.RUSAGE_SELF)  # this process's, since its fork
-    results.send(("cpu", usage.ru_utime + usage.ru_stime))
+    # This process's, since its fork, and its export processes'.
+    usage = [resource.getrusage(who) for who in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN)]
+    results.send(("cpu", sum(u.ru_utime + u.ru_stime for u in usage)))

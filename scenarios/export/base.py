@@ -104,12 +104,22 @@ def _set_priority(nice: int) -> None:
         logger.debug("exporter thread %d keeps its priority: %s", tid, exc)
 
 
+_threads_nicer = True
+
+
+def nice_threads(enabled: bool) -> None:
+    """Whether ``exporter_threads`` makes its threads nicer than the thread that makes the
+    pool: not in a process that is itself nicer (``scenarios.export.process``)."""
+    global _threads_nicer
+    _threads_nicer = enabled
+
+
 def exporter_threads(workers: int, name: str) -> ThreadPoolExecutor:
     """A pool of ``workers`` threads named ``name``, each ``EXPORTER_NICE`` nicer than the
     thread that makes the pool (the run's), whichever thread starts them (a pool starts its
     threads on its first calls, from the thread that calls; a thread inherits its parent's
-    priority)."""
-    base = _priority(threading.get_native_id())
+    priority); at the process's priority after ``nice_threads(False)``."""
+    base = _priority(threading.get_native_id()) if _threads_nicer else None
     if base is None:
         return ThreadPoolExecutor(max_workers=workers, thread_name_prefix=name)
     return ThreadPoolExecutor(

@@ -52,7 +52,8 @@ made with the declared mount (``declared_mount``, the same as ``methods``) and o
 images estimated again with the recovered mount (``recovered_mount``): what calibrating
 gives. ``timing_s`` adds ``calibrate`` (the calibration and that second estimate), ``judge``
 (the checks), ``total`` (the whole run, from its start to its report, wall seconds) and
-``total_cpu`` (the process's CPU time, user and system, over the same span).
+``total_cpu`` (the process's CPU time, user and system, over the same span, with its export
+process's).
 Also in 8, only in the report of a run with a user's function (``vnav.plugin``): ``estimators``,
 per function its spec, its time limit (``timeout_s``, None without one), calls, how many
 returned None, how many detections it was skipped on after timing out (``skipped``), its calls'

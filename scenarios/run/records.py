@@ -480,7 +480,8 @@ class RunResult:
         adds ``calibrate`` (the calibration and the second estimate with its mount, 0 when
         none), ``judge`` (the checks), ``total`` (wall seconds from the run's start to its
         report) and ``total_cpu`` (the process's user and system seconds over the same span,
-        every thread's); the only figures that depend on the machine.
+        every thread's, and its export process's); the only figures that depend on the
+        machine.
     poses : PoseStream or None
         The pose stream the estimator was sent (set when the run ends).
     calibration : CalibrationRecord or None
