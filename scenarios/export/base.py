@@ -20,7 +20,10 @@ The exporters' threads (``exporter_threads``) run at a lower scheduling priority
 own: on a machine whose cores the run already keeps busy (its thread, the renderer's), they
 take the time the run leaves idle instead of delaying its next tick, and catch up while it
 waits; their queue (``queue_bound``) is deep enough to hold what they fall behind by, and
-bounded in bytes.
+bounded in bytes. A run (``scenarios.pipeline``) runs the formats that encode every image in
+an export process instead (``scenarios.export.process``), itself that much nicer, where the
+exporters' Python does not hold the run's interpreter's lock; there the threads run at the
+process's priority (``nice_threads``).
 """
 
 from __future__ import annotations

@@ -400,6 +400,15 @@ class ExportProcess:
         return _recv(self._answers)
 
     def _raise_ended(self) -> None:
+        """Raise the child's error if it sent one before its end (a command written after
+        it failed finds its pipe closed), else ``ExportProcessError``."""
+        error = None
+        with contextlib.suppress(EOFError, OSError):
+            while error is None:
+                answer = self._answer()
+                error = answer[1] if answer[0] == "error" else None
+        if error is not None:
+            raise error
         status = self._process.wait()
         how = f"killed by {signal.Signals(-status).name}" if status < 0 else f"exit status {status}"
         raise ExportProcessError(f"the export process ended unexpectedly ({how})")
