@@ -245,13 +245,12 @@ class ExportProcess:
                 stdin=subprocess.DEVNULL,
             )
         except BaseException:
-            for fd in (commands_r, self._commands, self._answers, answers_w, self._ring_fd):
+            for fd in (self._commands, self._answers, self._ring_fd):
                 os.close(fd)
             raise
-        finally:
-            with contextlib.suppress(OSError):
-                os.close(commands_r)
-                os.close(answers_w)
+        finally:  # the child's ends: its own now
+            os.close(commands_r)
+            os.close(answers_w)
         self._slot_bytes = 0
         self._free: list[int] = []
         self._ticks = 0
@@ -436,7 +435,8 @@ def _ring_file() -> int:
     """A file for the ring, in memory, with no name: ``memfd_create`` where there is one,
     else an unlinked temporary file."""
     if hasattr(os, "memfd_create"):
-        return os.memfd_create("vnav-export-ring", 0)  # not O_CLOEXEC'd: pass_fds opens it
+        # Closed on exec like any other descriptor: pass_fds keeps it open for the child.
+        return os.memfd_create("vnav-export-ring", os.MFD_CLOEXEC)
     import tempfile
 
     with tempfile.TemporaryFile() as f:
