@@ -1,12 +1,13 @@
 """The export process (``scenarios.export.process``): the image formats written in a child
 process are the files one process writes, byte for byte, through a ring that reuses its
-slots; the child runs nicer than the command, ignores Ctrl-C, dies with the command, and its
-failures (a refused tick, a full disk, being killed) end the run as they would in one process,
-the previous files kept."""
+slots; the child runs nicer than the command, ignores Ctrl-C, dies with the command, is started by
+worker processes too, and its failures (a refused tick, a full disk, being killed) end the run
+as they would in one process, the previous files kept."""
 
 from __future__ import annotations
 
 import dataclasses
+import json
 import logging
 import os
 import signal
@@ -198,3 +199,19 @@ def test_the_command_killed_outright_takes_its_export_process_with_it(tmp_path):
         for p in tmp_path.iterdir()
         if p.name.startswith(outputs.TEMP_PREFIX) and p.name != outputs.LOCK_NAME
     ]
+
+
+def test_worker_processes_start_export_processes_of_their_own(tmp_path):
+    """``--jobs 2``: each worker (a daemonic multiprocessing child, which multiprocessing lets
+    start no process of its own) starts its scenario's export process, and both scenarios'
+    EuRoC folders and bags are committed, every file the report lists there at its size."""
+    names = ("orbit", "frame-problem")
+    args = ["run", *names, "--jobs", "2", "--duration", "1", "--export", "euroc,mcap"]
+    assert main([*args, "--out", str(tmp_path), "--quiet"]) in (0, 1)
+    for name in names:
+        report = json.loads((tmp_path / f"{name}.json").read_text())
+        listed = [f for entry in report["exports"].values() for f in entry["files"]]
+        assert f"{name}.mcap" in {f["path"] for f in listed}
+        assert any(f["path"].startswith(f"{name}.euroc/mav0/cam0/data/") for f in listed)
+        for f in listed:
+            assert (tmp_path / f["path"]).stat().st_size == f["bytes"]
