@@ -58,6 +58,7 @@ import numpy as np
 from vnav import se3, so3
 from vnav.camera import PinholeCamera
 from vnav.frames import FrameBuffer
+from vnav.least_squares import levenberg_marquardt
 from vnav.multiview import REPROJECTION_GATE_PX, camera_pose_from_apexes, unambiguous_pose
 
 logger = logging.getLogger(__name__)
@@ -524,31 +525,16 @@ def _jacobian(f, x: np.ndarray) -> np.ndarray:
 
 
 def _levenberg_marquardt(f, x: np.ndarray, iterations: int = 50) -> np.ndarray:
-    """Minimise ``|f(x)|^2``: Levenberg-Marquardt with Marquardt's diagonal scaling
-    (Nocedal & Wright 10.3), stopping when the step or the gain is negligible."""
-    r = f(x)
-    cost = float(r @ r)
-    lam = 1e-3
-    for _ in range(iterations):
+    """Minimise ``|f(x)|^2`` (``vnav.least_squares``), the normal equations from the
+    numerical Jacobian, stopping when the step or the gain is negligible."""
+
+    def normal_equations(x: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         J = _jacobian(f, x)
-        A, g = J.T @ J, J.T @ r
-        D = np.diag(np.maximum(np.diag(A), 1e-12))
-        while True:
-            step = -np.linalg.solve(A + lam * D, g)
-            x_new = x + step
-            r_new = f(x_new)
-            cost_new = float(r_new @ r_new)
-            if cost_new < cost:
-                lam = max(lam / 10.0, 1e-12)
-                break
-            lam *= 10.0
-            if lam > 1e12:
-                return x
-        gain = cost - cost_new
-        x, r, cost = x_new, r_new, cost_new
-        if gain < 1e-12 * max(cost, 1e-12) or np.all(np.abs(step) < 1e-12):
-            break
-    return x
+        return J.T @ J, J.T @ r
+
+    return levenberg_marquardt(
+        f, normal_equations, x, iterations=iterations, gain_tol=1e-12, step_tol=1e-12
+    )
 
 
 def _mutual_nearest(

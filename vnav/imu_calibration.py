@@ -88,6 +88,7 @@ from vnav import se3, so3
 from vnav.calibration import FOCAL_SCALE_STD, PIXEL_STD_FLOOR, CalibrationError
 from vnav.camera import PinholeCamera
 from vnav.imu import GRAVITY_W
+from vnav.least_squares import levenberg_marquardt
 from vnav.multiview import camera_pose_from_apexes, camera_pose_from_points
 
 logger = logging.getLogger(__name__)
@@ -981,33 +982,16 @@ class _Problem:
         return 0.5 * (cov + cov.T)
 
     def solve(self, x: np.ndarray, iterations: int = 20) -> np.ndarray:
-        """Levenberg-Marquardt with Marquardt's diagonal scaling (Nocedal & Wright 10.3),
-        stopping when an iteration lowers the cost by less than a millionth."""
-        r = self.residuals(x)
-        cost = float(r @ r)
-        lam = 1e-3
-        for _ in range(iterations):
-            A, g = self.normal_equations(x, r)
-            D = np.diag(np.maximum(np.diag(A), 1e-12))
-            while True:
-                try:
-                    step = -_solve_spd(A + lam * D, g)
-                except np.linalg.LinAlgError:
-                    step = np.full_like(x, np.nan)  # rejected below: more damping
-                x_new = x + step
-                r_new = self.residuals(x_new) if np.isfinite(step).all() else np.array([np.inf])
-                cost_new = float(r_new @ r_new)
-                if cost_new < cost:
-                    lam = max(lam / 10.0, 1e-12)
-                    break
-                lam *= 10.0
-                if lam > 1e12:
-                    return x
-            gain = cost - cost_new
-            x, r, cost = x_new, r_new, cost_new
-            if gain < GAIN_TOL * max(cost, 1e-12):
-                break
-        return x
+        """Levenberg-Marquardt (``vnav.least_squares``) on the sparse normal equations,
+        stopping when an iteration lowers the cost by less than ``GAIN_TOL``."""
+        return levenberg_marquardt(
+            self.residuals,
+            self.normal_equations,
+            x,
+            iterations=iterations,
+            gain_tol=GAIN_TOL,
+            solve=_solve_spd,
+        )
 
     def result(self, x: np.ndarray, x_start: np.ndarray) -> ImuCamCalibration:
         r = self.residuals(x)
