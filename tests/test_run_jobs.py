@@ -176,6 +176,39 @@ def test_a_signal_while_two_workers_run_stops_both_and_keeps_no_partial_file(tmp
     assert sorted(p.name for p in tmp_path.iterdir()) == [".vnav-demo.lock"]
 
 
+def test_a_signal_after_a_later_scenario_finished_still_prints_its_summary(tmp_path):
+    """``run calibration orbit --jobs 2``: orbit, second in order, finishes while calibration
+    runs; Ctrl-C then: orbit's summary is printed (its files are committed, as the serial
+    command prints each scenario it finished before a signal), calibration leaves nothing."""
+    args = ["run", "calibration", "orbit", "--jobs", "2", "--out", str(tmp_path)]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "scenarios.cli", *args],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    deadline = time.monotonic() + 120
+    while not (tmp_path / "orbit.json").exists():
+        assert proc.poll() is None and time.monotonic() < deadline, "orbit never finished"
+        time.sleep(0.05)
+    # The commit's last steps and the worker's word that it finished take milliseconds; a
+    # signal inside them ends the worker before it tells (the serial command says nothing
+    # then either: its files are whole, its summary unprinted).
+    time.sleep(1.0)
+    assert not (tmp_path / "calibration.json").exists(), "calibration finished first"
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 128 + signal.SIGINT, err
+    assert out.startswith("orbit: ") and f"wrote {tmp_path}/orbit.rrd" in " ".join(out.split())
+    assert "calibration:" not in out
+    assert err.strip().splitlines() == ["vnav-demo: error: interrupted; no partial file was kept"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        ".vnav-demo.lock",
+        "orbit.json",
+        "orbit.rrd",
+    ]
+
+
 def test_a_killed_command_takes_its_workers_and_the_next_run_clears_their_files(tmp_path):
     """SIGKILL of the command: its workers stop (SIGTERM when their parent ends), no file
     but hidden temporary ones is left, and the next run in the directory removes those."""

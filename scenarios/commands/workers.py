@@ -210,6 +210,13 @@ def run_parallel(
     except BaseException:
         bar.clear()
         _stop(workers)
+        # Scenarios that finished after one still running were written and committed (their
+        # news perhaps still in a pipe): say so, as the serial command says each scenario it
+        # finished before a signal.
+        _finished_before_stop(workers, done)
+        for index in sorted(i for i in done if i >= printed):
+            for stream, text in done[index][2]:
+                emit(stream, text)
         raise
     finally:
         for worker in workers:
@@ -369,6 +376,20 @@ def _lost(spec: ScenarioSpec, exitcode: int) -> str:
     else:
         how = f"ended with status {exitcode}"
     return f"{spec.name}: could not complete: its worker process {how}"
+
+
+def _finished_before_stop(
+    workers: list[_Worker], done: dict[int, tuple[int, Path | None, Messages]]
+) -> None:
+    """Read the scenarios that stopped workers finished but the command had not yet heard
+    of into ``done``; nothing else of what they sent."""
+    for worker in workers:
+        with contextlib.suppress(EOFError, OSError):
+            while worker.results.poll():
+                message = worker.results.recv()
+                if message[0] == "done":
+                    _, index, status, rrd, messages = message
+                    done[index] = (status, rrd, messages)
 
 
 def _stop(workers: list[_Worker]) -> None:
