@@ -20,7 +20,9 @@ text), one progress bar on a terminal (the earliest scenario still running), and
 status of every scenario the same way. Signals:
 
 - The command's SIGTERM, SIGHUP or Ctrl-C stop every worker (SIGTERM): each removes its
-  unfinished files, as the serial command does, before the command ends with 128 + N.
+  unfinished files, as the serial command does, before the command ends with 128 + N. The
+  summaries of scenarios that finished (and were committed) after one still running are
+  printed first, in order, as the serial command prints each one it finished.
   Workers ignore SIGINT (a terminal's Ctrl-C reaches the whole process group: the command
   stops them itself) and any signal after the first (their clean-up runs whole).
 - A worker stopped by SIGTERM or SIGHUP from outside stops the command as if it had
