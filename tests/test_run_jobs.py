@@ -136,15 +136,19 @@ def _alive(pid: int) -> bool:
         return False
 
 
-def _start_two(out: Path, *more: str) -> tuple[subprocess.Popen, dict[str, int]]:
-    """``run orbit calibration`` on two workers, once both are writing."""
-    args = ["run", "orbit", "calibration", "--jobs", "2", "--out", str(out), *more]
-    proc = subprocess.Popen(
+def _command(args: list[str]) -> subprocess.Popen:
+    """``vnav-demo ARGS`` in a process of its own, its output read as text."""
+    return subprocess.Popen(
         [sys.executable, "-m", "scenarios.cli", *args],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
     )
+
+
+def _start_two(out: Path, *more: str) -> tuple[subprocess.Popen, dict[str, int]]:
+    """``run orbit calibration`` on two workers, once both are writing."""
+    proc = _command(["run", "orbit", "calibration", "--jobs", "2", "--out", str(out), *more])
     deadline = time.monotonic() + 120
     while len(_partials(out)) < 2 and time.monotonic() < deadline and proc.poll() is None:
         time.sleep(0.05)
@@ -180,13 +184,7 @@ def test_a_signal_after_a_later_scenario_finished_still_prints_its_summary(tmp_p
     """``run calibration orbit --jobs 2``: orbit, second in order, finishes while calibration
     runs; Ctrl-C then: orbit's summary is printed (its files are committed, as the serial
     command prints each scenario it finished before a signal), calibration leaves nothing."""
-    args = ["run", "calibration", "orbit", "--jobs", "2", "--out", str(tmp_path)]
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "scenarios.cli", *args],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
+    proc = _command(["run", "calibration", "orbit", "--jobs", "2", "--out", str(tmp_path)])
     deadline = time.monotonic() + 120
     while not (tmp_path / "orbit.json").exists():
         assert proc.poll() is None and time.monotonic() < deadline, "orbit never finished"

@@ -216,9 +216,7 @@ def run_parallel(
         # news perhaps still in a pipe): say so, as the serial command says each scenario it
         # finished before a signal.
         _finished_before_stop(workers, done)
-        for index in sorted(i for i in done if i >= printed):
-            for stream, text in done[index][2]:
-                emit(stream, text)
+        _say_unprinted(done, printed, emit)
         raise
     finally:
         for worker in workers:
@@ -392,6 +390,17 @@ def _finished_before_stop(
                 if message[0] == "done":
                     _, index, status, rrd, messages = message
                     done[index] = (status, rrd, messages)
+
+
+def _say_unprinted(
+    done: dict[int, tuple[int, Path | None, Messages]],
+    printed: int,
+    emit: Callable[[str, str], None],
+) -> None:
+    """Emit the texts of every finished scenario from ``printed`` on, in order."""
+    for index in sorted(i for i in done if i >= printed):
+        for stream, text in done[index][2]:
+            emit(stream, text)
 
 
 def _stop(workers: list[_Worker]) -> None:

@@ -17,6 +17,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from scenarios.run.observers import abort_all
+
 if TYPE_CHECKING:
     import numpy as np
 
@@ -182,11 +184,4 @@ class ExportSet:
 
     def abort(self) -> None:
         """Abort every format, even if one fails to; then raise the first failure."""
-        first: BaseException | None = None
-        for o in self._observers:
-            try:
-                o.abort()
-            except BaseException as exc:
-                first = first or exc
-        if first is not None:
-            raise first
+        abort_all(self._observers)

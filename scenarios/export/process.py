@@ -63,6 +63,7 @@ import numpy as np
 
 from scenarios.export import base
 from scenarios.export.base import ExportResult
+from scenarios.run.observers import abort_all
 
 if TYPE_CHECKING:
     from scenarios.run.records import RunResult, TickRecord
@@ -550,14 +551,7 @@ class _Child:
     def _abort(self) -> None:
         """Abort every exporter (each removes its files), even if one fails to."""
         exporters, self._exporters = self._exporters, []
-        first: BaseException | None = None
-        for exporter in exporters:
-            try:
-                exporter.abort()
-            except BaseException as exc:
-                first = first or exc
-        if first is not None:
-            raise first
+        abort_all(exporters)
 
 
 def _lower_priority() -> None:

@@ -36,6 +36,7 @@ import numpy as np
 
 from scenarios.run.evaluate import TickTruth, evaluate_tick
 from scenarios.run.navigation import Navigator
+from scenarios.run.observers import abort_all
 from scenarios.run.records import ImageTiming, ImuRecord, PoseStream, RunResult, TickRecord
 from scenarios.run.streams import BODY, WORLD, Delivered, Receiver, Streams
 from scenarios.scenario.spec import (
@@ -128,14 +129,7 @@ class FanOut:
 
     def abort(self) -> None:
         """Abort every observer, even if one fails to; then raise the first failure."""
-        first: BaseException | None = None
-        for o in self.observers:
-            try:
-                o.abort()
-            except BaseException as exc:
-                first = first or exc
-        if first is not None:
-            raise first
+        abort_all(self.observers)
 
 
 def run_scenario(
